@@ -1,0 +1,249 @@
+// SPDX-License-Identifier: MIT
+// Shared building blocks of the Kokkos pipeline: resolved parameters, tracked
+// buffers (every allocation is labelled "nbmc::..." and counted against the
+// context), Morton keys, an open-addressing hash map for sparse grids, scans.
+#pragma once
+
+#include <Kokkos_Core.hpp>
+
+#include <atomic>
+#include <cstdint>
+#include <functional>
+#include <new>
+#include <stdexcept>
+#include <string>
+
+namespace nbmc {
+
+// Status carried by exceptions thrown inside the pipeline; the C API maps it.
+struct Error : std::runtime_error {
+  int32_t status;
+  Error(int32_t s, const std::string& msg) : std::runtime_error(msg), status(s) {}
+};
+
+// Parameters with every length in absolute units (see nbmc_params).
+struct Params {
+  double spacing = 0;          // r
+  double cell_size = 0;        // c
+  double influence_radius = 0; // R
+  double band_width = 0;       // half width of the band box
+  double surface_radius = 0;   // neighbourhood radius of the surface test
+  double iso_radius = 0;       // r-bar
+  int method = 0;              // NBMC_METHOD_*
+  int field = 0;               // NBMC_FIELD_*
+  double t_low = 0.4, t_high = 3.5;
+  double color_threshold = 0.75;
+  int neighbour_threshold = 25;
+  bool normals = true;
+  bool use_bbox = false;
+  double bbox_min[3] = {0, 0, 0}, bbox_max[3] = {0, 0, 0};
+};
+
+// Counts the bytes nbmc allocates per context (host and device together).
+struct MemoryTracker {
+  std::atomic<std::uint64_t> current{0};
+  std::atomic<std::uint64_t> peak{0};
+  std::uint64_t budget = 0;  // 0 = unlimited
+  void add(std::uint64_t b) {
+    const std::uint64_t now = current.fetch_add(b) + b;
+    std::uint64_t p = peak.load();
+    while (now > p && !peak.compare_exchange_weak(p, now)) {}
+  }
+  void sub(std::uint64_t b) { current.fetch_sub(b); }
+  void reset_peak() { peak.store(current.load()); }
+};
+
+// Progress/cancellation hook supplied by the C API layer.
+struct Progress {
+  std::function<bool(int stage, double fraction)> fn;  // returns false to cancel
+  void operator()(int stage, double fraction) const;
+};
+
+namespace Details {
+
+// Names a region for Kokkos Tools ("nbmc::..."); Kokkos 3.4 has no RAII form.
+struct ScopedRegion {
+  explicit ScopedRegion(const std::string& name) { Kokkos::Profiling::pushRegion(name); }
+  ~ScopedRegion() { Kokkos::Profiling::popRegion(); }
+  ScopedRegion(const ScopedRegion&) = delete;
+  ScopedRegion& operator=(const ScopedRegion&) = delete;
+};
+
+// A labelled, tracked 1-D allocation in a memory space.
+template <class T, class MemSpace>
+class Buffer {
+ public:
+  using view_type = Kokkos::View<T*, MemSpace>;
+  Buffer() = default;
+  Buffer(MemoryTracker& tracker, const std::string& label, std::size_t n, bool zero = false)
+      : tracker_(&tracker) {
+    const std::uint64_t bytes = std::uint64_t(n) * sizeof(T);
+    if (tracker.budget && tracker.current.load() + bytes > tracker.budget)
+      throw Error(10 /*NBMC_ERROR_MEMORY_BUDGET*/,
+                  "allocation of " + std::to_string(bytes) + " bytes for " + label +
+                      " exceeds the memory budget");
+    if (zero)
+      view_ = view_type("nbmc::" + label, n);
+    else
+      view_ = view_type(Kokkos::view_alloc(Kokkos::WithoutInitializing, "nbmc::" + label), n);
+    bytes_ = bytes;
+    tracker.add(bytes_);
+  }
+  Buffer(const Buffer&) = delete;
+  Buffer& operator=(const Buffer&) = delete;
+  Buffer(Buffer&& o) noexcept { swap(o); }
+  Buffer& operator=(Buffer&& o) noexcept {
+    if (this != &o) { release(); swap(o); }
+    return *this;
+  }
+  ~Buffer() { release(); }
+  void release() {
+    if (tracker_ && bytes_) tracker_->sub(bytes_);
+    view_ = view_type();
+    bytes_ = 0;
+  }
+  const view_type& view() const { return view_; }
+  std::size_t size() const { return view_.extent(0); }
+  T* data() const { return view_.data(); }
+
+ private:
+  void swap(Buffer& o) noexcept {
+    std::swap(view_, o.view_);
+    std::swap(tracker_, o.tracker_);
+    std::swap(bytes_, o.bytes_);
+  }
+  view_type view_;
+  MemoryTracker* tracker_ = nullptr;
+  std::uint64_t bytes_ = 0;
+};
+
+// ------------------------------------------------------------ Morton keys
+// 21 bits per axis, 63-bit keys (bit 63 stays clear: ~0 marks empty slots).
+KOKKOS_INLINE_FUNCTION std::uint64_t spread3(std::uint64_t v) {
+  v &= 0x1fffffULL;
+  v = (v | (v << 32)) & 0x1f00000000ffffULL;
+  v = (v | (v << 16)) & 0x1f0000ff0000ffULL;
+  v = (v | (v << 8)) & 0x100f00f00f00f00fULL;
+  v = (v | (v << 4)) & 0x10c30c30c30c30c3ULL;
+  v = (v | (v << 2)) & 0x1249249249249249ULL;
+  return v;
+}
+KOKKOS_INLINE_FUNCTION std::uint64_t compact3(std::uint64_t v) {
+  v &= 0x1249249249249249ULL;
+  v = (v ^ (v >> 2)) & 0x10c30c30c30c30c3ULL;
+  v = (v ^ (v >> 4)) & 0x100f00f00f00f00fULL;
+  v = (v ^ (v >> 8)) & 0x1f0000ff0000ffULL;
+  v = (v ^ (v >> 16)) & 0x1f00000000ffffULL;
+  v = (v ^ (v >> 32)) & 0x1fffffULL;
+  return v;
+}
+KOKKOS_INLINE_FUNCTION std::uint64_t morton3(std::uint32_t x, std::uint32_t y, std::uint32_t z) {
+  return spread3(x) | (spread3(y) << 1) | (spread3(z) << 2);
+}
+constexpr std::uint32_t kMaxAxisCells = (1u << 21) - 2;  // Morton limit per axis
+constexpr std::uint64_t kEmptyKey = ~std::uint64_t(0);
+
+KOKKOS_INLINE_FUNCTION std::uint64_t hash64(std::uint64_t k) {
+  k ^= k >> 33;
+  k *= 0xff51afd7ed558ccdULL;
+  k ^= k >> 33;
+  k *= 0xc4ceb9fe1a85ec53ULL;
+  k ^= k >> 33;
+  return k;
+}
+
+KOKKOS_INLINE_FUNCTION int popcount64(std::uint64_t x) {
+#if defined(__CUDA_ARCH__)
+  return __popcll(x);
+#else
+  return __builtin_popcountll(x);
+#endif
+}
+
+KOKKOS_INLINE_FUNCTION int ctz64(std::uint64_t x) {
+#if defined(__CUDA_ARCH__)
+  return __ffsll((long long)x) - 1;
+#else
+  return __builtin_ctzll(x);
+#endif
+}
+
+inline std::size_t next_pow2(std::size_t n) {
+  std::size_t p = 1;
+  while (p < n) p <<= 1;
+  return p;
+}
+
+// Open-addressing hash map uint64 key -> uint32 value (linear probing). Keys are
+// inserted in parallel with CAS; the set of keys (not their slots) is what the
+// pipeline depends on, so results are independent of the insertion order.
+template <class MemSpace>
+struct HashMap {
+  Kokkos::View<std::uint64_t*, MemSpace> keys;
+  Kokkos::View<std::uint32_t*, MemSpace> values;
+  std::uint64_t mask = 0;
+
+  // Returns true if the key was newly inserted.
+  KOKKOS_INLINE_FUNCTION bool insert(std::uint64_t key) const {
+    std::uint64_t slot = hash64(key) & mask;
+    while (true) {
+      const std::uint64_t prev = Kokkos::atomic_compare_exchange(&keys(slot), kEmptyKey, key);
+      if (prev == kEmptyKey) return true;
+      if (prev == key) return false;
+      slot = (slot + 1) & mask;
+    }
+  }
+  // Slot of the key, or -1.
+  KOKKOS_INLINE_FUNCTION std::int64_t find_slot(std::uint64_t key) const {
+    std::uint64_t slot = hash64(key) & mask;
+    while (true) {
+      const std::uint64_t k = keys(slot);
+      if (k == key) return std::int64_t(slot);
+      if (k == kEmptyKey) return -1;
+      slot = (slot + 1) & mask;
+    }
+  }
+  // Value of the key, or ~0u.
+  KOKKOS_INLINE_FUNCTION std::uint32_t find(std::uint64_t key) const {
+    const std::int64_t s = find_slot(key);
+    return s < 0 ? ~0u : values(s);
+  }
+};
+
+template <class MemSpace>
+struct HashMapStorage {
+  Buffer<std::uint64_t, MemSpace> keys;
+  Buffer<std::uint32_t, MemSpace> values;
+  HashMap<MemSpace> map;
+  template <class ExecSpace>
+  void allocate(const ExecSpace& space, MemoryTracker& t, const std::string& label, std::size_t expected) {
+    const std::size_t cap = next_pow2(std::max<std::size_t>(16, expected + expected / 2 + 1));
+    keys = Buffer<std::uint64_t, MemSpace>(t, label + "::keys", cap);
+    values = Buffer<std::uint32_t, MemSpace>(t, label + "::values", cap);
+    Kokkos::deep_copy(space, keys.view(), kEmptyKey);
+    map.keys = keys.view();
+    map.values = values.view();
+    map.mask = cap - 1;
+  }
+};
+
+// Exclusive scan of counts into offsets (which may be the same view); returns the total.
+template <class ExecSpace, class CountView, class OffsetView>
+std::uint64_t exclusive_scan(const ExecSpace& space, const std::string& label, const CountView& counts,
+                             const OffsetView& offsets) {
+  std::uint64_t total = 0;
+  using value_t = typename OffsetView::value_type;
+  Kokkos::parallel_scan(
+      label, Kokkos::RangePolicy<ExecSpace>(space, 0, counts.extent(0)),
+      KOKKOS_LAMBDA(const std::size_t i, std::uint64_t& update, const bool final) {
+        const std::uint64_t c = counts(i);  // read first: counts and offsets may alias
+        if (final) offsets(i) = value_t(update);
+        update += c;
+      },
+      total);
+  space.fence();
+  return total;
+}
+
+}  // namespace Details
+}  // namespace nbmc

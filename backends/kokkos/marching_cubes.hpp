@@ -1,0 +1,257 @@
+// SPDX-License-Identifier: MIT
+// Parallel marching cubes on the band (paper Sec. 4.2, which was serial):
+// a cell is triangulated only when its eight corners are band vertices. Each
+// band vertex owns the three edges leaving it in +x, +y, +z; an intersection
+// point is computed once per edge (shared-edge reuse) and numbered in band
+// order, so the output order is deterministic and independent of the thread
+// count. Passes:
+//   A  cases: per cell, the case index; crossed edges are flagged at their
+//      owner vertex (atomic OR: the result is a set, order-independent)
+//   B  vertex numbering: prefix sum of the flagged edges
+//   C  intersection points and normals (field gradient, central differences)
+//   D  triangles: per-word counts, prefix sum, table lookup
+#pragma once
+
+#include "common.hpp"
+#include "grid.hpp"
+#include "mc_tables.hpp"
+#include "narrow_band.hpp"
+
+#include <vector>
+
+namespace nbmc {
+namespace Details {
+
+template <class MemSpace>
+struct McTables {
+  Kokkos::View<std::int8_t*, MemSpace> triangles;  // 256 * 3 * kMaxTriangles
+  Kokkos::View<std::uint8_t*, MemSpace> count;     // 256
+  Kokkos::View<std::uint16_t*, MemSpace> edges;    // 256
+};
+
+template <class ExecSpace>
+McTables<typename ExecSpace::memory_space> make_mc_tables(const ExecSpace& space) {
+  using MemSpace = typename ExecSpace::memory_space;
+  McTables<MemSpace> t;
+  constexpr int W = 3 * mc::kMaxTriangles;
+  t.triangles = Kokkos::View<std::int8_t*, MemSpace>("nbmc::mc::triangles", 256 * W);
+  t.count = Kokkos::View<std::uint8_t*, MemSpace>("nbmc::mc::count", 256);
+  t.edges = Kokkos::View<std::uint16_t*, MemSpace>("nbmc::mc::edges", 256);
+  auto ht = Kokkos::create_mirror_view(t.triangles);
+  auto hc = Kokkos::create_mirror_view(t.count);
+  auto he = Kokkos::create_mirror_view(t.edges);
+  for (int c = 0; c < 256; ++c) {
+    hc(c) = mc::kTriangleCount[c];
+    he(c) = mc::kEdgeMask[c];
+    for (int k = 0; k < W; ++k) ht(c * W + k) = mc::kTriangles[c][k];
+  }
+  Kokkos::deep_copy(space, t.triangles, ht);
+  Kokkos::deep_copy(space, t.count, hc);
+  Kokkos::deep_copy(space, t.edges, he);
+  space.fence();
+  return t;
+}
+
+// Corner at which edge e starts (same as mc::kEdgeStart, usable on devices).
+KOKKOS_INLINE_FUNCTION int edge_start(int e) {
+  const int axis = e >> 2, m = e & 3;
+  return axis == 0 ? (m << 1) : (axis == 1 ? ((m & 1) | ((m >> 1) << 2)) : m);
+}
+
+// Band indices of the 8 corners of the cell whose minimum corner is (i,j,k);
+// false if one is not a band vertex.
+template <class MemSpace>
+KOKKOS_INLINE_FUNCTION bool cell_corners(const BandView<MemSpace>& band, std::int64_t i, std::int64_t j,
+                                         std::int64_t k, std::int64_t self, std::int64_t idx[8]) {
+  idx[0] = self;
+  for (int c = 1; c < 8; ++c) {
+    idx[c] = band.index(i + (c & 1), j + ((c >> 1) & 1), k + ((c >> 2) & 1));
+    if (idx[c] < 0) return false;
+  }
+  return true;
+}
+
+template <class MemSpace>
+KOKKOS_INLINE_FUNCTION float gradient_component(const BandView<MemSpace>& band,
+                                                const Kokkos::View<const float*, MemSpace>& phi, std::int64_t i,
+                                                std::int64_t j, std::int64_t k, std::int64_t self, int axis,
+                                                float inv_c) {
+  const std::int64_t di = axis == 0, dj = axis == 1, dk = axis == 2;
+  const std::int64_t p = band.index(i + di, j + dj, k + dk);
+  const std::int64_t m = band.index(i - di, j - dj, k - dk);
+  if (p >= 0 && m >= 0) return 0.5f * (phi(p) - phi(m)) * inv_c;
+  if (p >= 0) return (phi(p) - phi(self)) * inv_c;
+  if (m >= 0) return (phi(self) - phi(m)) * inv_c;
+  return 0.f;
+}
+
+struct McResult {
+  std::uint64_t vertices = 0, triangles = 0, cells = 0;
+};
+
+// Runs passes A and B; returns the counts. `info` (zeroed, one per band
+// vertex): bits 0-7 the cell case (only for triangulated cells), bits 8-10 the
+// crossed edges owned by the vertex. `vert_offset`: first mesh vertex of each
+// band vertex. `tri_offset`: first triangle of each band word.
+template <class ExecSpace>
+McResult classify_cells(const ExecSpace& space, const BandView<typename ExecSpace::memory_space>& band,
+                        std::size_t n_words, const Kokkos::View<const float*, typename ExecSpace::memory_space>& phi,
+                        const McTables<typename ExecSpace::memory_space>& tables,
+                        const Kokkos::View<std::uint32_t*, typename ExecSpace::memory_space>& info,
+                        const Kokkos::View<std::uint32_t*, typename ExecSpace::memory_space>& vert_offset,
+                        const Kokkos::View<std::uint64_t*, typename ExecSpace::memory_space>& tri_offset) {
+  ScopedRegion region("nbmc::marching_cubes::classify");
+  McResult r;
+  std::uint64_t cells = 0;
+  Kokkos::parallel_reduce(
+      "nbmc::marching_cubes::cases", Kokkos::RangePolicy<ExecSpace, Kokkos::Schedule<Kokkos::Dynamic>>(space, 0, n_words),
+      KOKKOS_LAMBDA(const std::size_t w, std::uint64_t& acc) {
+        std::uint64_t word = band.words(w);
+        std::int64_t self = std::int64_t(band.word_offset(w));
+        std::uint32_t tris = 0;
+        while (word) {
+          const int bit = ctz64(word);
+          word &= word - 1;
+          std::int64_t i, j, k, idx[8];
+          band.vertex(w, bit, i, j, k);
+          if (cell_corners(band, i, j, k, self, idx)) {
+            int cs = 0;
+            for (int c = 0; c < 8; ++c) cs |= (phi(idx[c]) < 0.f ? 1 : 0) << c;
+            if (cs != 0 && cs != 255) {
+              Kokkos::atomic_fetch_or(&info(self), std::uint32_t(cs));
+              const std::uint16_t em = tables.edges(cs);
+              for (int e = 0; e < 12; ++e)
+                if (em & (1u << e))
+                  Kokkos::atomic_fetch_or(&info(idx[edge_start(e)]), std::uint32_t(1) << (8 + e / 4));
+              tris += tables.count(cs);
+              ++acc;
+            }
+          }
+          ++self;
+        }
+        tri_offset(w) = tris;
+      },
+      cells);
+  space.fence();
+  r.cells = cells;
+  const std::size_t nb = info.extent(0);
+  std::uint64_t nverts = 0;
+  Kokkos::parallel_scan(
+      "nbmc::marching_cubes::number_vertices", Kokkos::RangePolicy<ExecSpace>(space, 0, nb),
+      KOKKOS_LAMBDA(const std::size_t v, std::uint64_t& update, const bool final) {
+        if (final) vert_offset(v) = std::uint32_t(update);
+        update += popcount64((info(v) >> 8) & 7u);
+      },
+      nverts);
+  space.fence();
+  r.vertices = nverts;
+  r.triangles = exclusive_scan(space, "nbmc::marching_cubes::number_triangles", tri_offset, tri_offset);
+  return r;
+}
+
+// Pass C: intersection points (absolute, float) and normals.
+template <class ExecSpace>
+void compute_vertices(const ExecSpace& space, const BandView<typename ExecSpace::memory_space>& band,
+                      std::size_t n_words, const Grid& g,
+                      const Kokkos::View<const float*, typename ExecSpace::memory_space>& phi,
+                      const Kokkos::View<const std::uint32_t*, typename ExecSpace::memory_space>& info,
+                      const Kokkos::View<const std::uint32_t*, typename ExecSpace::memory_space>& vert_offset,
+                      const Kokkos::View<float*, typename ExecSpace::memory_space>& positions,
+                      const Kokkos::View<float*, typename ExecSpace::memory_space>& normals, bool with_normals) {
+  ScopedRegion region("nbmc::marching_cubes::vertices");
+  const double o0 = g.origin[0], o1 = g.origin[1], o2 = g.origin[2], c = g.cell;
+  const float inv_c = float(1.0 / g.cell);
+  Kokkos::parallel_for(
+      "nbmc::marching_cubes::vertices",
+      Kokkos::RangePolicy<ExecSpace, Kokkos::Schedule<Kokkos::Dynamic>>(space, 0, n_words),
+      KOKKOS_LAMBDA(const std::size_t w) {
+        std::uint64_t word = band.words(w);
+        std::int64_t self = std::int64_t(band.word_offset(w));
+        while (word) {
+          const int bit = ctz64(word);
+          word &= word - 1;
+          const std::uint32_t edges = (info(self) >> 8) & 7u;
+          if (edges) {
+            std::int64_t i, j, k;
+            band.vertex(w, bit, i, j, k);
+            std::uint32_t out = vert_offset(self);
+            for (int a = 0; a < 3; ++a) {
+              if (!(edges & (1u << a))) continue;
+              const std::int64_t di = a == 0, dj = a == 1, dk = a == 2;
+              const std::int64_t other = band.index(i + di, j + dj, k + dk);
+              const float f0 = phi(self), f1 = phi(other);
+              float t = f0 / (f0 - f1);
+              t = t < 0.f ? 0.f : (t > 1.f ? 1.f : t);
+              positions(3 * out) = float(o0 + (double(i) + double(t) * double(di)) * c);
+              positions(3 * out + 1) = float(o1 + (double(j) + double(t) * double(dj)) * c);
+              positions(3 * out + 2) = float(o2 + (double(k) + double(t) * double(dk)) * c);
+              if (with_normals) {
+                float n[3];
+                for (int b = 0; b < 3; ++b) {
+                  const float g0 = gradient_component(band, phi, i, j, k, self, b, inv_c);
+                  const float g1 = gradient_component(band, phi, i + di, j + dj, k + dk, other, b, inv_c);
+                  n[b] = (1.f - t) * g0 + t * g1;
+                }
+                float len2 = n[0] * n[0] + n[1] * n[1] + n[2] * n[2];
+                if (!(len2 > 1e-30f)) {  // flat field: the edge direction, inside -> outside
+                  n[0] = n[1] = n[2] = 0.f;
+                  n[a] = f1 > f0 ? 1.f : -1.f;
+                  len2 = 1.f;
+                }
+                const float inv = 1.f / Kokkos::Experimental::sqrt(len2);
+                normals(3 * out) = n[0] * inv;
+                normals(3 * out + 1) = n[1] * inv;
+                normals(3 * out + 2) = n[2] * inv;
+              }
+              ++out;
+            }
+          }
+          ++self;
+        }
+      });
+  space.fence();
+}
+
+// Pass D: triangles (vertex indices), counter-clockwise seen from outside.
+template <class ExecSpace>
+void compute_triangles(const ExecSpace& space, const BandView<typename ExecSpace::memory_space>& band,
+                       std::size_t n_words, const McTables<typename ExecSpace::memory_space>& tables,
+                       const Kokkos::View<const std::uint32_t*, typename ExecSpace::memory_space>& info,
+                       const Kokkos::View<const std::uint32_t*, typename ExecSpace::memory_space>& vert_offset,
+                       const Kokkos::View<const std::uint64_t*, typename ExecSpace::memory_space>& tri_offset,
+                       const Kokkos::View<std::uint32_t*, typename ExecSpace::memory_space>& triangles) {
+  ScopedRegion region("nbmc::marching_cubes::triangles");
+  constexpr int W = 3 * mc::kMaxTriangles;
+  Kokkos::parallel_for(
+      "nbmc::marching_cubes::triangles",
+      Kokkos::RangePolicy<ExecSpace, Kokkos::Schedule<Kokkos::Dynamic>>(space, 0, n_words),
+      KOKKOS_LAMBDA(const std::size_t w) {
+        std::uint64_t word = band.words(w);
+        std::int64_t self = std::int64_t(band.word_offset(w));
+        std::uint64_t out = tri_offset(w);
+        while (word) {
+          const int bit = ctz64(word);
+          word &= word - 1;
+          const int cs = int(info(self) & 0xffu);
+          if (cs) {
+            std::int64_t i, j, k, idx[8];
+            band.vertex(w, bit, i, j, k);
+            cell_corners(band, i, j, k, self, idx);
+            const int nt = tables.count(cs);
+            for (int t = 0; t < 3 * nt; ++t) {
+              const int e = tables.triangles(cs * W + t);
+              const int axis = e >> 2;
+              const std::int64_t owner = idx[edge_start(e)];
+              const std::uint32_t below = (info(owner) >> 8) & ((1u << axis) - 1u);
+              triangles(3 * out + t) = vert_offset(owner) + std::uint32_t(popcount64(below));
+            }
+            out += std::uint64_t(nt);
+          }
+          ++self;
+        }
+      });
+  space.fence();
+}
+
+}  // namespace Details
+}  // namespace nbmc

@@ -1,0 +1,265 @@
+// SPDX-License-Identifier: MIT
+// Narrow band (paper Sec. 4.1, "extracting surface vertices"): every grid vertex
+// inside the +-band_width box of a surface particle. Stored block-sparse: blocks
+// of 8x8x8 vertices exist only where the band is (hash map from the block's
+// Morton key), each a 512-bit mask in eight 64-bit words (one word = a 4x4x4
+// sub-block). A band vertex's index is the prefix count of set bits, so field
+// values and everything after are stored compactly, one entry per band vertex,
+// in a deterministic order (block key, word, bit). No per-vertex or per-cell
+// array of the bounding box exists anywhere.
+#pragma once
+
+#include "common.hpp"
+#include "grid.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <vector>
+
+namespace nbmc {
+namespace Details {
+
+template <class MemSpace>
+struct Band {
+  std::size_t n_blocks = 0;
+  std::uint64_t n_vertices = 0;
+  Buffer<std::uint64_t, MemSpace> block_keys;   // sorted Morton keys of the blocks
+  HashMapStorage<MemSpace> blocks;              // key -> block index
+  Buffer<std::uint64_t, MemSpace> words;        // 8 per block
+  Buffer<std::uint64_t, MemSpace> word_offset;  // band index of each word's first vertex
+};
+
+template <class MemSpace>
+struct BandView {
+  Kokkos::View<const std::uint64_t*, MemSpace> block_keys, words, word_offset;
+  HashMap<MemSpace> blocks;
+  std::int64_t dims[3];
+
+  KOKKOS_INLINE_FUNCTION static int word_of(std::int64_t lx, std::int64_t ly, std::int64_t lz) {
+    return int((lx >> 2) | ((ly >> 2) << 1) | ((lz >> 2) << 2));
+  }
+  KOKKOS_INLINE_FUNCTION static int bit_of(std::int64_t lx, std::int64_t ly, std::int64_t lz) {
+    return int((lx & 3) | ((ly & 3) << 2) | ((lz & 3) << 4));
+  }
+  // Grid coordinates of bit `bit` of word `w` (global word index).
+  KOKKOS_INLINE_FUNCTION void vertex(std::size_t w, int bit, std::int64_t& i, std::int64_t& j,
+                                     std::int64_t& k) const {
+    const std::uint64_t key = block_keys(w >> 3);
+    const int sub = int(w & 7);
+    i = std::int64_t(compact3(key)) * 8 + (sub & 1) * 4 + (bit & 3);
+    j = std::int64_t(compact3(key >> 1)) * 8 + ((sub >> 1) & 1) * 4 + ((bit >> 2) & 3);
+    k = std::int64_t(compact3(key >> 2)) * 8 + ((sub >> 2) & 1) * 4 + (bit >> 4);
+  }
+  // Band index of grid vertex (i, j, k), or -1 when it is not in the band.
+  KOKKOS_INLINE_FUNCTION std::int64_t index(std::int64_t i, std::int64_t j, std::int64_t k) const {
+    if (i < 0 || j < 0 || k < 0 || i >= dims[0] || j >= dims[1] || k >= dims[2]) return -1;
+    const std::uint32_t b =
+        blocks.find(morton3(std::uint32_t(i >> 3), std::uint32_t(j >> 3), std::uint32_t(k >> 3)));
+    if (b == ~0u) return -1;
+    const std::size_t w = std::size_t(b) * 8 + word_of(i & 7, j & 7, k & 7);
+    const int bit = bit_of(i & 7, j & 7, k & 7);
+    const std::uint64_t word = words(w);
+    if (!((word >> bit) & 1)) return -1;
+    return std::int64_t(word_offset(w)) + popcount64(word & ((std::uint64_t(1) << bit) - 1));
+  }
+};
+
+template <class MemSpace>
+BandView<MemSpace> view_of(const Band<MemSpace>& b, const Grid& g) {
+  BandView<MemSpace> v;
+  v.block_keys = b.block_keys.view();
+  v.words = b.words.view();
+  v.word_offset = b.word_offset.view();
+  v.blocks = b.blocks.map;
+  for (int a = 0; a < 3; ++a) v.dims[a] = g.dims[a];
+  return v;
+}
+
+// Gives every block its index in the sorted key order.
+template <class ExecSpace>
+void number_blocks(const ExecSpace& space, Band<typename ExecSpace::memory_space>& band) {
+  auto map = band.blocks.map;
+  auto keys = band.block_keys.view();
+  Kokkos::parallel_for(
+      "nbmc::band::number_blocks", Kokkos::RangePolicy<ExecSpace>(space, 0, band.n_blocks),
+      KOKKOS_LAMBDA(const std::size_t b) { map.values(map.find_slot(keys(b))) = std::uint32_t(b); });
+  space.fence();
+}
+
+// Prefix counts of the words: the band index of every word's first vertex.
+template <class ExecSpace>
+void finish_band(const ExecSpace& space, MemoryTracker& tracker, Band<typename ExecSpace::memory_space>& band) {
+  using MemSpace = typename ExecSpace::memory_space;
+  band.word_offset = Buffer<std::uint64_t, MemSpace>(tracker, "band::word_offset", band.n_blocks * 8);
+  auto words = band.words.view();
+  auto offs = band.word_offset.view();
+  std::uint64_t total = 0;
+  Kokkos::parallel_scan(
+      "nbmc::band::prefix", Kokkos::RangePolicy<ExecSpace>(space, 0, band.n_blocks * 8),
+      KOKKOS_LAMBDA(const std::size_t w, std::uint64_t& update, const bool final) {
+        if (final) offs(w) = update;
+        update += popcount64(words(w));
+      },
+      total);
+  space.fence();
+  band.n_vertices = total;
+}
+
+// Sorted unique keys from a hash map's key array (host sort: few keys).
+template <class ExecSpace>
+void collect_sorted_keys(const ExecSpace& space, MemoryTracker& tracker,
+                         Band<typename ExecSpace::memory_space>& band) {
+  using MemSpace = typename ExecSpace::memory_space;
+  auto hkeys = Kokkos::create_mirror_view_and_copy(Kokkos::HostSpace(), band.blocks.keys.view());
+  std::vector<std::uint64_t> keys;
+  keys.reserve(band.n_blocks);
+  for (std::size_t s = 0; s < hkeys.extent(0); ++s)
+    if (hkeys(s) != kEmptyKey) keys.push_back(hkeys(s));
+  std::sort(keys.begin(), keys.end());
+  band.n_blocks = keys.size();
+  band.block_keys = Buffer<std::uint64_t, MemSpace>(tracker, "band::block_keys", keys.size());
+  Kokkos::View<const std::uint64_t*, Kokkos::HostSpace, Kokkos::MemoryTraits<Kokkos::Unmanaged>> hk(keys.data(),
+                                                                                                   keys.size());
+  Kokkos::deep_copy(space, band.block_keys.view(), hk);
+  space.fence();
+}
+
+// Narrow band around the surface particles (flags(i) != 0, sorted order).
+template <class ExecSpace>
+void build_narrow_band(const ExecSpace& space, MemoryTracker& tracker, const Grid& g, const Params& p,
+                       const Kokkos::View<const float*, typename ExecSpace::memory_space>& pos,
+                       const Kokkos::View<const std::uint8_t*, typename ExecSpace::memory_space>& flags,
+                       std::size_t n, Band<typename ExecSpace::memory_space>& band) {
+  using MemSpace = typename ExecSpace::memory_space;
+  ScopedRegion region("nbmc::narrow_band");
+  const float inv_c = float(1.0 / g.cell);
+  const float bw = float(p.band_width);
+  const std::int64_t d0 = g.dims[0] - 1, d1 = g.dims[1] - 1, d2 = g.dims[2] - 1;
+
+  // Vertex box of particle i, clamped to the grid; false if empty.
+  auto box = KOKKOS_LAMBDA(std::size_t i, std::int64_t lo[3], std::int64_t hi[3])->bool {
+    const std::int64_t dmax[3] = {d0, d1, d2};
+    for (int a = 0; a < 3; ++a) {
+      const float x = pos(4 * i + a);
+      lo[a] = std::int64_t(Kokkos::Experimental::ceil((x - bw) * inv_c));
+      hi[a] = std::int64_t(Kokkos::Experimental::floor((x + bw) * inv_c));
+      if (lo[a] < 0) lo[a] = 0;
+      if (hi[a] > dmax[a]) hi[a] = dmax[a];
+      if (lo[a] > hi[a]) return false;
+    }
+    return true;
+  };
+
+  // 1. Upper bound of the number of blocks, to size the hash map.
+  std::uint64_t bound = 0;
+  Kokkos::parallel_reduce(
+      "nbmc::band::count_blocks", Kokkos::RangePolicy<ExecSpace>(space, 0, n),
+      KOKKOS_LAMBDA(const std::size_t i, std::uint64_t& acc) {
+        std::int64_t lo[3], hi[3];
+        if (!flags(i) || !box(i, lo, hi)) return;
+        acc += std::uint64_t((hi[0] >> 3) - (lo[0] >> 3) + 1) * std::uint64_t((hi[1] >> 3) - (lo[1] >> 3) + 1) *
+               std::uint64_t((hi[2] >> 3) - (lo[2] >> 3) + 1);
+      },
+      bound);
+  const std::uint64_t grid_blocks = std::uint64_t(g.block_dims(0)) * g.block_dims(1) * g.block_dims(2);
+  band.blocks.allocate(space, tracker, "band::block_map", std::size_t(std::min(bound, grid_blocks)));
+
+  // 2. Insert the blocks.
+  auto map = band.blocks.map;
+  std::size_t inserted = 0;
+  Kokkos::parallel_reduce(
+      "nbmc::band::insert_blocks", Kokkos::RangePolicy<ExecSpace>(space, 0, n),
+      KOKKOS_LAMBDA(const std::size_t i, std::size_t& acc) {
+        std::int64_t lo[3], hi[3];
+        if (!flags(i) || !box(i, lo, hi)) return;
+        for (std::int64_t bz = lo[2] >> 3; bz <= (hi[2] >> 3); ++bz)
+          for (std::int64_t by = lo[1] >> 3; by <= (hi[1] >> 3); ++by)
+            for (std::int64_t bx = lo[0] >> 3; bx <= (hi[0] >> 3); ++bx)
+              if (map.insert(morton3(std::uint32_t(bx), std::uint32_t(by), std::uint32_t(bz)))) ++acc;
+      },
+      inserted);
+  space.fence();
+  band.n_blocks = inserted;
+  collect_sorted_keys(space, tracker, band);
+  number_blocks(space, band);  // before marking: the marking looks blocks up
+
+  // 3. Set the bits: one atomic OR per (particle, 4x4x4 sub-block).
+  band.words = Buffer<std::uint64_t, MemSpace>(tracker, "band::words", band.n_blocks * 8, true);
+  auto words = band.words.view();
+  Kokkos::parallel_for(
+      "nbmc::band::mark", Kokkos::RangePolicy<ExecSpace, Kokkos::Schedule<Kokkos::Dynamic>>(space, 0, n),
+      KOKKOS_LAMBDA(const std::size_t i) {
+        std::int64_t lo[3], hi[3];
+        if (!flags(i) || !box(i, lo, hi)) return;
+        for (std::int64_t sz = lo[2] >> 2; sz <= (hi[2] >> 2); ++sz)
+          for (std::int64_t sy = lo[1] >> 2; sy <= (hi[1] >> 2); ++sy)
+            for (std::int64_t sx = lo[0] >> 2; sx <= (hi[0] >> 2); ++sx) {
+              // Per-axis 4-bit masks of the box inside this sub-block.
+              std::uint64_t mask = 0;
+              const std::int64_t x0 = (sx << 2) > lo[0] ? (sx << 2) : lo[0];
+              const std::int64_t x1 = (sx << 2) + 3 < hi[0] ? (sx << 2) + 3 : hi[0];
+              const std::int64_t y0 = (sy << 2) > lo[1] ? (sy << 2) : lo[1];
+              const std::int64_t y1 = (sy << 2) + 3 < hi[1] ? (sy << 2) + 3 : hi[1];
+              const std::int64_t z0 = (sz << 2) > lo[2] ? (sz << 2) : lo[2];
+              const std::int64_t z1 = (sz << 2) + 3 < hi[2] ? (sz << 2) + 3 : hi[2];
+              std::uint64_t row = 0;
+              for (std::int64_t x = x0; x <= x1; ++x) row |= std::uint64_t(1) << (x & 3);
+              for (std::int64_t z = z0; z <= z1; ++z)
+                for (std::int64_t y = y0; y <= y1; ++y) mask |= row << (((y & 3) << 2) | ((z & 3) << 4));
+              const std::uint32_t b = map.find(
+                  morton3(std::uint32_t(sx >> 1), std::uint32_t(sy >> 1), std::uint32_t(sz >> 1)));
+              const std::size_t w = std::size_t(b) * 8 + ((sx & 1) | ((sy & 1) << 1) | ((sz & 1) << 2));
+              Kokkos::atomic_fetch_or(&words(w), mask);
+            }
+      });
+  space.fence();
+  finish_band(space, tracker, band);
+}
+
+// The dense baseline: every vertex of the bounding grid is a "band" vertex.
+template <class ExecSpace>
+void build_dense_band(const ExecSpace& space, MemoryTracker& tracker, const Grid& g,
+                      Band<typename ExecSpace::memory_space>& band) {
+  using MemSpace = typename ExecSpace::memory_space;
+  const std::int64_t bd[3] = {g.block_dims(0), g.block_dims(1), g.block_dims(2)};
+  std::vector<std::uint64_t> keys;
+  keys.reserve(std::size_t(bd[0] * bd[1] * bd[2]));
+  for (std::int64_t z = 0; z < bd[2]; ++z)
+    for (std::int64_t y = 0; y < bd[1]; ++y)
+      for (std::int64_t x = 0; x < bd[0]; ++x)
+        keys.push_back(morton3(std::uint32_t(x), std::uint32_t(y), std::uint32_t(z)));
+  std::sort(keys.begin(), keys.end());
+  band.n_blocks = keys.size();
+  band.block_keys = Buffer<std::uint64_t, MemSpace>(tracker, "band::block_keys", keys.size());
+  Kokkos::View<const std::uint64_t*, Kokkos::HostSpace, Kokkos::MemoryTraits<Kokkos::Unmanaged>> hk(keys.data(),
+                                                                                                   keys.size());
+  Kokkos::deep_copy(space, band.block_keys.view(), hk);
+  band.blocks.allocate(space, tracker, "band::block_map", keys.size());
+  band.words = Buffer<std::uint64_t, MemSpace>(tracker, "band::words", band.n_blocks * 8);
+  auto map = band.blocks.map;
+  auto bkeys = band.block_keys.view();
+  auto words = band.words.view();
+  const std::int64_t d0 = g.dims[0], d1 = g.dims[1], d2 = g.dims[2];
+  Kokkos::parallel_for(
+      "nbmc::band::dense", Kokkos::RangePolicy<ExecSpace>(space, 0, band.n_blocks), KOKKOS_LAMBDA(const std::size_t b) {
+        map.insert(bkeys(b));
+        const std::uint64_t key = bkeys(b);
+        const std::int64_t bx = std::int64_t(compact3(key)) * 8, by = std::int64_t(compact3(key >> 1)) * 8,
+                           bz = std::int64_t(compact3(key >> 2)) * 8;
+        for (int w = 0; w < 8; ++w) {
+          std::uint64_t mask = 0;
+          for (int bit = 0; bit < 64; ++bit) {
+            const std::int64_t i = bx + (w & 1) * 4 + (bit & 3), j = by + ((w >> 1) & 1) * 4 + ((bit >> 2) & 3),
+                               k = bz + ((w >> 2) & 1) * 4 + (bit >> 4);
+            if (i < d0 && j < d1 && k < d2) mask |= std::uint64_t(1) << bit;
+          }
+          words(b * 8 + w) = mask;
+        }
+      });
+  space.fence();
+  number_blocks(space, band);
+  finish_band(space, tracker, band);
+}
+
+}  // namespace Details
+}  // namespace nbmc

@@ -1,0 +1,248 @@
+/* SPDX-License-Identifier: MIT */
+/*
+ * nbmc — narrow-band marching cubes for particle-based fluids.
+ *
+ * The stable C ABI. Written by hand; see docs/api.md for the long form.
+ *
+ * Conventions
+ *  - Every fallible function returns an int32_t status (NBMC_OK == 0).
+ *    Handles come back through out-parameters.
+ *  - nbmc_status_string(code) returns a static string; the detailed message of
+ *    the last failed call on a context is nbmc_context_last_error(ctx), valid
+ *    until the next call on that context.
+ *  - Enumerations travel as int32_t; their values are never renumbered.
+ *  - Structs passed in start with `uint32_t struct_size`; fill them with the
+ *    matching nbmc_*_init() function before changing fields.
+ *  - Uploads copy. A mesh owns its memory and outlives its context.
+ *    Every *_destroy(NULL) is a no-op.
+ *
+ * Thread safety
+ *  - Different contexts and meshes may be used from different threads at once.
+ *  - One context must not be used by two threads at the same time (no internal
+ *    locking); it may move between threads.
+ *  - Mesh getters are read-only and may be called concurrently on one mesh.
+ */
+#ifndef NBMC_H
+#define NBMC_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+#define NBMC_VERSION_MAJOR 0
+#define NBMC_VERSION_MINOR 1
+#define NBMC_VERSION_PATCH 0
+#define NBMC_VERSION (NBMC_VERSION_MAJOR * 10000 + NBMC_VERSION_MINOR * 100 + NBMC_VERSION_PATCH)
+
+#if defined(_WIN32)
+#  if defined(NBMC_BUILDING_LIBRARY)
+#    define NBMC_API __declspec(dllexport)
+#  else
+#    define NBMC_API __declspec(dllimport)
+#  endif
+#elif defined(__GNUC__) || defined(__clang__)
+#  define NBMC_API __attribute__((visibility("default")))
+#else
+#  define NBMC_API
+#endif
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* ------------------------------------------------------------------ status */
+/* Values are fixed forever; new codes are only appended. */
+#define NBMC_OK                          0
+#define NBMC_ERROR_INVALID_ARGUMENT      1  /* null pointer, bad enum value, bad struct_size */
+#define NBMC_ERROR_INVALID_PARTICLES     2  /* a position is NaN or infinite */
+#define NBMC_ERROR_NO_PARTICLES          3  /* zero particles, or none uploaded yet */
+#define NBMC_ERROR_INVALID_PARAMETER     4  /* spacing <= 0, radius too small, thresholds inverted, ... */
+#define NBMC_ERROR_DOMAIN_TOO_LARGE      5  /* grid indices or mesh indices would overflow */
+#define NBMC_ERROR_OUT_OF_MEMORY         6  /* host or device allocation failed */
+#define NBMC_ERROR_BACKEND_UNAVAILABLE   7  /* requested backend not compiled in or no device */
+#define NBMC_ERROR_IO                    8  /* file could not be read or written */
+#define NBMC_ERROR_INTERNAL              9  /* a bug: please report with the message */
+#define NBMC_ERROR_MEMORY_BUDGET        10  /* estimated need exceeds the context's memory budget */
+#define NBMC_ERROR_CANCELLED            11  /* the progress callback asked to stop */
+#define NBMC_ERROR_FORMAT               12  /* a file is malformed or of an unsupported kind */
+
+/* --------------------------------------------------------------- constants */
+/* Backends (nbmc_context_desc.backend). */
+#define NBMC_BACKEND_AUTO    0  /* CUDA when compiled in and a device exists, else OpenMP, else serial */
+#define NBMC_BACKEND_SERIAL  1
+#define NBMC_BACKEND_OPENMP  2
+#define NBMC_BACKEND_CUDA    3
+
+/* Scalar field methods (nbmc_params.method). */
+#define NBMC_METHOD_SSP07  0  /* Solenthaler, Schlaefli, Pajarola 2007 (default) */
+#define NBMC_METHOD_ZB05   1  /* Zhu & Bridson 2005 */
+
+/* Field evaluation strategies (nbmc_params.field). */
+#define NBMC_FIELD_NARROW_BAND  0  /* gather on band vertices only (the method; default) */
+#define NBMC_FIELD_DENSE        1  /* baseline: gather on every vertex of the bounding grid */
+#define NBMC_FIELD_SCATTER      2  /* baseline: serial scatter over a dense grid */
+
+/* How lengths in nbmc_params are given (nbmc_params.length_unit). */
+#define NBMC_UNIT_SPACING   0  /* multiples of the particle spacing r (default) */
+#define NBMC_UNIT_ABSOLUTE  1  /* the same units as the particle positions */
+
+/* Pipeline stages, for timings and progress. */
+#define NBMC_STAGE_UPLOAD             0  /* validation, bounds, copy to the backend */
+#define NBMC_STAGE_NEIGHBOURHOOD      1  /* z-order sort, cell starts */
+#define NBMC_STAGE_SURFACE_PARTICLES  2
+#define NBMC_STAGE_BAND               3  /* narrow band marking and compaction */
+#define NBMC_STAGE_FIELD              4  /* scalar field */
+#define NBMC_STAGE_TRIANGULATION      5  /* marching cubes, normals */
+#define NBMC_STAGE_OUTPUT             6  /* copy of the mesh to the host */
+#define NBMC_STAGE_COUNT              7
+#define NBMC_STAGE_SLOTS             16  /* size of the stage arrays in nbmc_stats */
+
+/* ------------------------------------------------------------ opaque types */
+typedef struct nbmc_context nbmc_context;
+typedef struct nbmc_mesh nbmc_mesh;
+
+/* ----------------------------------------------------------------- version */
+/* NBMC_VERSION of the library actually loaded (compare with the header's). */
+NBMC_API uint32_t nbmc_version(void);
+/* "major.minor.patch" plus the compiled-in backends, static string. */
+NBMC_API const char* nbmc_version_string(void);
+/* Static English name of a status code ("unknown status" for others). */
+NBMC_API const char* nbmc_status_string(int32_t status);
+/* Static name of a stage ("upload", "neighbourhood", ...), NULL if out of range. */
+NBMC_API const char* nbmc_stage_name(int32_t stage);
+/* 1 if the backend is compiled in and usable on this machine, else 0. */
+NBMC_API int32_t nbmc_backend_available(int32_t backend);
+
+/* ----------------------------------------------------------------- context */
+typedef struct nbmc_context_desc {
+  uint32_t struct_size; /* sizeof(nbmc_context_desc) */
+  int32_t backend;      /* NBMC_BACKEND_*, default AUTO */
+  int32_t num_threads;  /* host threads for OpenMP; 0 = all cores (default) */
+  int32_t device_id;    /* CUDA device, default 0 */
+  uint32_t flags;       /* reserved, must be 0 */
+  uint32_t reserved0;
+} nbmc_context_desc;
+
+/* Fills *desc with the defaults. */
+NBMC_API void nbmc_context_desc_init(nbmc_context_desc* desc);
+
+/* Creates a context. desc may be NULL for the defaults. Initialises the Kokkos
+ * runtime on first use if the host program has not (see
+ * nbmc_kokkos_finalize); the context is then independent of all others.
+ * On failure *out is set to NULL. */
+NBMC_API int32_t nbmc_context_create(const nbmc_context_desc* desc, nbmc_context** out);
+
+/* Destroys a context and its buffers. Meshes it produced stay valid. */
+NBMC_API void nbmc_context_destroy(nbmc_context* ctx);
+
+/* Message of the last failed call on ctx ("" after success); valid until the
+ * next call on ctx. With ctx == NULL, the message of the last failed
+ * nbmc_context_create on this thread. */
+NBMC_API const char* nbmc_context_last_error(const nbmc_context* ctx);
+
+/* The backend the context really uses (AUTO resolved). */
+NBMC_API int32_t nbmc_context_backend(const nbmc_context* ctx, int32_t* backend);
+
+/* Uploads (copies) count particle positions. Particle i's x, y, z are the
+ * three consecutive values at byte offset i * byte_stride from xyz;
+ * byte_stride 0 means tightly packed (3 * sizeof value). Works for C arrays of
+ * [x,y,z] and for Fortran pos(3, n). Replaces earlier particles. Positions are
+ * validated here: NaN/Inf gives NBMC_ERROR_INVALID_PARTICLES, count 0 gives
+ * NBMC_ERROR_NO_PARTICLES, and the context keeps no particles. */
+NBMC_API int32_t nbmc_context_set_particles_f32(nbmc_context* ctx, const float* xyz,
+                                                uint64_t count, uint64_t byte_stride);
+NBMC_API int32_t nbmc_context_set_particles_f64(nbmc_context* ctx, const double* xyz,
+                                                uint64_t count, uint64_t byte_stride);
+
+/* Progress and cancellation. The callback is called from the calling thread
+ * with the stage (NBMC_STAGE_*) and the fraction of that stage done in [0,1];
+ * returning non-zero cancels the reconstruction, which then returns
+ * NBMC_ERROR_CANCELLED. fn == NULL removes it. */
+typedef int32_t (*nbmc_progress_fn)(void* user, int32_t stage, double fraction);
+NBMC_API int32_t nbmc_context_set_progress(nbmc_context* ctx, nbmc_progress_fn fn, void* user);
+
+/* -------------------------------------------------------------- parameters */
+typedef struct nbmc_params {
+  uint32_t struct_size;     /* sizeof(nbmc_params) */
+  int32_t length_unit;      /* NBMC_UNIT_SPACING (default) or NBMC_UNIT_ABSOLUTE */
+  double spacing;           /* r: rest distance of the particles, absolute, > 0. Required. */
+  double cell_size;         /* marching-cubes cell edge; default 0.5 (r/2) */
+  double influence_radius;  /* R, kernel support of the field; default 4 (4r) */
+  double band_width;        /* half width of the band box around surface particles; default 2 (2r) */
+  double surface_radius;    /* neighbourhood radius of the surface-particle test; default 2 (2r) */
+  double iso_radius;        /* r-bar of eq. (1) (SSP07) / particle radius (ZB05); default 1 (r) */
+  int32_t method;           /* NBMC_METHOD_*, default SSP07 */
+  int32_t field;            /* NBMC_FIELD_*, default NARROW_BAND */
+  double t_low;             /* SSP07 eigenvalue thresholds; default 0.4 */
+  double t_high;            /*                               default 3.5 */
+  double color_threshold;   /* |grad colour field| * surface_radius above which a particle is on the
+                               surface; default 0.75 */
+  int32_t neighbour_threshold; /* fewer neighbours within surface_radius => surface; default 25 */
+  int32_t compute_normals;  /* non-zero (default): per-vertex normals from the field gradient */
+  int32_t use_bbox;         /* non-zero: only reconstruct inside [bbox_min, bbox_max] (absolute) */
+  int32_t reserved0;
+  double bbox_min[3];
+  double bbox_max[3];
+} nbmc_params;
+
+/* Fills *params with the defaults (spacing is 0 and must be set). */
+NBMC_API void nbmc_params_init(nbmc_params* params);
+
+/* ------------------------------------------------------------ reconstruct */
+/* Reconstructs the surface of the uploaded particles. On success *mesh is a
+ * new mesh the caller owns (free with nbmc_mesh_destroy); on failure it is set
+ * to NULL and the context stays usable. Blocking. */
+NBMC_API int32_t nbmc_context_reconstruct(nbmc_context* ctx, const nbmc_params* params,
+                                          nbmc_mesh** mesh);
+
+/* Figures of the last successful reconstruction on ctx. */
+typedef struct nbmc_stats {
+  uint32_t struct_size;        /* sizeof(nbmc_stats) */
+  uint32_t reserved0;
+  uint64_t particle_count;
+  uint64_t surface_particle_count;
+  uint64_t occupied_cell_count;    /* non-empty neighbour-grid cells */
+  uint64_t band_vertex_count;      /* grid vertices where the field was evaluated */
+  uint64_t band_block_count;       /* allocated 8x8x8 band blocks (dense: 0) */
+  uint64_t grid_vertex_count;      /* vertices of the whole bounding grid (not allocated) */
+  uint64_t triangulated_cell_count;
+  uint64_t vertex_count;
+  uint64_t triangle_count;
+  uint64_t grid_dims[3];           /* vertices per axis of the bounding grid */
+  uint64_t peak_memory_bytes;      /* peak of nbmc's own allocations during the call */
+  uint64_t neighbour_evaluations;  /* particle-vertex pairs inside the influence radius */
+  double stage_seconds[NBMC_STAGE_SLOTS]; /* indexed by NBMC_STAGE_* */
+  double total_seconds;
+  double grid_origin[3];
+  double cell_size;                /* absolute */
+} nbmc_stats;
+
+NBMC_API void nbmc_stats_init(nbmc_stats* stats);
+NBMC_API int32_t nbmc_context_stats(const nbmc_context* ctx, nbmc_stats* stats);
+
+/* -------------------------------------------------------------------- mesh */
+/* Counts; 0 for NULL. */
+NBMC_API uint64_t nbmc_mesh_vertex_count(const nbmc_mesh* mesh);
+NBMC_API uint64_t nbmc_mesh_triangle_count(const nbmc_mesh* mesh);
+/* Pointers into the mesh (valid until nbmc_mesh_destroy): positions and normals
+ * are 3 * vertex_count floats (x,y,z per vertex), triangles 3 * triangle_count
+ * vertex indices, counter-clockwise seen from outside the fluid. Normals point
+ * out of the fluid and are NULL when compute_normals was 0. Empty mesh: NULL. */
+NBMC_API const float* nbmc_mesh_positions(const nbmc_mesh* mesh);
+NBMC_API const float* nbmc_mesh_normals(const nbmc_mesh* mesh);
+NBMC_API const uint32_t* nbmc_mesh_triangles(const nbmc_mesh* mesh);
+NBMC_API void nbmc_mesh_destroy(nbmc_mesh* mesh);
+
+/* ------------------------------------------------------------------ Kokkos */
+/* nbmc initialises Kokkos on the first nbmc_context_create unless the host
+ * program already did. nbmc never finalises a Kokkos runtime it did not
+ * initialise. A host that lets nbmc initialise Kokkos may call this after
+ * destroying all contexts (and before exit) to finalise it; otherwise it is
+ * finalised at process exit. Returns NBMC_OK, or NBMC_ERROR_INVALID_ARGUMENT
+ * while contexts are alive. */
+NBMC_API int32_t nbmc_kokkos_finalize(void);
+
+#ifdef __cplusplus
+} /* extern "C" */
+#endif
+
+#endif /* NBMC_H */

@@ -1,0 +1,280 @@
+// SPDX-License-Identifier: MIT
+#include "backends.hpp"
+
+#include <Kokkos_Core.hpp>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdlib>
+#include <exception>
+#include <mutex>
+#include <sstream>
+#include <thread>
+#if defined(_OPENMP)
+#include <omp.h>
+#endif
+
+namespace nbmc {
+
+void Progress::operator()(int stage, double fraction) const {
+  if (fn && !fn(stage, fraction)) throw Error(NBMC_ERROR_CANCELLED, "cancelled by the progress callback");
+}
+
+const char* version_string() {
+  static const std::string s = [] {
+    std::ostringstream o;
+    o << NBMC_VERSION_MAJOR << '.' << NBMC_VERSION_MINOR << '.' << NBMC_VERSION_PATCH << " (backends: serial";
+#if defined(KOKKOS_ENABLE_OPENMP)
+    o << " openmp";
+#endif
+#if defined(KOKKOS_ENABLE_CUDA)
+    o << " cuda";
+#endif
+    o << "; Kokkos " << KOKKOS_VERSION / 10000 << '.' << (KOKKOS_VERSION / 100) % 100 << '.' << KOKKOS_VERSION % 100
+      << ")";
+    return o.str();
+  }();
+  return s.c_str();
+}
+
+const char* backend_name(int32_t b) {
+  switch (b) {
+    case NBMC_BACKEND_AUTO: return "auto";
+    case NBMC_BACKEND_SERIAL: return "serial";
+    case NBMC_BACKEND_OPENMP: return "openmp";
+    case NBMC_BACKEND_CUDA: return "cuda";
+    default: return "unknown";
+  }
+}
+
+namespace {
+
+#if defined(KOKKOS_ENABLE_CUDA)
+int cuda_device_count() {
+  int n = 0;
+  if (cudaGetDeviceCount(&n) != cudaSuccess) {
+    cudaGetLastError();
+    return 0;
+  }
+  return n;
+}
+#endif
+
+std::mutex g_runtime_mutex;
+int g_contexts = 0;
+bool g_we_initialised = false;
+bool g_finalized = false;  // Kokkos 3.4 cannot be initialised again after finalize
+bool g_atexit_registered = false;
+// Kokkos' Serial and OpenMP spaces are single global instances in Kokkos 3.4:
+// reconstructions on one backend are serialised (contexts stay independent).
+std::mutex g_run_mutex[4];
+
+int pool_threads() {
+#if defined(KOKKOS_ENABLE_OPENMP)
+  return Kokkos::OpenMP::impl_thread_pool_size();
+#else
+  return 1;
+#endif
+}
+
+void finalize_at_exit() {
+  std::lock_guard<std::mutex> lock(g_runtime_mutex);
+  if (g_we_initialised && Kokkos::is_initialized() && !g_finalized) {
+    Kokkos::finalize();
+    g_finalized = true;
+  }
+  g_we_initialised = false;
+}
+
+}  // namespace
+
+bool backend_available(int32_t b) {
+  switch (b) {
+    case NBMC_BACKEND_AUTO:
+    case NBMC_BACKEND_SERIAL: return true;
+    case NBMC_BACKEND_OPENMP:
+#if defined(KOKKOS_ENABLE_OPENMP)
+      return true;
+#else
+      return false;
+#endif
+    case NBMC_BACKEND_CUDA:
+#if defined(KOKKOS_ENABLE_CUDA)
+      return cuda_device_count() > 0;
+#else
+      return false;
+#endif
+    default: return false;
+  }
+}
+
+int32_t auto_backend() {
+  if (backend_available(NBMC_BACKEND_CUDA)) return NBMC_BACKEND_CUDA;
+  if (backend_available(NBMC_BACKEND_OPENMP)) return NBMC_BACKEND_OPENMP;
+  return NBMC_BACKEND_SERIAL;
+}
+
+void runtime_acquire(nbmc_context& ctx) {
+  std::lock_guard<std::mutex> lock(g_runtime_mutex);
+  if (g_finalized)
+    throw Error(NBMC_ERROR_BACKEND_UNAVAILABLE, "the Kokkos runtime has already been finalized in this process");
+  if (!Kokkos::is_initialized()) {
+    Kokkos::InitArguments args;
+    // The OpenMP pool holds at least 4 threads so that contexts can ask for
+    // 1..4 threads on small machines; each context uses only its own count.
+    const int hw = int(std::max(1u, std::thread::hardware_concurrency()));
+    int want = std::max(hw, 4);
+    if (ctx.backend == NBMC_BACKEND_OPENMP && ctx.num_threads > want) want = ctx.num_threads;
+    args.num_threads = want;
+    args.device_id = ctx.device_id;
+    args.disable_warnings = true;
+#if defined(_OPENMP)
+    omp_set_max_active_levels(2);  // partition_master nests one level
+#endif
+    Kokkos::initialize(args);
+    g_we_initialised = true;
+    if (!g_atexit_registered) {
+      std::atexit(finalize_at_exit);
+      g_atexit_registered = true;
+    }
+  }
+  ++g_contexts;
+}
+
+void runtime_release(nbmc_context&) {
+  std::lock_guard<std::mutex> lock(g_runtime_mutex);
+  --g_contexts;
+}
+
+bool runtime_finalize() {
+  std::lock_guard<std::mutex> lock(g_runtime_mutex);
+  if (g_contexts > 0) return false;
+  if (g_we_initialised && Kokkos::is_initialized() && !g_finalized) {
+    Kokkos::finalize();
+    g_finalized = true;
+  }
+  g_we_initialised = false;
+  return true;
+}
+
+namespace {
+double length(const nbmc_params& in, double v, double r) {
+  return in.length_unit == NBMC_UNIT_SPACING ? v * r : v;
+}
+void require(bool ok, const std::string& msg) {
+  if (!ok) throw Error(NBMC_ERROR_INVALID_PARAMETER, msg);
+}
+std::string num(double v) {
+  std::ostringstream o;
+  o << v;
+  return o.str();
+}
+}  // namespace
+
+Params resolve_params(const nbmc_params& in) {
+  require(std::isfinite(in.spacing) && in.spacing > 0, "spacing must be a positive number (got " + num(in.spacing) + ")");
+  require(in.length_unit == NBMC_UNIT_SPACING || in.length_unit == NBMC_UNIT_ABSOLUTE,
+          "length_unit must be NBMC_UNIT_SPACING or NBMC_UNIT_ABSOLUTE");
+  require(in.method == NBMC_METHOD_SSP07 || in.method == NBMC_METHOD_ZB05, "unknown method " + std::to_string(in.method));
+  require(in.field >= NBMC_FIELD_NARROW_BAND && in.field <= NBMC_FIELD_SCATTER,
+          "unknown field strategy " + std::to_string(in.field));
+  const struct {
+    const char* name;
+    double v;
+  } lengths[] = {{"cell_size", in.cell_size},           {"influence_radius", in.influence_radius},
+                 {"band_width", in.band_width},         {"surface_radius", in.surface_radius},
+                 {"iso_radius", in.iso_radius}};
+  for (const auto& l : lengths)
+    require(std::isfinite(l.v) && l.v > 0, std::string(l.name) + " must be a positive number (got " + num(l.v) + ")");
+  require(std::isfinite(in.t_low) && std::isfinite(in.t_high) && in.t_low < in.t_high,
+          "t_low must be smaller than t_high (got " + num(in.t_low) + ", " + num(in.t_high) + ")");
+  require(std::isfinite(in.color_threshold) && in.color_threshold >= 0, "color_threshold must be >= 0");
+  require(in.neighbour_threshold >= 0, "neighbour_threshold must be >= 0");
+  Params p;
+  const double r = in.spacing;
+  p.spacing = r;
+  p.cell_size = length(in, in.cell_size, r);
+  p.influence_radius = length(in, in.influence_radius, r);
+  p.band_width = length(in, in.band_width, r);
+  p.surface_radius = length(in, in.surface_radius, r);
+  p.iso_radius = length(in, in.iso_radius, r);
+  require(p.iso_radius < p.influence_radius, "iso_radius must be smaller than influence_radius");
+  p.method = in.method;
+  p.field = in.field;
+  p.t_low = in.t_low;
+  p.t_high = in.t_high;
+  p.color_threshold = in.color_threshold;
+  p.neighbour_threshold = in.neighbour_threshold;
+  p.normals = in.compute_normals != 0;
+  p.use_bbox = in.use_bbox != 0;
+  if (p.use_bbox)
+    for (int a = 0; a < 3; ++a) {
+      require(std::isfinite(in.bbox_min[a]) && std::isfinite(in.bbox_max[a]) && in.bbox_min[a] < in.bbox_max[a],
+              "the bounding box must be finite with bbox_min < bbox_max on every axis");
+      p.bbox_min[a] = in.bbox_min[a];
+      p.bbox_max[a] = in.bbox_max[a];
+    }
+  return p;
+}
+
+void check_domain(const std::vector<double>&, const Params& p) {
+  // Band vertices around one surface particle; beyond this the cell size is
+  // absurdly small for the band (and the grid would not be indexable anyway).
+  const double per_axis = 2 * p.band_width / p.cell_size + 1;
+  if (per_axis > 2048) {
+    std::ostringstream s;
+    s << "cell size " << p.cell_size << " is too small for band width " << p.band_width << " (" << per_axis
+      << " band vertices per axis around each particle; at most 2048)";
+    throw Error(NBMC_ERROR_DOMAIN_TOO_LARGE, s.str());
+  }
+  const double per_axis_r = 2 * p.influence_radius / p.cell_size + 1;
+  if (per_axis_r > 4096) {
+    std::ostringstream s;
+    s << "cell size " << p.cell_size << " is too small for influence radius " << p.influence_radius;
+    throw Error(NBMC_ERROR_DOMAIN_TOO_LARGE, s.str());
+  }
+}
+
+void run_backend(nbmc_context& ctx, const Params& p, HostMesh& mesh, RunStats& st) {
+  Progress progress;
+  if (ctx.progress_fn) {
+    nbmc_progress_fn fn = ctx.progress_fn;
+    void* user = ctx.progress_user;
+    progress.fn = [fn, user](int stage, double f) { return fn(user, stage, f) == 0; };
+  }
+  std::lock_guard<std::mutex> lock(g_run_mutex[ctx.backend]);
+  ctx.memory.reset_peak();
+  const double* xyz = ctx.particles.data();
+  const std::size_t n = ctx.particles.size() / 3;
+  switch (ctx.backend) {
+    case NBMC_BACKEND_SERIAL: reconstruct_serial(xyz, n, p, ctx.memory, progress, mesh, st); break;
+    case NBMC_BACKEND_OPENMP: {
+#if defined(KOKKOS_ENABLE_OPENMP)
+      const int pool = pool_threads();
+      const int hw = int(std::max(1u, std::thread::hardware_concurrency()));
+      const int threads = std::min(pool, ctx.num_threads > 0 ? ctx.num_threads : hw);
+      if (threads >= pool) {
+        reconstruct_openmp(xyz, n, p, ctx.memory, progress, mesh, st);
+      } else {
+        std::exception_ptr err;
+        Kokkos::OpenMP::partition_master(
+            [&](int, int) {
+              try {
+                reconstruct_openmp(xyz, n, p, ctx.memory, progress, mesh, st);
+              } catch (...) {
+                err = std::current_exception();
+              }
+            },
+            1, threads);
+        if (err) std::rethrow_exception(err);
+      }
+#endif
+      break;
+    }
+    case NBMC_BACKEND_CUDA: reconstruct_cuda(xyz, n, p, ctx.memory, progress, mesh, st, ctx.device_id); break;
+    default: throw Error(NBMC_ERROR_BACKEND_UNAVAILABLE, "backend not available");
+  }
+  ctx.peak_memory = ctx.memory.peak.load();
+}
+
+}  // namespace nbmc

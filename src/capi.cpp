@@ -1,0 +1,313 @@
+// SPDX-License-Identifier: MIT
+// The C ABI of include/nbmc.h over the C++/Kokkos core. Every entry point is
+// wrapped in NBMC_CAPI_BEGIN/END: no exception, Kokkos error or abort crosses
+// the boundary; user input is validated here before any kernel runs.
+#include "nbmc.h"
+
+#include "backends.hpp"
+#include "context.hpp"
+
+#include <cmath>
+#include <cstring>
+#include <new>
+#include <sstream>
+#include <string>
+
+using nbmc::Error;
+
+namespace {
+
+thread_local std::string g_create_error;
+
+int32_t fail(nbmc_context* ctx, int32_t status, const std::string& msg) {
+  if (ctx) ctx->last_error = msg;
+  else g_create_error = msg;
+  return status;
+}
+
+}  // namespace
+
+#define NBMC_CAPI_BEGIN(ctx)                 \
+  nbmc_context* nbmc_capi_ctx_ = (ctx);      \
+  if (nbmc_capi_ctx_) nbmc_capi_ctx_->last_error.clear(); \
+  try {
+#define NBMC_CAPI_END                                                                     \
+  }                                                                                       \
+  catch (const Error& e) {                                                                \
+    return fail(nbmc_capi_ctx_, e.status, e.what());                                      \
+  }                                                                                       \
+  catch (const std::bad_alloc&) {                                                         \
+    return fail(nbmc_capi_ctx_, NBMC_ERROR_OUT_OF_MEMORY, "out of memory");               \
+  }                                                                                       \
+  catch (const std::exception& e) {                                                       \
+    const std::string what = e.what();                                                    \
+    if (what.find("allocat") != std::string::npos || what.find("memory") != std::string::npos) \
+      return fail(nbmc_capi_ctx_, NBMC_ERROR_OUT_OF_MEMORY, "out of memory: " + what);    \
+    return fail(nbmc_capi_ctx_, NBMC_ERROR_INTERNAL, "internal error: " + what);          \
+  }                                                                                       \
+  catch (...) {                                                                           \
+    return fail(nbmc_capi_ctx_, NBMC_ERROR_INTERNAL, "internal error: unknown exception"); \
+  }
+
+extern "C" {
+
+uint32_t nbmc_version(void) { return NBMC_VERSION; }
+
+const char* nbmc_version_string(void) { return nbmc::version_string(); }
+
+const char* nbmc_status_string(int32_t status) {
+  switch (status) {
+    case NBMC_OK: return "ok";
+    case NBMC_ERROR_INVALID_ARGUMENT: return "invalid argument";
+    case NBMC_ERROR_INVALID_PARTICLES: return "invalid particles";
+    case NBMC_ERROR_NO_PARTICLES: return "no particles";
+    case NBMC_ERROR_INVALID_PARAMETER: return "invalid parameter";
+    case NBMC_ERROR_DOMAIN_TOO_LARGE: return "domain too large";
+    case NBMC_ERROR_OUT_OF_MEMORY: return "out of memory";
+    case NBMC_ERROR_BACKEND_UNAVAILABLE: return "backend unavailable";
+    case NBMC_ERROR_IO: return "i/o error";
+    case NBMC_ERROR_INTERNAL: return "internal error";
+    case NBMC_ERROR_MEMORY_BUDGET: return "memory budget exceeded";
+    case NBMC_ERROR_CANCELLED: return "cancelled";
+    case NBMC_ERROR_FORMAT: return "malformed or unsupported file";
+    default: return "unknown status";
+  }
+}
+
+const char* nbmc_stage_name(int32_t stage) {
+  static const char* const names[NBMC_STAGE_COUNT] = {"upload", "neighbourhood", "surface particles", "band",
+                                                      "field", "triangulation", "output"};
+  return stage >= 0 && stage < NBMC_STAGE_COUNT ? names[stage] : nullptr;
+}
+
+int32_t nbmc_backend_available(int32_t backend) { return nbmc::backend_available(backend) ? 1 : 0; }
+
+void nbmc_context_desc_init(nbmc_context_desc* desc) {
+  if (!desc) return;
+  std::memset(desc, 0, sizeof(*desc));
+  desc->struct_size = sizeof(nbmc_context_desc);
+  desc->backend = NBMC_BACKEND_AUTO;
+}
+
+int32_t nbmc_context_create(const nbmc_context_desc* desc, nbmc_context** out) {
+  g_create_error.clear();
+  if (!out) return fail(nullptr, NBMC_ERROR_INVALID_ARGUMENT, "nbmc_context_create: out is NULL");
+  *out = nullptr;
+  nbmc_context_desc d;
+  nbmc_context_desc_init(&d);
+  if (desc) {
+    if (desc->struct_size < sizeof(nbmc_context_desc))
+      return fail(nullptr, NBMC_ERROR_INVALID_ARGUMENT,
+                  "nbmc_context_create: desc->struct_size is " + std::to_string(desc->struct_size) +
+                      "; fill the struct with nbmc_context_desc_init()");
+    d = *desc;
+  }
+  if (d.backend < NBMC_BACKEND_AUTO || d.backend > NBMC_BACKEND_CUDA)
+    return fail(nullptr, NBMC_ERROR_INVALID_ARGUMENT, "nbmc_context_create: unknown backend " + std::to_string(d.backend));
+  if (d.num_threads < 0)
+    return fail(nullptr, NBMC_ERROR_INVALID_ARGUMENT, "nbmc_context_create: num_threads must be >= 0");
+  if (d.flags != 0)
+    return fail(nullptr, NBMC_ERROR_INVALID_ARGUMENT, "nbmc_context_create: flags must be 0");
+  try {
+    int32_t backend = d.backend;
+    if (backend == NBMC_BACKEND_AUTO) backend = nbmc::auto_backend();
+    if (!nbmc::backend_available(backend))
+      return fail(nullptr, NBMC_ERROR_BACKEND_UNAVAILABLE,
+                  std::string("backend '") + nbmc::backend_name(backend) +
+                      "' is not available (compiled-in backends: " + nbmc::version_string() + ")");
+    auto* ctx = new nbmc_context();
+    ctx->backend = backend;
+    ctx->num_threads = d.num_threads;
+    ctx->device_id = d.device_id;
+    nbmc::runtime_acquire(*ctx);
+    *out = ctx;
+    return NBMC_OK;
+  } catch (const Error& e) {
+    return fail(nullptr, e.status, e.what());
+  } catch (const std::bad_alloc&) {
+    return fail(nullptr, NBMC_ERROR_OUT_OF_MEMORY, "out of memory");
+  } catch (const std::exception& e) {
+    return fail(nullptr, NBMC_ERROR_INTERNAL, std::string("internal error: ") + e.what());
+  } catch (...) {
+    return fail(nullptr, NBMC_ERROR_INTERNAL, "internal error: unknown exception");
+  }
+}
+
+void nbmc_context_destroy(nbmc_context* ctx) {
+  if (!ctx) return;
+  try {
+    nbmc::runtime_release(*ctx);
+  } catch (...) {
+  }
+  delete ctx;
+}
+
+const char* nbmc_context_last_error(const nbmc_context* ctx) {
+  return ctx ? ctx->last_error.c_str() : g_create_error.c_str();
+}
+
+int32_t nbmc_context_backend(const nbmc_context* ctx, int32_t* backend) {
+  if (!ctx || !backend) return NBMC_ERROR_INVALID_ARGUMENT;
+  *backend = ctx->backend;
+  return NBMC_OK;
+}
+
+}  // extern "C"
+
+template <class T>
+static int32_t set_particles(nbmc_context* ctx, const T* xyz, uint64_t count, uint64_t byte_stride,
+                             const char* fn) {
+  if (!ctx) return NBMC_ERROR_INVALID_ARGUMENT;
+  NBMC_CAPI_BEGIN(ctx)
+  ctx->particles.clear();
+  ctx->particles.shrink_to_fit();
+  if (count == 0) throw Error(NBMC_ERROR_NO_PARTICLES, std::string(fn) + ": count is 0");
+  if (!xyz) throw Error(NBMC_ERROR_INVALID_ARGUMENT, std::string(fn) + ": xyz is NULL");
+  if (byte_stride == 0) byte_stride = 3 * sizeof(T);
+  if (byte_stride < 3 * sizeof(T))
+    throw Error(NBMC_ERROR_INVALID_ARGUMENT, std::string(fn) + ": byte_stride " + std::to_string(byte_stride) +
+                                                 " is smaller than one position (" + std::to_string(3 * sizeof(T)) +
+                                                 " bytes)");
+  if (count > uint64_t(UINT32_MAX) - 1)
+    throw Error(NBMC_ERROR_DOMAIN_TOO_LARGE, std::string(fn) + ": at most 4294967294 particles are supported");
+  std::vector<double> p(3 * count);
+  const unsigned char* base = reinterpret_cast<const unsigned char*>(xyz);
+  std::uint64_t bad = 0, first_bad = 0;
+  for (uint64_t i = 0; i < count; ++i) {
+    T v[3];
+    std::memcpy(v, base + i * byte_stride, sizeof v);
+    for (int a = 0; a < 3; ++a) {
+      if (!std::isfinite(v[a]) || std::fabs(double(v[a])) > 1e15) {
+        if (!bad) first_bad = i;
+        ++bad;
+      }
+      p[3 * i + a] = double(v[a]);
+    }
+  }
+  if (bad) {
+    std::ostringstream s;
+    s << fn << ": " << bad << " coordinate(s) are NaN, infinite or beyond 1e15 in magnitude (first at particle "
+      << first_bad << ")";
+    throw Error(NBMC_ERROR_INVALID_PARTICLES, s.str());
+  }
+  ctx->particles.swap(p);
+  return NBMC_OK;
+  NBMC_CAPI_END
+}
+
+extern "C" {
+
+int32_t nbmc_context_set_particles_f32(nbmc_context* ctx, const float* xyz, uint64_t count, uint64_t byte_stride) {
+  return set_particles(ctx, xyz, count, byte_stride, "nbmc_context_set_particles_f32");
+}
+
+int32_t nbmc_context_set_particles_f64(nbmc_context* ctx, const double* xyz, uint64_t count, uint64_t byte_stride) {
+  return set_particles(ctx, xyz, count, byte_stride, "nbmc_context_set_particles_f64");
+}
+
+int32_t nbmc_context_set_progress(nbmc_context* ctx, nbmc_progress_fn fn, void* user) {
+  if (!ctx) return NBMC_ERROR_INVALID_ARGUMENT;
+  ctx->progress_fn = fn;
+  ctx->progress_user = user;
+  return NBMC_OK;
+}
+
+void nbmc_params_init(nbmc_params* p) {
+  if (!p) return;
+  std::memset(p, 0, sizeof(*p));
+  p->struct_size = sizeof(nbmc_params);
+  p->length_unit = NBMC_UNIT_SPACING;
+  p->spacing = 0;
+  p->cell_size = 0.5;
+  p->influence_radius = 4;
+  p->band_width = 2;
+  p->surface_radius = 2;
+  p->iso_radius = 1;
+  p->method = NBMC_METHOD_SSP07;
+  p->field = NBMC_FIELD_NARROW_BAND;
+  p->t_low = 0.4;
+  p->t_high = 3.5;
+  p->color_threshold = 0.75;
+  p->neighbour_threshold = 25;
+  p->compute_normals = 1;
+}
+
+int32_t nbmc_context_reconstruct(nbmc_context* ctx, const nbmc_params* params, nbmc_mesh** mesh) {
+  if (mesh) *mesh = nullptr;
+  if (!ctx) return NBMC_ERROR_INVALID_ARGUMENT;
+  NBMC_CAPI_BEGIN(ctx)
+  if (!params) throw Error(NBMC_ERROR_INVALID_ARGUMENT, "nbmc_context_reconstruct: params is NULL");
+  if (!mesh) throw Error(NBMC_ERROR_INVALID_ARGUMENT, "nbmc_context_reconstruct: mesh is NULL");
+  if (params->struct_size < sizeof(nbmc_params))
+    throw Error(NBMC_ERROR_INVALID_ARGUMENT, "nbmc_context_reconstruct: params->struct_size is " +
+                                                 std::to_string(params->struct_size) +
+                                                 "; fill the struct with nbmc_params_init()");
+  if (ctx->particles.empty())
+    throw Error(NBMC_ERROR_NO_PARTICLES, "nbmc_context_reconstruct: no particles uploaded");
+  const nbmc::Params p = nbmc::resolve_params(*params);
+  nbmc::check_domain(ctx->particles, p);
+  auto m = std::make_unique<nbmc_mesh>();
+  nbmc::RunStats st;
+  nbmc::run_backend(*ctx, p, m->mesh, st);
+  ctx->stats = st;
+  ctx->has_stats = true;
+  *mesh = m.release();
+  return NBMC_OK;
+  NBMC_CAPI_END
+}
+
+void nbmc_stats_init(nbmc_stats* s) {
+  if (!s) return;
+  std::memset(s, 0, sizeof(*s));
+  s->struct_size = sizeof(nbmc_stats);
+}
+
+int32_t nbmc_context_stats(const nbmc_context* ctx, nbmc_stats* s) {
+  if (!ctx || !s) return NBMC_ERROR_INVALID_ARGUMENT;
+  if (s->struct_size < sizeof(nbmc_stats)) return NBMC_ERROR_INVALID_ARGUMENT;
+  if (!ctx->has_stats) return NBMC_ERROR_NO_PARTICLES;
+  const nbmc::RunStats& st = ctx->stats;
+  nbmc_stats_init(s);
+  s->particle_count = st.particles;
+  s->surface_particle_count = st.surface_particles;
+  s->occupied_cell_count = st.occupied_cells;
+  s->band_vertex_count = st.band_vertices;
+  s->band_block_count = st.band_blocks;
+  s->grid_vertex_count = st.grid_vertices;
+  s->triangulated_cell_count = st.cells;
+  s->vertex_count = st.vertices;
+  s->triangle_count = st.triangles;
+  for (int a = 0; a < 3; ++a) {
+    s->grid_dims[a] = st.dims[a];
+    s->grid_origin[a] = st.origin[a];
+  }
+  s->peak_memory_bytes = ctx->peak_memory;
+  s->neighbour_evaluations = st.evaluations;
+  for (int i = 0; i < NBMC_STAGE_SLOTS; ++i) s->stage_seconds[i] = st.stage[i];
+  s->total_seconds = st.total;
+  s->cell_size = st.cell;
+  return NBMC_OK;
+}
+
+uint64_t nbmc_mesh_vertex_count(const nbmc_mesh* m) { return m ? m->mesh.positions.size() / 3 : 0; }
+uint64_t nbmc_mesh_triangle_count(const nbmc_mesh* m) { return m ? m->mesh.triangles.size() / 3 : 0; }
+const float* nbmc_mesh_positions(const nbmc_mesh* m) {
+  return m && !m->mesh.positions.empty() ? m->mesh.positions.data() : nullptr;
+}
+const float* nbmc_mesh_normals(const nbmc_mesh* m) {
+  return m && !m->mesh.normals.empty() ? m->mesh.normals.data() : nullptr;
+}
+const uint32_t* nbmc_mesh_triangles(const nbmc_mesh* m) {
+  return m && !m->mesh.triangles.empty() ? m->mesh.triangles.data() : nullptr;
+}
+void nbmc_mesh_destroy(nbmc_mesh* m) { delete m; }
+
+int32_t nbmc_kokkos_finalize(void) {
+  try {
+    return nbmc::runtime_finalize() ? NBMC_OK : NBMC_ERROR_INVALID_ARGUMENT;
+  } catch (...) {
+    return NBMC_ERROR_INTERNAL;
+  }
+}
+
+}  // extern "C"

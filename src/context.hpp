@@ -1,0 +1,30 @@
+// SPDX-License-Identifier: MIT
+// Internal definitions of the opaque C handles.
+#pragma once
+
+#include "nbmc.h"
+
+#include "../backends/kokkos/common.hpp"
+#include "../backends/kokkos/pipeline.hpp"
+
+#include <memory>
+#include <string>
+#include <vector>
+
+struct nbmc_context {
+  int32_t backend = NBMC_BACKEND_SERIAL;
+  int32_t num_threads = 0;
+  int32_t device_id = 0;
+  std::string last_error;
+  std::vector<double> particles;  // validated, 3 per particle
+  nbmc_progress_fn progress_fn = nullptr;
+  void* progress_user = nullptr;
+  nbmc::MemoryTracker memory;
+  std::uint64_t peak_memory = 0;
+  nbmc::RunStats stats;
+  bool has_stats = false;
+};
+
+struct nbmc_mesh {
+  nbmc::HostMesh mesh;
+};
