@@ -4,14 +4,25 @@
 // vertices that no particle reaches.
 //
 // A method is a type with
-//   struct Acc;                                   // per-vertex accumulator, zero-initialised
-//   static void add(Acc&, dx, dy, dz, s2, k)      // contribution of one particle, d = x_j - x,
-//                                                 // s2 = |d|^2 / R^2 < 1, k = (1 - s2)
-//   static float value(const Acc&, const FieldConstants&)  // phi(x); negative inside
+//   static constexpr int N;                       // accumulator size (floats, zero-initialised)
+//   static void add(float* a, dx, dy, dz, k)      // contribution of one particle, d = x_j - x,
+//                                                 // k = max(0, 1 - |d|^2/R^2) (0: no contribution)
+//   static uint32_t accumulate(a, X, Y, Z, b, e, x0, x1, x2, inv_R2)
+//                                                 // the same for particles [b, e), vectorised
+//   static float value(const float* a, const FieldConstants&)  // phi(x); negative inside
 // so the gather (narrow band, dense) and the scatter drivers are written once.
 #pragma once
 
 #include <Kokkos_Core.hpp>
+
+// Vectorisation of the particle loops on the host (explicit reduction order,
+// fixed per build, so results stay deterministic).
+#if defined(_OPENMP) && !defined(__CUDA_ARCH__)
+#define NBMC_PRAGMA(x) _Pragma(#x)
+#define NBMC_SIMD_REDUCTION(...) NBMC_PRAGMA(omp simd reduction(+ : __VA_ARGS__))
+#else
+#define NBMC_SIMD_REDUCTION(...)
+#endif
 
 namespace nbmc {
 namespace Details {

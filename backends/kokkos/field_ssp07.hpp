@@ -12,6 +12,8 @@
 
 #include "field_common.hpp"
 
+#include <cstdint>
+
 namespace nbmc {
 namespace Details {
 
@@ -34,42 +36,70 @@ KOKKOS_INLINE_FUNCTION float largest_eigenvalue_sym3(float a, float b, float c, 
 
 struct FieldSSP07 {
   static constexpr const char* name = "ssp07";
-  struct Acc {
-    float w = 0, dx = 0, dy = 0, dz = 0;
-    float gx = 0, gy = 0, gz = 0;
-    float m[9] = {0, 0, 0, 0, 0, 0, 0, 0, 0};  // sum d_a g_b, row-major
-  };
-  KOKKOS_INLINE_FUNCTION static void add(Acc& a, float dx, float dy, float dz, float /*s2*/, float k) {
+  // a[0] = W = sum k^3, a[1..3] = sum k^3 d, a[4..6] = sum k^2 d (grad k without 6/R^2),
+  // a[7..15] = sum d_a k^2 d_b (row-major)
+  static constexpr int N = 16;
+  KOKKOS_INLINE_FUNCTION static void add(float* a, float dx, float dy, float dz, float k) {
     const float k2 = k * k;
     const float w = k2 * k;
-    a.w += w;
-    a.dx += w * dx;
-    a.dy += w * dy;
-    a.dz += w * dz;
-    // grad k without the 6 / R^2 factor (applied in value()).
+    a[0] += w;
+    a[1] += w * dx;
+    a[2] += w * dy;
+    a[3] += w * dz;
     const float gx = k2 * dx, gy = k2 * dy, gz = k2 * dz;
-    a.gx += gx;
-    a.gy += gy;
-    a.gz += gz;
-    a.m[0] += dx * gx; a.m[1] += dx * gy; a.m[2] += dx * gz;
-    a.m[3] += dy * gx; a.m[4] += dy * gy; a.m[5] += dy * gz;
-    a.m[6] += dz * gx; a.m[7] += dz * gy; a.m[8] += dz * gz;
+    a[4] += gx;
+    a[5] += gy;
+    a[6] += gz;
+    a[7] += dx * gx; a[8] += dx * gy; a[9] += dx * gz;
+    a[10] += dy * gx; a[11] += dy * gy; a[12] += dy * gz;
+    a[13] += dz * gx; a[14] += dz * gy; a[15] += dz * gz;
   }
-  KOKKOS_INLINE_FUNCTION static float eigenvalue(const Acc& a, const FieldConstants& c) {
-    const float inv = 1.f / a.w;
+  // Adds particles [b, e) (SoA coordinates) at vertex x; returns how many contribute.
+  KOKKOS_INLINE_FUNCTION static std::uint32_t accumulate(float* a, const float* X, const float* Y, const float* Z,
+                                                         std::uint32_t b, std::uint32_t e, float x0, float x1,
+                                                         float x2, float inv_R2) {
+    float w0 = a[0], d0 = a[1], d1 = a[2], d2 = a[3], g0 = a[4], g1 = a[5], g2 = a[6];
+    float m00 = a[7], m01 = a[8], m02 = a[9], m10 = a[10], m11 = a[11], m12 = a[12], m20 = a[13], m21 = a[14],
+          m22 = a[15];
+    std::uint32_t count = 0;
+    NBMC_SIMD_REDUCTION(w0, d0, d1, d2, g0, g1, g2, m00, m01, m02, m10, m11, m12, m20, m21, m22, count)
+    for (std::uint32_t j = b; j < e; ++j) {
+      const float dx = X[j] - x0, dy = Y[j] - x1, dz = Z[j] - x2;
+      const float s2 = (dx * dx + dy * dy + dz * dz) * inv_R2;
+      const float k = s2 < 1.f ? 1.f - s2 : 0.f;
+      count += s2 < 1.f ? 1u : 0u;
+      const float k2 = k * k, w = k2 * k;
+      w0 += w;
+      d0 += w * dx;
+      d1 += w * dy;
+      d2 += w * dz;
+      const float gx = k2 * dx, gy = k2 * dy, gz = k2 * dz;
+      g0 += gx;
+      g1 += gy;
+      g2 += gz;
+      m00 += dx * gx; m01 += dx * gy; m02 += dx * gz;
+      m10 += dy * gx; m11 += dy * gy; m12 += dy * gz;
+      m20 += dz * gx; m21 += dz * gy; m22 += dz * gz;
+    }
+    a[0] = w0; a[1] = d0; a[2] = d1; a[3] = d2; a[4] = g0; a[5] = g1; a[6] = g2;
+    a[7] = m00; a[8] = m01; a[9] = m02; a[10] = m10; a[11] = m11; a[12] = m12; a[13] = m20; a[14] = m21; a[15] = m22;
+    return count;
+  }
+  KOKKOS_INLINE_FUNCTION static float eigenvalue(const float* a, const FieldConstants& c) {
+    const float inv = 1.f / a[0];
     const float s = 6.f * c.inv_R2 * inv;
-    const float db[3] = {a.dx * inv, a.dy * inv, a.dz * inv};
-    const float g[3] = {a.gx, a.gy, a.gz};
+    const float db[3] = {a[1] * inv, a[2] * inv, a[3] * inv};
+    const float g[3] = {a[4], a[5], a[6]};
     float J[9];
     for (int r = 0; r < 3; ++r)
-      for (int q = 0; q < 3; ++q) J[3 * r + q] = s * (a.m[3 * r + q] - db[r] * g[q]);
+      for (int q = 0; q < 3; ++q) J[3 * r + q] = s * (a[7 + 3 * r + q] - db[r] * g[q]);
     return largest_eigenvalue_sym3(J[0], J[4], J[8], 0.5f * (J[1] + J[3]), 0.5f * (J[2] + J[6]),
                                    0.5f * (J[5] + J[7]));
   }
-  KOKKOS_INLINE_FUNCTION static float value(const Acc& a, const FieldConstants& c) {
-    if (!(a.w > 0)) return c.outside;
-    const float inv = 1.f / a.w;
-    const float x = a.dx * inv, y = a.dy * inv, z = a.dz * inv;
+  KOKKOS_INLINE_FUNCTION static float value(const float* a, const FieldConstants& c) {
+    if (!(a[0] > 0)) return c.outside;
+    const float inv = 1.f / a[0];
+    const float x = a[1] * inv, y = a[2] * inv, z = a[3] * inv;
     const float ev = eigenvalue(a, c);
     float f = 1.f;
     if (!(ev < c.t_low)) {

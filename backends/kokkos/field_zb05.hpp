@@ -6,25 +6,47 @@
 
 #include "field_common.hpp"
 
+#include <cstdint>
+
 namespace nbmc {
 namespace Details {
 
 struct FieldZB05 {
   static constexpr const char* name = "zb05";
-  struct Acc {
-    float w = 0, dx = 0, dy = 0, dz = 0;
-  };
-  KOKKOS_INLINE_FUNCTION static void add(Acc& a, float dx, float dy, float dz, float /*s2*/, float k) {
+  // a[0] = sum k^3, a[1..3] = sum k^3 d
+  static constexpr int N = 4;
+  KOKKOS_INLINE_FUNCTION static void add(float* a, float dx, float dy, float dz, float k) {
     const float w = k * k * k;
-    a.w += w;
-    a.dx += w * dx;
-    a.dy += w * dy;
-    a.dz += w * dz;
+    a[0] += w;
+    a[1] += w * dx;
+    a[2] += w * dy;
+    a[3] += w * dz;
   }
-  KOKKOS_INLINE_FUNCTION static float value(const Acc& a, const FieldConstants& c) {
-    if (!(a.w > 0)) return c.outside;
-    const float inv = 1.f / a.w;
-    const float x = a.dx * inv, y = a.dy * inv, z = a.dz * inv;
+  // Adds particles [b, e) (SoA coordinates) at vertex x; returns how many contribute.
+  KOKKOS_INLINE_FUNCTION static std::uint32_t accumulate(float* a, const float* X, const float* Y, const float* Z,
+                                                         std::uint32_t b, std::uint32_t e, float x0, float x1,
+                                                         float x2, float inv_R2) {
+    float a0 = a[0], a1 = a[1], a2 = a[2], a3 = a[3];
+    std::uint32_t count = 0;
+    NBMC_SIMD_REDUCTION(a0, a1, a2, a3, count)
+    for (std::uint32_t j = b; j < e; ++j) {
+      const float dx = X[j] - x0, dy = Y[j] - x1, dz = Z[j] - x2;
+      const float s2 = (dx * dx + dy * dy + dz * dz) * inv_R2;
+      const float k = s2 < 1.f ? 1.f - s2 : 0.f;
+      count += s2 < 1.f ? 1u : 0u;
+      const float w = k * k * k;
+      a0 += w;
+      a1 += w * dx;
+      a2 += w * dy;
+      a3 += w * dz;
+    }
+    a[0] = a0; a[1] = a1; a[2] = a2; a[3] = a3;
+    return count;
+  }
+  KOKKOS_INLINE_FUNCTION static float value(const float* a, const FieldConstants& c) {
+    if (!(a[0] > 0)) return c.outside;
+    const float inv = 1.f / a[0];
+    const float x = a[1] * inv, y = a[2] * inv, z = a[3] * inv;
     return Kokkos::Experimental::sqrt(x * x + y * y + z * z) - c.iso_radius;
   }
 };

@@ -140,7 +140,7 @@ void build_narrow_band(const ExecSpace& space, MemoryTracker& tracker, const Gri
   auto box = KOKKOS_LAMBDA(std::size_t i, std::int64_t lo[3], std::int64_t hi[3])->bool {
     const std::int64_t dmax[3] = {d0, d1, d2};
     for (int a = 0; a < 3; ++a) {
-      const float x = pos(4 * i + a);
+      const float x = pos(std::size_t(a) * n + i);
       lo[a] = std::int64_t(Kokkos::Experimental::ceil((x - bw) * inv_c));
       hi[a] = std::int64_t(Kokkos::Experimental::floor((x + bw) * inv_c));
       if (lo[a] < 0) lo[a] = 0;

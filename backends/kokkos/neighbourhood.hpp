@@ -23,7 +23,7 @@ namespace Details {
 template <class MemSpace>
 struct Neighbourhood {
   std::size_t n = 0, n_cells = 0;
-  Buffer<float, MemSpace> pos;            // 4 * n: x, y, z (relative to the grid origin), 0
+  Buffer<float, MemSpace> pos;            // 3 * n: all x, then all y, then all z (relative to the grid origin)
   Buffer<std::uint32_t, MemSpace> perm;   // sorted index -> uploaded index
   Buffer<std::uint64_t, MemSpace> cell_keys;
   Buffer<std::uint32_t, MemSpace> cell_start;  // n_cells + 1
@@ -33,7 +33,8 @@ struct Neighbourhood {
 // Read-only device view of a neighbourhood for kernels.
 template <class MemSpace>
 struct NeighbourView {
-  Kokkos::View<const float*, MemSpace> pos;
+  Kokkos::View<const float*, MemSpace> pos;  // SoA: x(j) = pos(j), y(j) = pos(n + j), z(j) = pos(2n + j)
+  std::size_t n;
   Kokkos::View<const std::uint32_t*, MemSpace> cell_start;
   HashMap<MemSpace> cells;
   std::int64_t nb_dims[3];
@@ -54,6 +55,7 @@ template <class MemSpace>
 NeighbourView<MemSpace> view_of(const Neighbourhood<MemSpace>& nb, const Grid& g) {
   NeighbourView<MemSpace> v;
   v.pos = nb.pos.view();
+  v.n = nb.n;
   v.cell_start = nb.cell_start.view();
   v.cells = nb.cells.map;
   for (int a = 0; a < 3; ++a) v.nb_dims[a] = g.nb_dims[a];
@@ -132,7 +134,7 @@ void build_neighbourhood(const ExecSpace& space, MemoryTracker& tracker, const d
   out.n_cells = starts.size();
   starts.push_back(std::uint32_t(n));
 
-  out.pos = Buffer<float, MemSpace>(tracker, "neighbourhood::positions", 4 * n);
+  out.pos = Buffer<float, MemSpace>(tracker, "neighbourhood::positions", 3 * n);
   out.perm = Buffer<std::uint32_t, MemSpace>(tracker, "neighbourhood::permutation", n);
   out.cell_keys = Buffer<std::uint64_t, MemSpace>(tracker, "neighbourhood::cell_keys", out.n_cells);
   out.cell_start = Buffer<std::uint32_t, MemSpace>(tracker, "neighbourhood::cell_start", out.n_cells + 1);
@@ -144,10 +146,9 @@ void build_neighbourhood(const ExecSpace& space, MemoryTracker& tracker, const d
     Kokkos::parallel_for(
         "nbmc::neighbourhood::scatter", Kokkos::RangePolicy<HostPolicyExec>(host_space, 0, n),
         [=](const std::size_t i) {
-          hpos(4 * i) = r[i].x;
-          hpos(4 * i + 1) = r[i].y;
-          hpos(4 * i + 2) = r[i].z;
-          hpos(4 * i + 3) = 0.f;
+          hpos(i) = r[i].x;
+          hpos(n + i) = r[i].y;
+          hpos(2 * n + i) = r[i].z;
           hperm(i) = r[i].index;
         });
     host_space.fence();

@@ -101,7 +101,8 @@ void reconstruct(const ExecSpace& space, const double* xyz, std::size_t count, c
   Band<MemSpace> band;
   if (p.field == 0 /*NBMC_FIELD_NARROW_BAND*/) {
     Buffer<std::uint8_t, MemSpace> flags(tracker, "surface_particles::flags", nbh.n);
-    st.surface_particles = mark_surface_particles(space, nb, nbh.n, p, g, flags.view());
+    st.surface_particles = mark_surface_particles(
+        space, nb, Kokkos::View<const std::uint64_t*, MemSpace>(nbh.cell_keys.view()), nbh.n_cells, p, g, flags.view());
     lap(2);
     build_narrow_band(space, tracker, g, p, Kokkos::View<const float*, MemSpace>(nbh.pos.view()),
                       Kokkos::View<const std::uint8_t*, MemSpace>(flags.view()), nbh.n, band);

@@ -61,31 +61,84 @@ KOKKOS_INLINE_FUNCTION void cell_span(const NeighbourView<MemSpace>& nb, const f
   }
 }
 
+// Squared distance from point x to the box [lo, lo + S]^3.
+KOKKOS_INLINE_FUNCTION float box_distance2(const float lo[3], float S, const float x[3]) {
+  float dist2 = 0;
+  for (int a = 0; a < 3; ++a) {
+    const float below = lo[a] - x[a], above = x[a] - (lo[a] + S);
+    const float d = below > 0 ? below : (above > 0 ? above : 0.f);
+    dist2 += d * d;
+  }
+  return dist2;
+}
+
 // Field value at x from the particles of `cells`; adds the number of
 // contributing particles to `evals`.
 template <class Method, class MemSpace>
 KOKKOS_INLINE_FUNCTION float eval_vertex(const NeighbourView<MemSpace>& nb, const CellRange* cells, int n_cells,
                                          const float x[3], float S, const FieldConstants& fc, std::uint64_t& evals) {
-  typename Method::Acc acc;
-  const float R2 = fc.R * fc.R;
+  float acc[Method::N];
+  for (int q = 0; q < Method::N; ++q) acc[q] = 0.f;
+  const float R2 = fc.R * fc.R, inv_R2 = fc.inv_R2;
+  const float x0 = x[0], x1 = x[1], x2 = x[2];
+  const float* X = nb.pos.data();
+  const float* Y = X + nb.n;
+  const float* Z = Y + nb.n;
+  std::uint32_t count = 0;
   for (int c = 0; c < n_cells; ++c) {
     const CellRange& cr = cells[c];
-    float dist2 = 0;
+    if (box_distance2(cr.lo, S, x) >= R2) continue;
+    count += Method::accumulate(acc, X, Y, Z, cr.begin, cr.end, x0, x1, x2, inv_R2);
+  }
+  evals += count;
+  return Method::value(acc, fc);
+}
+
+// Host tile evaluation: the particles of all cells within R of the tile are
+// copied once into a contiguous buffer, then every vertex of the tile runs one
+// long vectorised loop over it (the CPU form of the GPU's shared-memory tile).
+constexpr std::uint32_t kTileParticles = 6144;
+struct TileScratch {
+  float x[kTileParticles], y[kTileParticles], z[kTileParticles];
+};
+
+template <class Method, class MemSpace>
+inline bool eval_tile_host(const NeighbourView<MemSpace>& nb, const CellRange* cells, int n_cells, const float tmin[3],
+                           const float tmax[3], float S, const FieldConstants& fc, std::uint64_t word,
+                           std::uint64_t out, std::size_t w, const BandView<MemSpace>& band, float c,
+                           const Kokkos::View<float*, MemSpace>& phi, std::uint64_t& evals) {
+  static thread_local TileScratch scratch;
+  const float R2 = fc.R * fc.R;
+  std::uint32_t n = 0;
+  for (int q = 0; q < n_cells; ++q) {
+    const CellRange& cr = cells[q];
+    // distance between the cell box and the tile box
+    float d2 = 0;
     for (int a = 0; a < 3; ++a) {
-      const float below = cr.lo[a] - x[a], above = x[a] - (cr.lo[a] + S);
-      const float d = below > 0 ? below : (above > 0 ? above : 0.f);
-      dist2 += d * d;
+      const float gap = cr.lo[a] > tmax[a] ? cr.lo[a] - tmax[a] : (tmin[a] > cr.lo[a] + S ? tmin[a] - cr.lo[a] - S : 0.f);
+      d2 += gap * gap;
     }
-    if (dist2 >= R2) continue;
-    for (std::uint32_t j = cr.begin; j < cr.end; ++j) {
-      const float dx = nb.pos(4 * j) - x[0], dy = nb.pos(4 * j + 1) - x[1], dz = nb.pos(4 * j + 2) - x[2];
-      const float s2 = (dx * dx + dy * dy + dz * dz) * fc.inv_R2;
-      if (s2 >= 1.f) continue;
-      Method::add(acc, dx, dy, dz, s2, 1.f - s2);
-      ++evals;
+    if (d2 >= R2) continue;
+    if (n + (cr.end - cr.begin) > kTileParticles) return false;
+    const float* X = nb.pos.data();
+    for (std::uint32_t j = cr.begin; j < cr.end; ++j, ++n) {
+      scratch.x[n] = X[j];
+      scratch.y[n] = X[nb.n + j];
+      scratch.z[n] = X[2 * nb.n + j];
     }
   }
-  return Method::value(acc, fc);
+  while (word) {
+    const int bit = ctz64(word);
+    word &= word - 1;
+    std::int64_t i, j, k;
+    band.vertex(w, bit, i, j, k);
+    float acc[Method::N];
+    for (int q = 0; q < Method::N; ++q) acc[q] = 0.f;
+    evals += Method::accumulate(acc, scratch.x, scratch.y, scratch.z, 0, n, float(i) * c, float(j) * c,
+                                float(k) * c, fc.inv_R2);
+    phi(out++) = Method::value(acc, fc);
+  }
+  return true;
 }
 
 template <class Method, class ExecSpace>
@@ -94,7 +147,9 @@ std::uint64_t gather_field(const ExecSpace& space, const NeighbourView<typename 
                            const Grid& g, const FieldConstants& fc,
                            const Kokkos::View<float*, typename ExecSpace::memory_space>& phi,
                            const Progress& progress) {
+  using MemSpace = typename ExecSpace::memory_space;
   ScopedRegion region("nbmc::scalar_field::gather");
+  constexpr bool host = Kokkos::SpaceAccessibility<Kokkos::HostSpace, MemSpace>::accessible;
   const float c = float(g.cell), S = float(g.nb_cell);
   std::uint64_t total_evals = 0;
   const std::size_t chunk = std::max<std::size_t>(4096, n_words / 64);
@@ -117,6 +172,11 @@ std::uint64_t gather_field(const ExecSpace& space, const NeighbourView<typename 
           cell_span(nb, tmin, tmax, fc.R, lo, hi);
           const bool tiled = collect_cells(nb, lo, hi, S, cells, n_cells);
           std::uint64_t out = band.word_offset(w);
+          if constexpr (host) {
+            if (tiled && eval_tile_host<Method>(nb, cells, n_cells, tmin, tmax, S, fc, word, out, w, band, c, phi,
+                                                acc_evals))
+              return;
+          }
           while (word) {
             const int bit = ctz64(word);
             word &= word - 1;
@@ -148,15 +208,15 @@ std::uint64_t scatter_field(const ExecSpace& space, MemoryTracker& tracker,
                             const Kokkos::View<float*, typename ExecSpace::memory_space>& phi,
                             const Progress& progress) {
   ScopedRegion region("nbmc::scalar_field::scatter");
-  using Acc = typename Method::Acc;
+  constexpr int N = Method::N;
   const std::uint64_t nv = g.vertex_count();
-  Buffer<Acc, Kokkos::HostSpace> acc(tracker, "scalar_field::scatter_accumulators", nv, true);
-  Acc* a = acc.data();
+  Buffer<float, Kokkos::HostSpace> acc(tracker, "scalar_field::scatter_accumulators", nv * N, true);
+  float* a = acc.data();
   const double c = g.cell;
   const std::int64_t d0 = g.dims[0], d1 = g.dims[1], d2 = g.dims[2];
   std::uint64_t evals = 0;
   for (std::size_t p = 0; p < n; ++p) {
-    const float px = pos(4 * p), py = pos(4 * p + 1), pz = pos(4 * p + 2);
+    const float px = pos(p), py = pos(n + p), pz = pos(2 * n + p);
     const std::int64_t lo[3] = {std::max<std::int64_t>(0, std::int64_t(std::ceil((px - fc.R) / c))),
                                 std::max<std::int64_t>(0, std::int64_t(std::ceil((py - fc.R) / c))),
                                 std::max<std::int64_t>(0, std::int64_t(std::ceil((pz - fc.R) / c)))};
@@ -167,12 +227,12 @@ std::uint64_t scatter_field(const ExecSpace& space, MemoryTracker& tracker,
       const float dz = pz - float(k) * float(c);
       for (std::int64_t j = lo[1]; j <= hi[1]; ++j) {
         const float dy = py - float(j) * float(c);
-        Acc* row = a + std::size_t(d0) * (std::size_t(j) + std::size_t(d1) * std::size_t(k));
+        float* row = a + N * std::size_t(d0) * (std::size_t(j) + std::size_t(d1) * std::size_t(k));
         for (std::int64_t i = lo[0]; i <= hi[0]; ++i) {
           const float dx = px - float(i) * float(c);
           const float s2 = (dx * dx + dy * dy + dz * dz) * fc.inv_R2;
           if (s2 >= 1.f) continue;
-          Method::add(row[i], dx, dy, dz, s2, 1.f - s2);
+          Method::add(row + N * i, dx, dy, dz, 1.f - s2);
           ++evals;
         }
       }
@@ -189,7 +249,7 @@ std::uint64_t scatter_field(const ExecSpace& space, MemoryTracker& tracker,
           word &= word - 1;
           std::int64_t i, j, k;
           band.vertex(w, bit, i, j, k);
-          phi(out++) = Method::value(a[std::size_t(i) + std::size_t(d0) * (std::size_t(j) + std::size_t(d1) * std::size_t(k))], fc);
+          phi(out++) = Method::value(a + N * (std::size_t(i) + std::size_t(d0) * (std::size_t(j) + std::size_t(d1) * std::size_t(k))), fc);
         }
       });
   space.fence();

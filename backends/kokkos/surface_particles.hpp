@@ -15,67 +15,85 @@
 namespace nbmc {
 namespace Details {
 
-// Dimensionless colour-field gradient |grad c| * h of one particle and its
-// neighbour count within h. Device function so tests and kernels share it.
+// Marks the particles of occupied neighbour cell `cell`: the neighbour cells
+// within `range` are looked up once for all particles of the cell.
 template <class MemSpace>
-KOKKOS_INLINE_FUNCTION void colour_field(const NeighbourView<MemSpace>& nb, std::size_t i, float h, float volume,
-                                         int range, float& grad_h, int& neighbours) {
-  const float xi = nb.pos(4 * i), yi = nb.pos(4 * i + 1), zi = nb.pos(4 * i + 2);
-  const std::int64_t cx = std::int64_t(xi * nb.inv_nb_cell), cy = std::int64_t(yi * nb.inv_nb_cell),
-                     cz = std::int64_t(zi * nb.inv_nb_cell);
-  const float h2 = h * h;
-  float gx = 0, gy = 0, gz = 0;
-  int count = 0;
-  for (std::int64_t z = cz - range; z <= cz + range; ++z) {
-    if (z < 0 || z >= nb.nb_dims[2]) continue;
-    for (std::int64_t y = cy - range; y <= cy + range; ++y) {
-      if (y < 0 || y >= nb.nb_dims[1]) continue;
+KOKKOS_INLINE_FUNCTION std::size_t surface_particles_of_cell(const NeighbourView<MemSpace>& nb,
+                                                             const Kokkos::View<const std::uint64_t*, MemSpace>& keys,
+                                                             std::size_t cell, int range, float h, float scale,
+                                                             float threshold, int min_neighbours,
+                                                             const Kokkos::View<std::uint8_t*, MemSpace>& flags) {
+  constexpr int kMaxCells = 729;  // range <= 4
+  std::uint32_t begin[kMaxCells], end[kMaxCells];
+  int n_cells = 0;
+  const std::uint64_t key = keys(cell);
+  const std::int64_t cx = std::int64_t(compact3(key)), cy = std::int64_t(compact3(key >> 1)),
+                     cz = std::int64_t(compact3(key >> 2));
+  for (std::int64_t z = cz - range; z <= cz + range; ++z)
+    for (std::int64_t y = cy - range; y <= cy + range; ++y)
       for (std::int64_t x = cx - range; x <= cx + range; ++x) {
-        if (x < 0 || x >= nb.nb_dims[0]) continue;
+        if (x < 0 || y < 0 || z < 0 || x >= nb.nb_dims[0] || y >= nb.nb_dims[1] || z >= nb.nb_dims[2]) continue;
         std::uint32_t b, e;
-        if (!nb.cell_range(x, y, z, b, e)) continue;
-        for (std::uint32_t j = b; j < e; ++j) {
-          if (j == i) continue;
-          const float dx = xi - nb.pos(4 * j), dy = yi - nb.pos(4 * j + 1), dz = zi - nb.pos(4 * j + 2);
-          const float d2 = dx * dx + dy * dy + dz * dz;
-          if (d2 >= h2) continue;
-          ++count;
-          const float q = h2 - d2;
-          const float w = q * q;  // grad W = -945/(32 pi h^9) (h^2-d^2)^2 (x_i - x_j)
-          gx += w * dx;
-          gy += w * dy;
-          gz += w * dz;
+        if (nb.cell_range(x, y, z, b, e)) {
+          begin[n_cells] = b;
+          end[n_cells] = e;
+          ++n_cells;
         }
       }
+  const float* X = nb.pos.data();
+  const float* Y = X + nb.n;
+  const float* Z = Y + nb.n;
+  const float h2 = h * h;
+  std::size_t surface = 0;
+  for (std::uint32_t i = nb.cell_start(cell); i < nb.cell_start(cell + 1); ++i) {
+    const float xi = X[i], yi = Y[i], zi = Z[i];
+    float gx = 0, gy = 0, gz = 0;
+    int count = 0;
+    for (int c = 0; c < n_cells; ++c) {
+      const std::uint32_t b = begin[c], e = end[c];
+      NBMC_SIMD_REDUCTION(gx, gy, gz, count)
+      for (std::uint32_t j = b; j < e; ++j) {
+        const float dx = xi - X[j], dy = yi - Y[j], dz = zi - Z[j];
+        const float d2 = dx * dx + dy * dy + dz * dz;
+        const float q = d2 < h2 ? h2 - d2 : 0.f;
+        const float w = q * q;  // grad W ~ (h^2 - d^2)^2 (x_i - x_j); 0 for i itself
+        gx += w * dx;
+        gy += w * dy;
+        gz += w * dz;
+        count += d2 < h2 ? 1 : 0;
+      }
     }
+    const int neighbours = count - 1;  // i itself is counted
+    const float grad_h = Kokkos::Experimental::sqrt(gx * gx + gy * gy + gz * gz) * scale;
+    const bool is_surface = neighbours < min_neighbours || grad_h > threshold;
+    flags(i) = is_surface ? 1 : 0;
+    surface += is_surface ? 1 : 0;
   }
-  const float h4 = h2 * h2, h9 = h4 * h4 * h;
-  const float scale = volume * 945.f / (32.f * 3.14159265358979f * h9);
-  grad_h = std::sqrt(gx * gx + gy * gy + gz * gz) * scale * h;
-  neighbours = count;
+  return surface;
 }
 
 // flags(i) = 1 for surface particles (sorted order); returns their count.
 template <class ExecSpace>
 std::size_t mark_surface_particles(const ExecSpace& space, const NeighbourView<typename ExecSpace::memory_space>& nb,
-                                   std::size_t n, const Params& p, const Grid& g,
+                                   const Kokkos::View<const std::uint64_t*, typename ExecSpace::memory_space>& keys,
+                                   std::size_t n_cells, const Params& p, const Grid& g,
                                    const Kokkos::View<std::uint8_t*, typename ExecSpace::memory_space>& flags) {
   ScopedRegion region("nbmc::surface_particles");
   const float h = float(p.surface_radius);
-  const float volume = float(p.spacing * p.spacing * p.spacing);
   const int range = int(std::ceil(p.surface_radius / g.nb_cell));
+  if (range > 4)
+    throw Error(4, "surface_radius may be at most twice the influence radius");
+  // |grad c| * h with c = sum_j V W_poly6(x - x_j, h), V = r^3.
+  const double h9 = std::pow(p.surface_radius, 9);
+  const float scale = float(p.spacing * p.spacing * p.spacing * 945.0 / (32.0 * 3.14159265358979 * h9) * p.surface_radius);
   const float threshold = float(p.color_threshold);
   const int min_neighbours = p.neighbour_threshold;
   std::size_t count = 0;
   Kokkos::parallel_reduce(
-      "nbmc::surface_particles", Kokkos::RangePolicy<ExecSpace>(space, 0, n),
-      KOKKOS_LAMBDA(const std::size_t i, std::size_t& acc) {
-        float grad_h;
-        int neighbours;
-        colour_field(nb, i, h, volume, range, grad_h, neighbours);
-        const bool surface = neighbours < min_neighbours || grad_h > threshold;
-        flags(i) = surface ? 1 : 0;
-        acc += surface ? 1 : 0;
+      "nbmc::surface_particles",
+      Kokkos::RangePolicy<ExecSpace, Kokkos::Schedule<Kokkos::Dynamic>>(space, 0, n_cells),
+      KOKKOS_LAMBDA(const std::size_t c, std::size_t& acc) {
+        acc += surface_particles_of_cell(nb, keys, c, range, h, scale, threshold, min_neighbours, flags);
       },
       count);
   space.fence();

@@ -1,0 +1,237 @@
+// SPDX-License-Identifier: MIT
+// nbmc benchmark: per-stage times, peak memory and counts for one frame, and
+// the comparison table of the paper's Tables 3/4 (scatter, dense gather,
+// narrow band; 1 thread and all threads; two cell sizes).
+//
+//   nbmc_bench FRAME.xyz --spacing R [--cell-size C] [--threads N]
+//              [--field narrow-band|dense|scatter] [--method ssp07|zb05] [--backend B]
+//   nbmc_bench FRAME.xyz --spacing R --table [--cell-sizes 1,0.5] [--skip-scatter]
+//              [--max-threads N]
+//
+// In --table mode every configuration runs in a child process of its own
+// (this program with --one), so that the reported peak RSS is that run's.
+#include "nbmc.h"
+
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <thread>
+#include <vector>
+
+namespace {
+
+struct Options {
+  std::string file;
+  double spacing = 0, cell = 0.5;
+  int threads = 0, method = NBMC_METHOD_SSP07, field = NBMC_FIELD_NARROW_BAND, backend = NBMC_BACKEND_AUTO;
+  bool table = false, one = false, skip_scatter = false;
+  std::vector<double> cells{1.0, 0.5};
+  int max_threads = 0;
+  int repeat = 1;
+};
+
+[[noreturn]] void usage(const char* msg) {
+  std::fprintf(stderr, "nbmc_bench: %s\nusage: nbmc_bench FRAME.xyz --spacing R [--cell-size C] [--threads N] "
+                       "[--field narrow-band|dense|scatter] [--method ssp07|zb05] [--backend auto|serial|openmp|cuda] "
+                       "[--repeat K] | --table [--cell-sizes 1,0.5] [--skip-scatter] [--max-threads N]\n", msg);
+  std::exit(2);
+}
+
+int field_of(const std::string& s) {
+  if (s == "narrow-band") return NBMC_FIELD_NARROW_BAND;
+  if (s == "dense") return NBMC_FIELD_DENSE;
+  if (s == "scatter") return NBMC_FIELD_SCATTER;
+  usage("unknown --field");
+}
+const char* field_name(int f) {
+  return f == NBMC_FIELD_NARROW_BAND ? "narrow-band" : f == NBMC_FIELD_DENSE ? "dense" : "scatter";
+}
+
+std::vector<float> read_xyz(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  if (!f) usage(("cannot open " + path).c_str());
+  f.seekg(0, std::ios::end);
+  const std::size_t bytes = std::size_t(f.tellg());
+  if (bytes % 12) usage((path + ": size is not a multiple of 12 bytes").c_str());
+  f.seekg(0);
+  std::vector<float> v(bytes / 4);
+  f.read(reinterpret_cast<char*>(v.data()), std::streamsize(bytes));
+  return v;
+}
+
+double peak_rss_mib() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return double(u.ru_maxrss) / 1024.0;
+}
+
+// One reconstruction; prints a single "RESULT key=value ..." line.
+int run_one(const Options& o) {
+  const std::vector<float> p = read_xyz(o.file);
+  nbmc_context_desc d;
+  nbmc_context_desc_init(&d);
+  d.backend = o.backend;
+  d.num_threads = o.threads;
+  nbmc_context* ctx = nullptr;
+  if (nbmc_context_create(&d, &ctx) != NBMC_OK) {
+    std::fprintf(stderr, "nbmc_bench: %s\n", nbmc_context_last_error(nullptr));
+    return 1;
+  }
+  nbmc_params prm;
+  nbmc_params_init(&prm);
+  prm.spacing = o.spacing;
+  prm.cell_size = o.cell;
+  prm.method = o.method;
+  prm.field = o.field;
+  int32_t st = nbmc_context_set_particles_f32(ctx, p.data(), p.size() / 3, 0);
+  nbmc_stats s;
+  nbmc_stats_init(&s);
+  double best = 1e300;
+  for (int k = 0; k < o.repeat && st == NBMC_OK; ++k) {
+    nbmc_mesh* mesh = nullptr;
+    st = nbmc_context_reconstruct(ctx, &prm, &mesh);
+    nbmc_mesh_destroy(mesh);
+    if (st == NBMC_OK) {
+      nbmc_stats cur;
+      nbmc_stats_init(&cur);
+      nbmc_context_stats(ctx, &cur);
+      if (cur.total_seconds < best) {
+        best = cur.total_seconds;
+        s = cur;
+      }
+    }
+  }
+  if (st != NBMC_OK) {
+    std::fprintf(stderr, "nbmc_bench: %s: %s\n", nbmc_status_string(st), nbmc_context_last_error(ctx));
+    nbmc_context_destroy(ctx);
+    return 1;
+  }
+  int32_t backend = 0;
+  nbmc_context_backend(ctx, &backend);
+  std::printf("RESULT field=%s threads=%d backend=%d cell=%g particles=%llu surface=%llu band=%llu blocks=%llu "
+              "grid=%llux%llux%llu cells=%llu vertices=%llu triangles=%llu evals=%llu peak_nbmc_mib=%.1f "
+              "peak_rss_mib=%.1f total=%.4f",
+              field_name(o.field), o.threads, backend, o.cell, (unsigned long long)s.particle_count,
+              (unsigned long long)s.surface_particle_count, (unsigned long long)s.band_vertex_count,
+              (unsigned long long)s.band_block_count, (unsigned long long)s.grid_dims[0],
+              (unsigned long long)s.grid_dims[1], (unsigned long long)s.grid_dims[2],
+              (unsigned long long)s.triangulated_cell_count, (unsigned long long)s.vertex_count,
+              (unsigned long long)s.triangle_count, (unsigned long long)s.neighbour_evaluations,
+              double(s.peak_memory_bytes) / 1048576.0, peak_rss_mib(), s.total_seconds);
+  for (int i = 0; i < NBMC_STAGE_COUNT; ++i) std::printf(" t%d=%.4f", i, s.stage_seconds[i]);
+  std::printf("\n");
+  nbmc_context_destroy(ctx);
+  return 0;
+}
+
+double value(const std::string& line, const std::string& key) {
+  const std::size_t at = line.find(" " + key + "=");
+  if (at == std::string::npos) return -1;
+  return std::atof(line.c_str() + at + key.size() + 2);
+}
+
+std::string child(const Options& o, int field, int threads, double cell) {
+  std::ostringstream cmd;
+  cmd << "'/proc/" << getpid() << "/exe' '" << o.file << "' --one --spacing " << o.spacing << " --cell-size " << cell
+      << " --threads " << threads << " --field " << field_name(field) << " --method "
+      << (o.method == NBMC_METHOD_ZB05 ? "zb05" : "ssp07") << " --backend "
+      << (o.backend == NBMC_BACKEND_SERIAL ? "serial" : o.backend == NBMC_BACKEND_CUDA ? "cuda" : o.backend == NBMC_BACKEND_OPENMP ? "openmp" : "auto");
+  // /proc/<pid>/exe must be read before popen's shell replaces nothing of ours.
+  char self[4096];
+  const ssize_t n = readlink("/proc/self/exe", self, sizeof self - 1);
+  std::string c = cmd.str();
+  if (n > 0) {
+    self[n] = 0;
+    c = "'" + std::string(self) + c.substr(c.find("' '") + 1);
+  }
+  FILE* f = popen(c.c_str(), "r");
+  std::string out;
+  char buf[4096];
+  while (f && std::fgets(buf, sizeof buf, f))
+    if (std::strncmp(buf, "RESULT", 6) == 0) out = buf;
+  if (f) pclose(f);
+  return out;
+}
+
+int run_table(const Options& o) {
+  const int all = o.max_threads > 0 ? o.max_threads : int(std::max(1u, std::thread::hardware_concurrency()));
+  std::printf("frame: %s, spacing %g, influence radius 4r, method %s, %d hardware threads\n\n", o.file.c_str(),
+              o.spacing, o.method == NBMC_METHOD_ZB05 ? "zb05" : "ssp07", all);
+  for (double cell : o.cells) {
+    std::printf("### cell size %g r\n\n", cell);
+    std::printf("| method | threads | t_sf [s] | t_tri [s] | total [s] | nbmc peak [MiB] | process peak RSS [MiB] | "
+                "field vertices | triangles |\n|---|---|---|---|---|---|---|---|---|\n");
+    struct Cfg {
+      int field, threads;
+    };
+    std::vector<Cfg> cfgs;
+    if (!o.skip_scatter) cfgs.push_back({NBMC_FIELD_SCATTER, 1});
+    cfgs.push_back({NBMC_FIELD_DENSE, 1});
+    if (all > 1) cfgs.push_back({NBMC_FIELD_DENSE, all});
+    cfgs.push_back({NBMC_FIELD_NARROW_BAND, 1});
+    if (all > 1) cfgs.push_back({NBMC_FIELD_NARROW_BAND, all});
+    for (const Cfg& c : cfgs) {
+      const std::string r = child(o, c.field, c.threads, cell);
+      if (r.empty()) {
+        std::printf("| %s | %d | failed | | | | | | |\n", field_name(c.field), c.threads);
+        continue;
+      }
+      const double t_sf = value(r, "t4"), t_tri = value(r, "t5");
+      std::printf("| %s | %d | %.3f | %.3f | %.3f | %.0f | %.0f | %.0f | %.0f |\n", field_name(c.field), c.threads,
+                  t_sf, t_tri, value(r, "total"), value(r, "peak_nbmc_mib"), value(r, "peak_rss_mib"),
+                  value(r, "band"), value(r, "triangles"));
+      std::fflush(stdout);
+      std::fprintf(stderr, "%s", r.c_str());
+    }
+    std::printf("\n");
+  }
+  return 0;
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  Options o;
+  for (int i = 1; i < argc; ++i) {
+    const std::string a = argv[i];
+    auto next = [&]() -> std::string {
+      if (i + 1 >= argc) usage(("missing value after " + a).c_str());
+      return argv[++i];
+    };
+    if (a == "--spacing") o.spacing = std::atof(next().c_str());
+    else if (a == "--cell-size") o.cell = std::atof(next().c_str());
+    else if (a == "--threads") o.threads = std::atoi(next().c_str());
+    else if (a == "--max-threads") o.max_threads = std::atoi(next().c_str());
+    else if (a == "--repeat") o.repeat = std::max(1, std::atoi(next().c_str()));
+    else if (a == "--field") o.field = field_of(next());
+    else if (a == "--method") o.method = next() == "zb05" ? NBMC_METHOD_ZB05 : NBMC_METHOD_SSP07;
+    else if (a == "--backend") {
+      const std::string b = next();
+      o.backend = b == "serial" ? NBMC_BACKEND_SERIAL : b == "openmp" ? NBMC_BACKEND_OPENMP : b == "cuda" ? NBMC_BACKEND_CUDA : NBMC_BACKEND_AUTO;
+    } else if (a == "--table") o.table = true;
+    else if (a == "--one") o.one = true;
+    else if (a == "--skip-scatter") o.skip_scatter = true;
+    else if (a == "--cell-sizes") {
+      o.cells.clear();
+      std::stringstream ss(next());
+      std::string t;
+      while (std::getline(ss, t, ',')) o.cells.push_back(std::atof(t.c_str()));
+    } else if (a[0] == '-') usage(("unknown option " + a).c_str());
+    else o.file = a;
+  }
+  if (o.file.empty() || !(o.spacing > 0)) usage("a frame and --spacing are required");
+  if (o.table) return run_table(o);
+  const int rc = run_one(o);
+  if (rc == 0 && !o.one) {
+    // Human-readable breakdown of the RESULT line printed above.
+  }
+  return rc;
+}
