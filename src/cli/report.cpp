@@ -1,0 +1,239 @@
+// SPDX-License-Identifier: MIT
+#include "report.hpp"
+
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <initializer_list>
+#include <utility>
+#include <vector>
+
+#include <sys/resource.h>
+
+namespace nbmc::cli {
+
+std::uint64_t peak_rss_bytes() {
+  struct rusage ru {};
+  if (getrusage(RUSAGE_SELF, &ru) != 0) return 0;
+  return static_cast<std::uint64_t>(ru.ru_maxrss) * 1024; // Linux: KiB
+}
+
+namespace {
+
+// "1,234,567"
+std::string grouped(std::uint64_t v) {
+  std::string digits = std::to_string(v);
+  std::string out;
+  const std::size_t n = digits.size();
+  for (std::size_t i = 0; i < n; ++i) {
+    out += digits[i];
+    if (i + 1 < n && (n - 1 - i) % 3 == 0) out += ',';
+  }
+  return out;
+}
+
+std::string printf_string(const char* fmt, double v) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, fmt, v);
+  return buf;
+}
+
+std::string mib(std::uint64_t bytes) { return printf_string("%.1f MiB", static_cast<double>(bytes) / 1048576.0); }
+
+// Shortest representation that reads back exactly; "null" when not finite.
+std::string json_number(double v) {
+  if (!std::isfinite(v)) return "null";
+  char buf[64];
+  const auto r = std::to_chars(buf, buf + sizeof buf, v);
+  return std::string(buf, r.ptr);
+}
+
+const char* stage_label(int i) {
+  const char* name = nbmc_stage_name(i);
+  return name ? name : "?";
+}
+
+std::vector<std::pair<std::string, double>> timings(const Report& r) {
+  std::vector<std::pair<std::string, double>> rows;
+  rows.emplace_back("read", r.read_seconds);
+  for (int i = 0; i < NBMC_STAGE_COUNT; ++i) rows.emplace_back(stage_label(i), r.stats.stage_seconds[i]);
+  rows.emplace_back("write", r.write_seconds);
+  return rows;
+}
+
+std::vector<std::pair<const char*, std::uint64_t>> counts(const nbmc_stats& s) {
+  return {{"particle_count", s.particle_count},
+          {"surface_particle_count", s.surface_particle_count},
+          {"occupied_cell_count", s.occupied_cell_count},
+          {"band_vertex_count", s.band_vertex_count},
+          {"band_block_count", s.band_block_count},
+          {"grid_vertex_count", s.grid_vertex_count},
+          {"triangulated_cell_count", s.triangulated_cell_count},
+          {"vertex_count", s.vertex_count},
+          {"triangle_count", s.triangle_count},
+          {"neighbour_evaluations", s.neighbour_evaluations}};
+}
+
+const char* method_name(std::int32_t m) { return m == NBMC_METHOD_ZB05 ? "zb05" : "ssp07"; }
+const char* field_name(std::int32_t f) {
+  return f == NBMC_FIELD_DENSE ? "dense" : f == NBMC_FIELD_SCATTER ? "scatter" : "narrow-band";
+}
+
+} // namespace
+
+std::string json_string(const std::string& s) {
+  std::string out = "\"";
+  const auto* p = reinterpret_cast<const unsigned char*>(s.data());
+  const std::size_t n = s.size();
+  for (std::size_t i = 0; i < n;) {
+    const unsigned char c = p[i];
+    if (c == '"' || c == '\\') {
+      out += '\\';
+      out += static_cast<char>(c);
+      ++i;
+    } else if (c < 0x20) {
+      char buf[8];
+      switch (c) {
+      case '\n': out += "\\n"; break;
+      case '\r': out += "\\r"; break;
+      case '\t': out += "\\t"; break;
+      default: std::snprintf(buf, sizeof buf, "\\u%04x", c); out += buf;
+      }
+      ++i;
+    } else if (c < 0x80) {
+      out += static_cast<char>(c);
+      ++i;
+    } else {
+      // Copy a well-formed UTF-8 sequence, replace anything else by U+FFFD.
+      std::size_t len = c >= 0xf0 && c <= 0xf4 ? 4 : c >= 0xe0 ? 3 : c >= 0xc2 && c <= 0xdf ? 2 : 0;
+      if (c > 0xf4) len = 0;
+      bool ok = len > 0 && i + len <= n;
+      for (std::size_t k = 1; ok && k < len; ++k) ok = (p[i + k] & 0xc0) == 0x80;
+      if (ok && len == 3) { // no overlongs, no surrogates
+        ok = !(c == 0xe0 && p[i + 1] < 0xa0) && !(c == 0xed && p[i + 1] >= 0xa0);
+      }
+      if (ok && len == 4) ok = !(c == 0xf0 && p[i + 1] < 0x90) && !(c == 0xf4 && p[i + 1] >= 0x90);
+      if (ok) {
+        out.append(s, i, len);
+        i += len;
+      } else {
+        out += "\\ufffd";
+        ++i;
+      }
+    }
+  }
+  out += '"';
+  return out;
+}
+
+std::string format_report(const Report& r) {
+  const nbmc_stats& s = r.stats;
+  std::string o;
+  const auto line = [&](const std::string& key, const std::string& value) {
+    char buf[32];
+    std::snprintf(buf, sizeof buf, "%-10s ", key.c_str());
+    o += buf + value + "\n";
+  };
+  line("nbmc", r.version);
+  line("input", r.input_path + " (" + r.input_format + ", " + grouped(r.particle_count) + " particles)");
+  line("output", r.output_path + " (" + r.output_format + ", " + grouped(s.vertex_count) + " vertices, " +
+                     grouped(s.triangle_count) + " triangles" + (r.normals ? ", normals" : "") + ")");
+  line("backend", r.backend);
+  line("method", std::string(method_name(r.params.method)) + ", " + field_name(r.params.field) + " field");
+  line("spacing", printf_string("%g", r.params.spacing) + " (cell size " + printf_string("%g", s.cell_size) + ")");
+  line("grid", grouped(s.grid_dims[0]) + " x " + grouped(s.grid_dims[1]) + " x " + grouped(s.grid_dims[2]) +
+                   " vertices, origin (" + printf_string("%g", s.grid_origin[0]) + ", " +
+                   printf_string("%g", s.grid_origin[1]) + ", " + printf_string("%g", s.grid_origin[2]) + ")");
+
+  o += "\nstage                  seconds      %\n";
+  const double total = r.total_seconds > 0 ? r.total_seconds : 1;
+  char buf[128];
+  for (const auto& [name, sec] : timings(r)) {
+    std::snprintf(buf, sizeof buf, "  %-18s %9.4f %6.1f\n", name.c_str(), sec, 100.0 * sec / total);
+    o += buf;
+  }
+  std::snprintf(buf, sizeof buf, "  %-18s %9.4f %6.1f\n", "total", r.total_seconds, 100.0);
+  o += buf;
+  std::snprintf(buf, sizeof buf, "  (library total %.4f s; the rest is start-up and context creation)\n",
+                s.total_seconds);
+  o += buf;
+
+  o += "\n";
+  const std::pair<const char*, std::uint64_t> rows[] = {
+      {"surface particles", s.surface_particle_count},
+      {"occupied cells", s.occupied_cell_count},
+      {"band vertices", s.band_vertex_count},
+      {"band blocks", s.band_block_count},
+      {"grid vertices", s.grid_vertex_count},
+      {"triangulated cells", s.triangulated_cell_count},
+      {"vertices", s.vertex_count},
+      {"triangles", s.triangle_count},
+      {"neighbour evals", s.neighbour_evaluations}};
+  for (const auto& [name, v] : rows) {
+    std::snprintf(buf, sizeof buf, "  %-20s %16s\n", name, grouped(v).c_str());
+    o += buf;
+  }
+  o += "\npeak memory: nbmc " + mib(s.peak_memory_bytes) + ", process RSS " + mib(r.peak_rss_bytes) + "\n";
+  return o;
+}
+
+std::string format_json(const Report& r) {
+  const nbmc_stats& s = r.stats;
+  const nbmc_params& p = r.params;
+  std::string o = "{\n";
+  o += "  \"nbmc_version\": " + json_string(r.version) + ",\n";
+  o += "  \"input\": {\"path\": " + json_string(r.input_path) + ", \"format\": " + json_string(r.input_format) +
+       ", \"particle_count\": " + std::to_string(r.particle_count) + "},\n";
+  o += "  \"output\": {\"path\": " + json_string(r.output_path) + ", \"format\": " + json_string(r.output_format) +
+       ", \"normals\": " + (r.normals ? "true" : "false") + "},\n";
+  o += "  \"backend\": " + json_string(r.backend) + ",\n";
+
+  o += "  \"params\": {";
+  o += "\"length_unit\": " + json_string(p.length_unit == NBMC_UNIT_ABSOLUTE ? "absolute" : "spacing");
+  const std::pair<const char*, double> reals[] = {
+      {"spacing", p.spacing},           {"cell_size", p.cell_size},   {"influence_radius", p.influence_radius},
+      {"band_width", p.band_width},     {"surface_radius", p.surface_radius},
+      {"iso_radius", p.iso_radius},     {"t_low", p.t_low},           {"t_high", p.t_high},
+      {"color_threshold", p.color_threshold}};
+  for (const auto& [k, v] : reals) o += std::string(", \"") + k + "\": " + json_number(v);
+  o += ", \"method\": " + json_string(method_name(p.method));
+  o += ", \"field\": " + json_string(field_name(p.field));
+  o += ", \"neighbour_threshold\": " + std::to_string(p.neighbour_threshold);
+  o += std::string(", \"compute_normals\": ") + (p.compute_normals ? "true" : "false");
+  if (p.use_bbox) {
+    o += ", \"bbox\": [";
+    for (int i = 0; i < 6; ++i) o += (i ? ", " : "") + json_number(i < 3 ? p.bbox_min[i] : p.bbox_max[i - 3]);
+    o += "]";
+  } else {
+    o += ", \"bbox\": null";
+  }
+  o += "},\n";
+
+  o += "  \"grid\": {\"dims\": [" + std::to_string(s.grid_dims[0]) + ", " + std::to_string(s.grid_dims[1]) + ", " +
+       std::to_string(s.grid_dims[2]) + "], \"origin\": [" + json_number(s.grid_origin[0]) + ", " +
+       json_number(s.grid_origin[1]) + ", " + json_number(s.grid_origin[2]) +
+       "], \"cell_size\": " + json_number(s.cell_size) + "},\n";
+
+  o += "  \"timings_seconds\": {";
+  bool first = true;
+  for (const auto& [name, sec] : timings(r)) {
+    o += (first ? "" : ", ") + json_string(name) + ": " + json_number(sec);
+    first = false;
+  }
+  o += ", \"total\": " + json_number(r.total_seconds) + ", \"library_total\": " + json_number(s.total_seconds) +
+       "},\n";
+
+  o += "  \"counts\": {";
+  first = true;
+  for (const auto& [name, v] : counts(s)) {
+    o += std::string(first ? "" : ", ") + "\"" + name + "\": " + std::to_string(v);
+    first = false;
+  }
+  o += "},\n";
+  o += "  \"memory\": {\"peak_memory_bytes\": " + std::to_string(s.peak_memory_bytes) +
+       ", \"peak_rss_bytes\": " + std::to_string(r.peak_rss_bytes) + "}\n";
+  o += "}\n";
+  return o;
+}
+
+} // namespace nbmc::cli

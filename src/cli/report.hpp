@@ -1,0 +1,43 @@
+// SPDX-License-Identifier: MIT
+// The figures the nbmc command reports, as a table and as JSON.
+#ifndef NBMC_CLI_REPORT_HPP
+#define NBMC_CLI_REPORT_HPP
+
+#include <nbmc.h>
+
+#include <cstdint>
+#include <string>
+
+namespace nbmc::cli {
+
+struct Report {
+  std::string version;
+  std::string input_path;
+  std::string input_format;
+  std::string output_path;
+  std::string output_format;
+  std::string backend;
+  std::uint64_t particle_count = 0;
+  nbmc_params params{};  // as passed (spacing absolute)
+  nbmc_stats stats{};    // of the reconstruction
+  bool normals = false;  // the mesh has normals
+  double read_seconds = 0;
+  double write_seconds = 0;
+  double total_seconds = 0; // wall clock of the whole command
+  std::uint64_t peak_rss_bytes = 0;
+};
+
+// Peak resident set size of this process so far (getrusage), in bytes.
+std::uint64_t peak_rss_bytes();
+
+// Human-readable report.
+std::string format_report(const Report& r);
+// The same figures as one JSON object (ends with a newline).
+std::string format_json(const Report& r);
+
+// JSON string literal of s (quoted, escaped; invalid UTF-8 becomes U+FFFD).
+std::string json_string(const std::string& s);
+
+} // namespace nbmc::cli
+
+#endif

@@ -1,0 +1,62 @@
+// SPDX-License-Identifier: MIT
+// nbmc::io — triangle mesh writers (binary PLY, Wavefront OBJ) and a reader
+// for PLY meshes such as the ones written here.
+//
+// Writers create a temporary file next to the destination and rename it into
+// place once complete, so an interrupted or failed run never leaves a
+// half-written mesh under the destination name (a killed process may leave a
+// hidden ".<name>.nbmc-tmp.*" file behind). Errors throw nbmc::io::Error
+// naming the file.
+#ifndef NBMC_IO_MESH_HPP
+#define NBMC_IO_MESH_HPP
+
+#include "io/error.hpp"
+
+#include <cstdint>
+#include <functional>
+#include <string>
+#include <vector>
+
+namespace nbmc::io {
+
+// A mesh in flat arrays, as nbmc_mesh_* returns it. Pointers may be null when
+// the matching count is 0; normals may be null (then none are written).
+struct MeshView {
+  const float* positions = nullptr;      // 3 * vertex_count
+  const float* normals = nullptr;        // 3 * vertex_count, or null
+  const std::uint32_t* triangles = nullptr; // 3 * triangle_count, 0-based
+  std::uint64_t vertex_count = 0;
+  std::uint64_t triangle_count = 0;
+};
+
+// An owning mesh (what read_mesh_ply returns).
+struct Mesh {
+  std::vector<float> positions;
+  std::vector<float> normals; // empty when the file has none
+  std::vector<std::uint32_t> triangles;
+  std::uint64_t vertex_count() const { return positions.size() / 3; }
+  std::uint64_t triangle_count() const { return triangles.size() / 3; }
+  MeshView view() const;
+};
+
+// Writes m to path. format: "ply" (binary little-endian: vertex x y z
+// [nx ny nz] float, face "list uchar uint vertex_indices") or "obj" (v, vn,
+// f a//a b//b c//c, 1-based), case-insensitive, or "" to take it from the
+// extension of path. Triangle indices are checked against vertex_count.
+// cancelled, when set, is polled while writing; if it returns true the
+// temporary file is removed and Cancelled is thrown.
+void write_mesh(const std::string& path, const MeshView& m, const std::string& format = "",
+                const std::function<bool()>& cancelled = {});
+
+// The format write_mesh would use: "ply" or "obj"; throws Error otherwise.
+std::string mesh_format(const std::string& path, const std::string& format = "");
+
+// Reads a triangle mesh from a PLY file (any of the three encodings): vertex
+// x, y, z and optionally nx, ny, nz; face list "vertex_indices" (or
+// "vertex_index") of triangles only.
+Mesh read_mesh_ply(const std::string& path);
+Mesh parse_mesh_ply(const void* data, std::size_t size, const std::string& name = "<memory>");
+
+} // namespace nbmc::io
+
+#endif

@@ -1,0 +1,251 @@
+// SPDX-License-Identifier: MIT
+// The nbmc command: exit codes, messages, and a small real reconstruction.
+// Needs the nbmc_cli target built (NBMC_BINARY_DIR/src/cli/nbmc).
+#include "io/mesh.hpp"
+#include "io/particles.hpp"
+#include "nbmc.h"
+#include "nbmc_test.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include <chrono>
+#include <csignal>
+#include <thread>
+
+#include <fcntl.h>
+#include <spawn.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+namespace fs = std::filesystem;
+
+namespace {
+
+const std::string kBinary = std::string(NBMC_BINARY_DIR) + "/src/cli/nbmc";
+const std::string kFrame = std::string(NBMC_DATA_DIR) + "/xyz/splashsurf_doubledambreak_f26_4732.xyz";
+
+std::string quote(const std::string& s) {
+  std::string out = "'";
+  for (char c : s) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return out + "'";
+}
+
+std::string slurp(const fs::path& p) {
+  std::ifstream f(p, std::ios::binary);
+  return std::string((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+}
+
+struct Result {
+  int exit_code = -1;
+  std::string out, err;
+};
+
+class CliTest : public ::testing::Test {
+protected:
+  void SetUp() override {
+    if (!fs::exists(kBinary)) FAIL() << kBinary << " does not exist: build the nbmc_cli target first";
+    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+    dir_ = fs::temp_directory_path() / ("nbmc_test_cli_" + std::to_string(::getpid()) + "_" + info->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override {
+    std::error_code ec;
+    fs::remove_all(dir_, ec);
+  }
+  std::string path(const std::string& name) const { return (dir_ / name).string(); }
+
+  // Runs "nbmc ARGS" (args already quoted where needed) with stdout and
+  // stderr captured.
+  Result run(const std::string& args) const {
+    const fs::path out = dir_ / "stdout.txt", err = dir_ / "stderr.txt";
+    const std::string cmd = quote(kBinary) + " " + args + " >" + quote(out.string()) + " 2>" + quote(err.string()) +
+                            " </dev/null";
+    const int status = std::system(cmd.c_str());
+    Result r;
+    r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    r.out = slurp(out);
+    r.err = slurp(err);
+    return r;
+  }
+  fs::path dir_;
+};
+
+bool contains(const std::string& haystack, const std::string& needle) {
+  return haystack.find(needle) != std::string::npos;
+}
+
+// The unsigned integer after "\"key\":" in a JSON text, or -1.
+long long json_uint(const std::string& json, const std::string& key) {
+  const std::string k = "\"" + key + "\"";
+  std::size_t pos = json.find(k);
+  if (pos == std::string::npos) return -1;
+  pos = json.find(':', pos + k.size());
+  if (pos == std::string::npos) return -1;
+  ++pos;
+  while (pos < json.size() && json[pos] == ' ') ++pos;
+  std::size_t end = pos;
+  while (end < json.size() && json[end] >= '0' && json[end] <= '9') ++end;
+  if (end == pos) return -1;
+  return std::stoll(json.substr(pos, end - pos));
+}
+
+} // namespace
+
+TEST_F(CliTest, Help) {
+  Result r = run("--help");
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(contains(r.out, "reconstruct")) << r.out;
+  EXPECT_TRUE(contains(r.out, "--spacing")) << r.out;
+
+  r = run("reconstruct --help");
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  for (const char* opt : {"--spacing", "--particle-radius", "--cell-size", "--influence-radius", "--band-width",
+                          "--surface-radius", "--iso-radius", "--method", "--field", "--t-low", "--t-high",
+                          "--color-threshold", "--neighbour-threshold", "--no-normals", "--bbox", "--threads",
+                          "--backend", "--format", "--json", "--quiet", "--progress"})
+    EXPECT_TRUE(contains(r.out, opt)) << opt;
+  // Defaults shown are those of nbmc_params_init.
+  nbmc_params p;
+  nbmc_params_init(&p);
+  std::ostringstream want;
+  want << "--cell-size FLOAT=" << p.cell_size;
+  EXPECT_TRUE(contains(r.out, want.str())) << r.out;
+}
+
+TEST_F(CliTest, Version) {
+  const Result r = run("--version");
+  EXPECT_EQ(r.exit_code, 0);
+  EXPECT_TRUE(contains(r.out, nbmc_version_string())) << r.out;
+}
+
+TEST_F(CliTest, MissingInputFile) {
+  const Result r = run("reconstruct " + quote(path("missing_particles.xyz")) + " -o " + quote(path("out.ply")) +
+                       " --spacing 0.1");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_TRUE(contains(r.err, "missing_particles.xyz")) << r.err;
+  EXPECT_TRUE(contains(r.err, "nbmc: error:")) << r.err;
+  EXPECT_FALSE(fs::exists(path("out.ply")));
+}
+
+TEST_F(CliTest, UsageErrorsExitWith2) {
+  const std::string io = quote(kFrame) + " -o " + quote(path("out.ply"));
+  Result r = run("reconstruct " + io);
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  EXPECT_TRUE(contains(r.err, "--spacing")) << r.err;
+  EXPECT_EQ(run("reconstruct " + io + " --spacing 0.05 --particle-radius 0.025").exit_code, 2);
+  EXPECT_EQ(run("reconstruct " + io + " --spacing 0.05 --method nope").exit_code, 2);
+  EXPECT_EQ(run("reconstruct " + io + " --spacing 0.05 --no-such-option").exit_code, 2);
+  EXPECT_EQ(run("reconstruct " + io + " --spacing 0.05 --bbox 0 0 0 1 1").exit_code, 2);
+  EXPECT_EQ(run("reconstruct --spacing 0.05").exit_code, 2);
+  EXPECT_EQ(run("").exit_code, 2);
+  EXPECT_FALSE(fs::exists(path("out.ply")));
+}
+
+TEST_F(CliTest, BadInputAndOutputExitWith1) {
+  std::ofstream(path("odd.xyz")) << "12345";
+  Result r = run("reconstruct " + quote(path("odd.xyz")) + " -o " + quote(path("out.ply")) + " --spacing 0.05");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_TRUE(contains(r.err, "odd.xyz")) << r.err;
+  r = run("reconstruct " + quote(path("odd.xyz")) + " -o " + quote(path("out.stl")) + " --spacing 0.05");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_TRUE(contains(r.err, "out.stl")) << r.err;
+  r = run("reconstruct " + quote(path("odd.foo")) + " -o " + quote(path("out.ply")) + " --spacing 0.05");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_TRUE(contains(r.err, "unknown extension '.foo'")) << r.err;
+}
+
+TEST_F(CliTest, LibraryErrorsExitWith1) {
+  if (!fs::exists(kFrame)) GTEST_SKIP() << kFrame << " not found";
+  const Result r = run("reconstruct " + quote(kFrame) + " -o " + quote(path("out.ply")) + " --spacing -1");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_TRUE(contains(r.err, std::string("nbmc: error: ") + nbmc_status_string(NBMC_ERROR_INVALID_PARAMETER)))
+      << r.err;
+  EXPECT_FALSE(fs::exists(path("out.ply")));
+}
+
+TEST_F(CliTest, ReconstructsARealFrame) {
+  if (!fs::exists(kFrame)) GTEST_SKIP() << kFrame << " not found";
+  const std::string ply = path("dd.ply");
+  Result r = run("reconstruct " + quote(kFrame) + " -o " + quote(ply) +
+                 " --particle-radius 0.025 --cell-size 1 --progress never");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto mesh = nbmc::io::read_mesh_ply(ply);
+  EXPECT_GT(mesh.triangle_count(), 0u);
+  EXPECT_EQ(mesh.normals.size(), mesh.positions.size());
+  // The report: input, stages, counts, memory.
+  EXPECT_TRUE(contains(r.out, "4,732 particles")) << r.out;
+  for (int s = 0; s < NBMC_STAGE_COUNT; ++s) EXPECT_TRUE(contains(r.out, nbmc_stage_name(s))) << s;
+  for (const char* word : {"read", "write", "total", "triangles", "peak memory"})
+    EXPECT_TRUE(contains(r.out, word)) << word;
+  EXPECT_TRUE(r.err.empty()) << r.err;
+
+  // Same mesh size as the C API gives for the same input and parameters.
+  const auto particles = nbmc::io::read_particles(kFrame);
+  nbmc_params p = nbmc_test::params(0.05);
+  p.cell_size = 1;
+  const nbmc_test::Run direct = nbmc_test::reconstruct(particles.xyz, p, NBMC_BACKEND_AUTO);
+  ASSERT_EQ(direct.status, NBMC_OK) << direct.message;
+  EXPECT_EQ(mesh.triangle_count(), direct.mesh.triangle_count());
+  EXPECT_EQ(mesh.vertex_count(), direct.mesh.vertex_count());
+
+  // JSON on stdout (no table), and OBJ output without normals.
+  const std::string obj = path("dd.obj");
+  r = run("reconstruct " + quote(kFrame) + " -o " + quote(obj) +
+          " --particle-radius 0.025 --cell-size 1 --no-normals --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(r.out.front(), '{') << r.out;
+  EXPECT_EQ(json_uint(r.out, "triangle_count"), static_cast<long long>(mesh.triangle_count())) << r.out;
+  EXPECT_EQ(json_uint(r.out, "particle_count"), 4732) << r.out;
+  EXPECT_GT(json_uint(r.out, "peak_rss_bytes"), 0) << r.out;
+  EXPECT_FALSE(contains(slurp(obj), "vn ")) << "normals written despite --no-normals";
+
+  // JSON to a file, quiet: nothing on stdout.
+  const std::string json = path("report.json");
+  r = run("reconstruct " + quote(kFrame) + " -o " + quote(ply) + " --spacing 0.05 --cell-size 1 --quiet --json=" +
+          quote(json));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(r.out.empty()) << r.out;
+  const std::string text = slurp(json);
+  EXPECT_EQ(json_uint(text, "triangle_count"), static_cast<long long>(mesh.triangle_count())) << text;
+  EXPECT_TRUE(contains(text, "\"timings_seconds\"")) << text;
+  // No temporary files left next to the outputs.
+  for (const auto& e : fs::directory_iterator(dir_))
+    EXPECT_FALSE(contains(e.path().filename().string(), "nbmc-tmp")) << e.path();
+}
+
+// Ctrl-C during the reconstruction: exit 130, "cancelled", no mesh written.
+TEST_F(CliTest, InterruptCancels) {
+  const std::string frame = std::string(NBMC_DATA_DIR) + "/xyz/cbd1654k_t040_1654104.xyz";
+  if (!fs::exists(frame)) GTEST_SKIP() << frame << " not found";
+  const std::string out = path("big.ply"), err = path("stderr.txt");
+  std::vector<std::string> args = {kBinary, "reconstruct", frame, "-o", out, "--spacing", "0.00484",
+                                   "--cell-size", "0.25", "--progress", "always", "--quiet"};
+  std::vector<char*> argv;
+  for (std::string& a : args) argv.push_back(a.data());
+  argv.push_back(nullptr);
+  posix_spawn_file_actions_t actions;
+  posix_spawn_file_actions_init(&actions);
+  posix_spawn_file_actions_addopen(&actions, STDERR_FILENO, err.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+  pid_t pid = 0;
+  ASSERT_EQ(posix_spawn(&pid, kBinary.c_str(), &actions, nullptr, argv.data(), environ), 0);
+  posix_spawn_file_actions_destroy(&actions);
+  // Wait for the first progress report, then interrupt.
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(60);
+  while (!contains(slurp(err), "stage") && std::chrono::steady_clock::now() < deadline)
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  ::kill(pid, SIGINT);
+  int status = 0;
+  ASSERT_EQ(::waitpid(pid, &status, 0), pid);
+  ASSERT_TRUE(WIFEXITED(status)) << "killed by signal " << (WIFSIGNALED(status) ? WTERMSIG(status) : 0);
+  if (WEXITSTATUS(status) == 0) GTEST_SKIP() << "the reconstruction finished before the interrupt arrived";
+  EXPECT_EQ(WEXITSTATUS(status), 130) << slurp(err);
+  EXPECT_TRUE(contains(slurp(err), "cancelled")) << slurp(err);
+  EXPECT_FALSE(fs::exists(out));
+}
