@@ -149,6 +149,91 @@ McResult classify_cells(const ExecSpace& space, const BandView<typename ExecSpac
   return r;
 }
 
+// Band leaks: cells that are triangulated (all corners in the band, mixed
+// signs) and have a face with mixed signs whose neighbour cell across it is
+// not entirely in the band. The surface continues into that neighbour, so
+// without it the mesh would have a hole there. Returns the minimum corners
+// of those neighbour cells (x, y, z triples, host memory, sorted).
+template <class ExecSpace>
+std::vector<std::int64_t> find_band_leaks(const ExecSpace& space, const BandView<typename ExecSpace::memory_space>& band,
+                                          std::size_t n_words,
+                                          const Kokkos::View<const float*, typename ExecSpace::memory_space>& phi) {
+  using MemSpace = typename ExecSpace::memory_space;
+  ScopedRegion region("nbmc::marching_cubes::band_leaks");
+  // Face f: axis a = f / 2, side = f % 2 (0: the face at the cell's minimum).
+  auto leaks_of = KOKKOS_LAMBDA(std::size_t w, int bit, std::int64_t self, std::int64_t out[18])->int {
+    std::int64_t i, j, k, idx[8];
+    band.vertex(w, bit, i, j, k);
+    if (!cell_corners(band, i, j, k, self, idx)) return 0;
+    int cs = 0;
+    for (int c = 0; c < 8; ++c) cs |= (phi(idx[c]) < 0.f ? 1 : 0) << c;
+    if (cs == 0 || cs == 255) return 0;
+    int n = 0;
+    for (int f = 0; f < 6; ++f) {
+      const int a = f >> 1, side = f & 1;
+      int inside = 0;
+      for (int c = 0; c < 8; ++c)
+        if (((c >> a) & 1) == side) inside += (cs >> c) & 1;
+      if (inside == 0 || inside == 4) continue;
+      const std::int64_t ni = i + (a == 0 ? (side ? 1 : -1) : 0), nj = j + (a == 1 ? (side ? 1 : -1) : 0),
+                         nk = k + (a == 2 ? (side ? 1 : -1) : 0);
+      if (ni < 0 || nj < 0 || nk < 0 || ni + 1 >= band.dims[0] || nj + 1 >= band.dims[1] || nk + 1 >= band.dims[2])
+        continue;  // the grid's own boundary (padded: only reached with a clipping box)
+      bool full = true;
+      for (int c = 0; c < 8 && full; ++c)
+        full = band.index(ni + (c & 1), nj + ((c >> 1) & 1), nk + (c >> 2)) >= 0;
+      if (full) continue;
+      out[3 * n] = ni;
+      out[3 * n + 1] = nj;
+      out[3 * n + 2] = nk;
+      ++n;
+    }
+    return n;
+  };
+  std::uint64_t count = 0;
+  Kokkos::parallel_reduce(
+      "nbmc::marching_cubes::count_leaks",
+      Kokkos::RangePolicy<ExecSpace, Kokkos::Schedule<Kokkos::Dynamic>>(space, 0, n_words),
+      KOKKOS_LAMBDA(const std::size_t w, std::uint64_t& acc) {
+        std::uint64_t word = band.words(w);
+        std::int64_t self = std::int64_t(band.word_offset(w));
+        std::int64_t out[18];
+        while (word) {
+          const int bit = ctz64(word);
+          word &= word - 1;
+          acc += std::uint64_t(leaks_of(w, bit, self, out));
+          ++self;
+        }
+      },
+      count);
+  space.fence();
+  std::vector<std::int64_t> result;
+  if (!count) return result;
+  Kokkos::View<std::int64_t*, MemSpace> list("nbmc::marching_cubes::leaks", 3 * count);
+  Kokkos::View<std::uint64_t, MemSpace> cursor("nbmc::marching_cubes::leak_cursor");
+  Kokkos::parallel_for(
+      "nbmc::marching_cubes::collect_leaks", Kokkos::RangePolicy<ExecSpace>(space, 0, n_words),
+      KOKKOS_LAMBDA(const std::size_t w) {
+        std::uint64_t word = band.words(w);
+        std::int64_t self = std::int64_t(band.word_offset(w));
+        std::int64_t out[18];
+        while (word) {
+          const int bit = ctz64(word);
+          word &= word - 1;
+          const int n = leaks_of(w, bit, self, out);
+          if (n) {
+            const std::uint64_t at = Kokkos::atomic_fetch_add(&cursor(), std::uint64_t(n));
+            for (int q = 0; q < 3 * n; ++q) list(3 * at + q) = out[q];
+          }
+          ++self;
+        }
+      });
+  space.fence();
+  auto h = Kokkos::create_mirror_view_and_copy(Kokkos::HostSpace(), list);
+  result.assign(h.data(), h.data() + h.extent(0));
+  return result;
+}
+
 // Pass C: intersection points (absolute, float) and normals.
 template <class ExecSpace>
 void compute_vertices(const ExecSpace& space, const BandView<typename ExecSpace::memory_space>& band,

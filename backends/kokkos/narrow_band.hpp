@@ -216,6 +216,59 @@ void build_narrow_band(const ExecSpace& space, MemoryTracker& tracker, const Gri
   finish_band(space, tracker, band);
 }
 
+// Grows the band by the eight corners of every cell in `cells` (grid
+// coordinates of the cells' minimum corners, host memory). Returns the new
+// band; `old` is left intact so field values can be carried over.
+template <class ExecSpace>
+void extend_band(const ExecSpace& space, MemoryTracker& tracker, const Grid& g,
+                 const Band<typename ExecSpace::memory_space>& old, const std::vector<std::int64_t>& cells,
+                 Band<typename ExecSpace::memory_space>& band) {
+  using MemSpace = typename ExecSpace::memory_space;
+  auto okeys = Kokkos::create_mirror_view_and_copy(Kokkos::HostSpace(), old.block_keys.view());
+  auto owords = Kokkos::create_mirror_view_and_copy(Kokkos::HostSpace(), old.words.view());
+  std::vector<std::uint64_t> keys(okeys.data(), okeys.data() + old.n_blocks);
+  auto block_key = [](std::int64_t i, std::int64_t j, std::int64_t k) {
+    return morton3(std::uint32_t(i >> 3), std::uint32_t(j >> 3), std::uint32_t(k >> 3));
+  };
+  for (std::size_t c = 0; c + 2 < cells.size(); c += 3)
+    for (int q = 0; q < 8; ++q) {
+      const std::int64_t i = cells[c] + (q & 1), j = cells[c + 1] + ((q >> 1) & 1), k = cells[c + 2] + (q >> 2);
+      if (i < g.dims[0] && j < g.dims[1] && k < g.dims[2]) keys.push_back(block_key(i, j, k));
+    }
+  std::sort(keys.begin(), keys.end());
+  keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
+  std::vector<std::uint64_t> words(keys.size() * 8, 0);
+  for (std::size_t b = 0; b < old.n_blocks; ++b) {
+    const std::size_t nbk = std::size_t(std::lower_bound(keys.begin(), keys.end(), okeys(b)) - keys.begin());
+    for (int w = 0; w < 8; ++w) words[nbk * 8 + w] = owords(b * 8 + w);
+  }
+  for (std::size_t c = 0; c + 2 < cells.size(); c += 3)
+    for (int q = 0; q < 8; ++q) {
+      const std::int64_t i = cells[c] + (q & 1), j = cells[c + 1] + ((q >> 1) & 1), k = cells[c + 2] + (q >> 2);
+      if (i >= g.dims[0] || j >= g.dims[1] || k >= g.dims[2]) continue;
+      const std::size_t b = std::size_t(std::lower_bound(keys.begin(), keys.end(), block_key(i, j, k)) - keys.begin());
+      const std::int64_t lx = i & 7, ly = j & 7, lz = k & 7;
+      words[b * 8 + BandView<MemSpace>::word_of(lx, ly, lz)] |= std::uint64_t(1) << BandView<MemSpace>::bit_of(lx, ly, lz);
+    }
+  band.n_blocks = keys.size();
+  band.block_keys = Buffer<std::uint64_t, MemSpace>(tracker, "band::block_keys", keys.size());
+  band.words = Buffer<std::uint64_t, MemSpace>(tracker, "band::words", words.size());
+  using Unmanaged = Kokkos::MemoryTraits<Kokkos::Unmanaged>;
+  Kokkos::deep_copy(space, band.block_keys.view(),
+                    Kokkos::View<const std::uint64_t*, Kokkos::HostSpace, Unmanaged>(keys.data(), keys.size()));
+  Kokkos::deep_copy(space, band.words.view(),
+                    Kokkos::View<const std::uint64_t*, Kokkos::HostSpace, Unmanaged>(words.data(), words.size()));
+  band.blocks.allocate(space, tracker, "band::block_map", keys.size());
+  auto map = band.blocks.map;
+  auto bk = band.block_keys.view();
+  Kokkos::parallel_for(
+      "nbmc::band::extend_insert", Kokkos::RangePolicy<ExecSpace>(space, 0, band.n_blocks),
+      KOKKOS_LAMBDA(const std::size_t b) { map.insert(bk(b)); });
+  space.fence();
+  number_blocks(space, band);
+  finish_band(space, tracker, band);
+}
+
 // The dense baseline: every vertex of the bounding grid is a "band" vertex.
 template <class ExecSpace>
 void build_dense_band(const ExecSpace& space, MemoryTracker& tracker, const Grid& g,

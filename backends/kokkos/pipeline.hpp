@@ -29,6 +29,7 @@ struct HostMesh {
 struct RunStats {
   std::uint64_t particles = 0, surface_particles = 0, occupied_cells = 0, band_vertices = 0, band_blocks = 0,
                 grid_vertices = 0, cells = 0, vertices = 0, triangles = 0, evaluations = 0;
+  std::uint64_t band_growth_rounds = 0, band_growth_cells = 0;
   std::uint64_t dims[3] = {0, 0, 0};
   double stage[16] = {0};
   double total = 0;
@@ -110,30 +111,59 @@ void reconstruct(const ExecSpace& space, const double* xyz, std::size_t count, c
     lap(2);
     build_dense_band(space, tracker, g, band);
   }
-  const BandView<MemSpace> bv = view_of(band, g);
-  const std::size_t n_words = band.n_blocks * 8;
-  st.band_vertices = band.n_vertices;
-  st.band_blocks = p.field == 0 ? band.n_blocks : 0;
   lap(3);
 
   // ------------------------------------------------------------------ field
   const FieldConstants fc = field_constants(p.influence_radius, p.iso_radius, p.t_low, p.t_high);
   Buffer<float, MemSpace> phi(tracker, "scalar_field::values", band.n_vertices);
+  const BandView<MemSpace> bv0 = view_of(band, g);
+  const std::size_t n_words0 = band.n_blocks * 8;
   auto run_field = [&](auto method) {
     using Method = decltype(method);
     if (p.field == 2 /*NBMC_FIELD_SCATTER*/) {
       if constexpr (Kokkos::SpaceAccessibility<Kokkos::HostSpace, MemSpace>::accessible) {
         return scatter_field<Method>(space, tracker, Kokkos::View<const float*, Kokkos::HostSpace>(nbh.pos.view()),
-                                     nbh.n, bv, n_words, g, fc, phi.view(), progress);
+                                     nbh.n, bv0, n_words0, g, fc, phi.view(), progress);
       } else {
         throw Error(4, "the scatter baseline runs on the CPU backends only");
         return std::uint64_t(0);
       }
     }
-    return gather_field<Method>(space, nb, bv, n_words, g, fc, phi.view(), progress);
+    return gather_field<Method>(space, nb, bv0, n_words0, g, fc, phi.view(), progress);
   };
   st.evaluations = p.method == 1 ? run_field(FieldZB05{}) : run_field(FieldSSP07{});
+
+  // Close the band where the surface leaves it (a triangulated cell with a
+  // crossed face next to a cell that is not entirely in the band): add that
+  // cell's corners, evaluate the new vertices only, repeat. The paper's band
+  // has no such guarantee; without it real frames get holes.
+  if (p.field == 0) {
+    for (int round = 0;; ++round) {
+      const std::vector<std::int64_t> leaks =
+          find_band_leaks(space, view_of(band, g), band.n_blocks * 8, Kokkos::View<const float*, MemSpace>(phi.view()));
+      if (leaks.empty()) break;
+      if (round >= 1000) throw Error(9, "the narrow band did not close after 1000 growth rounds");
+      Band<MemSpace> grown;
+      extend_band(space, tracker, g, band, leaks, grown);
+      Buffer<float, MemSpace> grown_phi(tracker, "scalar_field::values", grown.n_vertices);
+      const BandView<MemSpace> old_view = view_of(band, g);
+      const Kokkos::View<const float*, MemSpace> old_phi = phi.view();
+      auto grow = [&](auto method) {
+        return gather_field<decltype(method)>(space, nb, view_of(grown, g), grown.n_blocks * 8, g, fc,
+                                              grown_phi.view(), progress, &old_view, old_phi);
+      };
+      st.evaluations += p.method == 1 ? grow(FieldZB05{}) : grow(FieldSSP07{});
+      band = std::move(grown);
+      phi = std::move(grown_phi);
+      st.band_growth_rounds = std::uint64_t(round + 1);
+      st.band_growth_cells += leaks.size() / 3;
+    }
+  }
   lap(4);
+  const BandView<MemSpace> bv = view_of(band, g);
+  const std::size_t n_words = band.n_blocks * 8;
+  st.band_vertices = band.n_vertices;
+  st.band_blocks = p.field == 0 ? band.n_blocks : 0;
 
   // ---------------------------------------------------------- triangulation
   const McTables<MemSpace> tables = make_mc_tables(space);

@@ -105,7 +105,7 @@ struct TileScratch {
 template <class Method, class MemSpace>
 inline bool eval_tile_host(const NeighbourView<MemSpace>& nb, const CellRange* cells, int n_cells, const float tmin[3],
                            const float tmax[3], float S, const FieldConstants& fc, std::uint64_t word,
-                           std::uint64_t out, std::size_t w, const BandView<MemSpace>& band, float c,
+                           std::uint64_t full, std::size_t w, const BandView<MemSpace>& band, float c,
                            const Kokkos::View<float*, MemSpace>& phi, std::uint64_t& evals) {
   static thread_local TileScratch scratch;
   const float R2 = fc.R * fc.R;
@@ -136,21 +136,28 @@ inline bool eval_tile_host(const NeighbourView<MemSpace>& nb, const CellRange* c
     for (int q = 0; q < Method::N; ++q) acc[q] = 0.f;
     evals += Method::accumulate(acc, scratch.x, scratch.y, scratch.z, 0, n, float(i) * c, float(j) * c,
                                 float(k) * c, fc.inv_R2);
-    phi(out++) = Method::value(acc, fc);
+    phi(band.word_offset(w) + popcount64(full & ((std::uint64_t(1) << bit) - 1))) = Method::value(acc, fc);
   }
   return true;
 }
 
+// Evaluates the field on the band. With `old` (a band contained in `band`
+// whose values are `old_phi`), values of vertices already in `old` are copied
+// and only the new vertices are evaluated (used when the band grows).
 template <class Method, class ExecSpace>
 std::uint64_t gather_field(const ExecSpace& space, const NeighbourView<typename ExecSpace::memory_space>& nb,
                            const BandView<typename ExecSpace::memory_space>& band, std::size_t n_words,
                            const Grid& g, const FieldConstants& fc,
                            const Kokkos::View<float*, typename ExecSpace::memory_space>& phi,
-                           const Progress& progress) {
+                           const Progress& progress,
+                           const BandView<typename ExecSpace::memory_space>* old = nullptr,
+                           const Kokkos::View<const float*, typename ExecSpace::memory_space>& old_phi = {}) {
   using MemSpace = typename ExecSpace::memory_space;
   ScopedRegion region("nbmc::scalar_field::gather");
   constexpr bool host = Kokkos::SpaceAccessibility<Kokkos::HostSpace, MemSpace>::accessible;
   const float c = float(g.cell), S = float(g.nb_cell);
+  const bool has_old = old != nullptr;
+  const BandView<MemSpace> ob = has_old ? *old : BandView<MemSpace>();
   std::uint64_t total_evals = 0;
   const std::size_t chunk = std::max<std::size_t>(4096, n_words / 64);
   for (std::size_t w0 = 0; w0 < n_words; w0 += chunk) {
@@ -160,20 +167,37 @@ std::uint64_t gather_field(const ExecSpace& space, const NeighbourView<typename 
         "nbmc::scalar_field::gather",
         Kokkos::RangePolicy<ExecSpace, Kokkos::Schedule<Kokkos::Dynamic>>(space, w0, w1),
         KOKKOS_LAMBDA(const std::size_t w, std::uint64_t& acc_evals) {
-          std::uint64_t word = band.words(w);
+          const std::uint64_t full = band.words(w);
+          std::uint64_t word = full;
           if (!word) return;
-          CellRange cells[kMaxTileCells];
-          int n_cells = 0;
           std::int64_t i0, j0, k0;
           band.vertex(w, 0, i0, j0, k0);
+          if (has_old) {  // carry over the values the smaller band already has
+            const std::uint32_t b = ob.blocks.find(
+                morton3(std::uint32_t(i0 >> 3), std::uint32_t(j0 >> 3), std::uint32_t(k0 >> 3)));
+            if (b != ~0u) {
+              const std::size_t ow = std::size_t(b) * 8 + (w & 7);
+              std::uint64_t both = ob.words(ow) & full;
+              word = full & ~ob.words(ow);
+              while (both) {
+                const int bit = ctz64(both);
+                both &= both - 1;
+                const std::uint64_t below = (std::uint64_t(1) << bit) - 1;
+                phi(band.word_offset(w) + popcount64(full & below)) =
+                    old_phi(ob.word_offset(ow) + popcount64(ob.words(ow) & below));
+              }
+            }
+            if (!word) return;
+          }
+          CellRange cells[kMaxTileCells];
+          int n_cells = 0;
           const float tmin[3] = {float(i0) * c, float(j0) * c, float(k0) * c};
           const float tmax[3] = {float(i0 + 3) * c, float(j0 + 3) * c, float(k0 + 3) * c};
           std::int64_t lo[3], hi[3];
           cell_span(nb, tmin, tmax, fc.R, lo, hi);
           const bool tiled = collect_cells(nb, lo, hi, S, cells, n_cells);
-          std::uint64_t out = band.word_offset(w);
           if constexpr (host) {
-            if (tiled && eval_tile_host<Method>(nb, cells, n_cells, tmin, tmax, S, fc, word, out, w, band, c, phi,
+            if (tiled && eval_tile_host<Method>(nb, cells, n_cells, tmin, tmax, S, fc, word, full, w, band, c, phi,
                                                 acc_evals))
               return;
           }
@@ -187,13 +211,14 @@ std::uint64_t gather_field(const ExecSpace& space, const NeighbourView<typename 
               cell_span(nb, x, x, fc.R, lo, hi);
               collect_cells(nb, lo, hi, S, cells, n_cells);
             }
-            phi(out++) = eval_vertex<Method>(nb, cells, n_cells, x, S, fc, acc_evals);
+            phi(band.word_offset(w) + popcount64(full & ((std::uint64_t(1) << bit) - 1))) =
+                eval_vertex<Method>(nb, cells, n_cells, x, S, fc, acc_evals);
           }
         },
         evals);
     space.fence();
     total_evals += evals;
-    progress(4 /*NBMC_STAGE_FIELD*/, double(w1) / double(n_words));
+    if (!has_old) progress(4 /*NBMC_STAGE_FIELD*/, double(w1) / double(n_words));
   }
   return total_evals;
 }

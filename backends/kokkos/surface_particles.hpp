@@ -3,7 +3,9 @@
 // c(x) = sum_j V_j W(x - x_j, h) with V_j = r^3 and the poly6 kernel of support
 // h = surface_radius; a particle is on the surface when |grad c| * h exceeds
 // color_threshold, or when it has fewer than neighbour_threshold neighbours
-// within h (this catches splashes, which the colour field misses).
+// within h (this catches splashes, which the colour field misses). A third,
+// nbmc's own: every particle of a neighbour cell that borders an empty cell
+// but holds no surface particle (see surface_particles_of_cell).
 #pragma once
 
 #include "common.hpp"
@@ -26,6 +28,7 @@ KOKKOS_INLINE_FUNCTION std::size_t surface_particles_of_cell(const NeighbourView
   constexpr int kMaxCells = 729;  // range <= 4
   std::uint32_t begin[kMaxCells], end[kMaxCells];
   int n_cells = 0;
+  bool face_empty = false;
   const std::uint64_t key = keys(cell);
   const std::int64_t cx = std::int64_t(compact3(key)), cy = std::int64_t(compact3(key >> 1)),
                      cz = std::int64_t(compact3(key >> 2));
@@ -38,8 +41,13 @@ KOKKOS_INLINE_FUNCTION std::size_t surface_particles_of_cell(const NeighbourView
           begin[n_cells] = b;
           end[n_cells] = e;
           ++n_cells;
+        } else if ((x != cx) + (y != cy) + (z != cz) == 1 && (x - cx) * (x - cx) + (y - cy) * (y - cy) + (z - cz) * (z - cz) == 1) {
+          face_empty = true;
         }
       }
+  // Face neighbours outside the neighbour grid are empty too.
+  if (cx == 0 || cy == 0 || cz == 0 || cx + 1 >= nb.nb_dims[0] || cy + 1 >= nb.nb_dims[1] || cz + 1 >= nb.nb_dims[2])
+    face_empty = true;
   const float* X = nb.pos.data();
   const float* Y = X + nb.n;
   const float* Z = Y + nb.n;
@@ -68,6 +76,14 @@ KOKKOS_INLINE_FUNCTION std::size_t surface_particles_of_cell(const NeighbourView
     const bool is_surface = neighbours < min_neighbours || grad_h > threshold;
     flags(i) = is_surface ? 1 : 0;
     surface += is_surface ? 1 : 0;
+  }
+  // Safety net for clumps the two criteria miss (coincident or compressed
+  // particles: many neighbours, no colour gradient): a cell next to an empty
+  // cell that holds no surface particle is all surface. Cells on a normal
+  // free surface already hold surface particles, so the band is unchanged there.
+  if (surface == 0 && face_empty) {
+    for (std::uint32_t i = nb.cell_start(cell); i < nb.cell_start(cell + 1); ++i) flags(i) = 1;
+    surface = nb.cell_start(cell + 1) - nb.cell_start(cell);
   }
   return surface;
 }

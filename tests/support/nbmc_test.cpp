@@ -83,8 +83,8 @@ nbmc_params params(double spacing) {
   return p;
 }
 
-Run reconstruct(const Points& pts, const nbmc_params& prm, int32_t backend, int threads) {
-  Run run;
+Result reconstruct(const Points& pts, const nbmc_params& prm, int32_t backend, int threads) {
+  Result run;
   nbmc_context_desc d;
   nbmc_context_desc_init(&d);
   d.backend = backend;

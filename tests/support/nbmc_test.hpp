@@ -31,7 +31,7 @@ struct Mesh {
   std::size_t triangle_count() const { return triangles.size() / 3; }
 };
 
-struct Run {
+struct Result {
   int32_t status = -1;
   std::string message;
   Mesh mesh;
@@ -41,7 +41,7 @@ struct Run {
 // Default parameters with the given spacing (relative units).
 nbmc_params params(double spacing);
 // Reconstructs on a fresh context (backend, threads).
-Run reconstruct(const Points& p, const nbmc_params& prm, int32_t backend = NBMC_BACKEND_OPENMP, int threads = 0);
+Result reconstruct(const Points& p, const nbmc_params& prm, int32_t backend = NBMC_BACKEND_OPENMP, int threads = 0);
 
 struct MeshReport {
   bool closed = false;          // every edge shared by exactly two triangles
