@@ -53,7 +53,7 @@ extern "C" {
 /* Values are fixed forever; new codes are only appended. */
 #define NBMC_OK                          0
 #define NBMC_ERROR_INVALID_ARGUMENT      1  /* null pointer, bad enum value, bad struct_size */
-#define NBMC_ERROR_INVALID_PARTICLES     2  /* a position is NaN or infinite */
+#define NBMC_ERROR_INVALID_PARTICLES     2  /* a position is NaN, infinite or beyond 1e15 */
 #define NBMC_ERROR_NO_PARTICLES          3  /* zero particles, or none uploaded yet */
 #define NBMC_ERROR_INVALID_PARAMETER     4  /* spacing <= 0, radius too small, thresholds inverted, ... */
 #define NBMC_ERROR_DOMAIN_TOO_LARGE      5  /* grid indices or mesh indices would overflow */
@@ -146,8 +146,11 @@ NBMC_API int32_t nbmc_context_backend(const nbmc_context* ctx, int32_t* backend)
  * three consecutive values at byte offset i * byte_stride from xyz;
  * byte_stride 0 means tightly packed (3 * sizeof value). Works for C arrays of
  * [x,y,z] and for Fortran pos(3, n). Replaces earlier particles. Positions are
- * validated here: NaN/Inf gives NBMC_ERROR_INVALID_PARTICLES, count 0 gives
- * NBMC_ERROR_NO_PARTICLES, and the context keeps no particles. */
+ * validated here: NaN, Inf or a magnitude above 1e15 gives
+ * NBMC_ERROR_INVALID_PARTICLES (the message names the first bad particle),
+ * count 0 gives NBMC_ERROR_NO_PARTICLES; on failure the context keeps no
+ * particles. One particle, or many at the same position, is valid input (a
+ * sphere of radius iso_radius). */
 NBMC_API int32_t nbmc_context_set_particles_f32(nbmc_context* ctx, const float* xyz,
                                                 uint64_t count, uint64_t byte_stride);
 NBMC_API int32_t nbmc_context_set_particles_f64(nbmc_context* ctx, const double* xyz,
