@@ -190,7 +190,7 @@ TEST_F(CliTest, ReconstructsARealFrame) {
   const auto particles = nbmc::io::read_particles(kFrame);
   nbmc_params p = nbmc_test::params(0.05);
   p.cell_size = 1;
-  const nbmc_test::Run direct = nbmc_test::reconstruct(particles.xyz, p, NBMC_BACKEND_AUTO);
+  const nbmc_test::Result direct = nbmc_test::reconstruct(particles.xyz, p, NBMC_BACKEND_AUTO);
   ASSERT_EQ(direct.status, NBMC_OK) << direct.message;
   EXPECT_EQ(mesh.triangle_count(), direct.mesh.triangle_count());
   EXPECT_EQ(mesh.vertex_count(), direct.mesh.vertex_count());

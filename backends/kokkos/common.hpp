@@ -187,8 +187,9 @@ struct HashMap {
   KOKKOS_INLINE_FUNCTION bool insert(std::uint64_t key) const {
     std::uint64_t slot = hash64(key) & mask;
     while (true) {
-      const std::uint64_t prev = Kokkos::atomic_compare_exchange(&keys(slot), kEmptyKey, key);
-      if (prev == kEmptyKey) return true;
+      const std::uint64_t empty = ~std::uint64_t(0);  // kEmptyKey, by value for device code
+      const std::uint64_t prev = Kokkos::atomic_compare_exchange(&keys(slot), empty, key);
+      if (prev == empty) return true;
       if (prev == key) return false;
       slot = (slot + 1) & mask;
     }
@@ -199,7 +200,7 @@ struct HashMap {
     while (true) {
       const std::uint64_t k = keys(slot);
       if (k == key) return std::int64_t(slot);
-      if (k == kEmptyKey) return -1;
+      if (k == ~std::uint64_t(0)) return -1;
       slot = (slot + 1) & mask;
     }
   }

@@ -103,10 +103,15 @@ struct TileScratch {
 };
 
 template <class Method, class MemSpace>
-inline bool eval_tile_host(const NeighbourView<MemSpace>& nb, const CellRange* cells, int n_cells, const float tmin[3],
+KOKKOS_INLINE_FUNCTION bool eval_tile_host(const NeighbourView<MemSpace>& nb, const CellRange* cells, int n_cells, const float tmin[3],
                            const float tmax[3], float S, const FieldConstants& fc, std::uint64_t word,
                            std::uint64_t full, std::size_t w, const BandView<MemSpace>& band, float c,
                            const Kokkos::View<float*, MemSpace>& phi, std::uint64_t& evals) {
+#if defined(__CUDA_ARCH__)
+  (void)nb; (void)cells; (void)n_cells; (void)tmin; (void)tmax; (void)S; (void)fc; (void)word; (void)full;
+  (void)w; (void)band; (void)c; (void)phi; (void)evals;
+  return false;  // device code uses gather_words_team
+#else
   static thread_local TileScratch scratch;
   const float R2 = fc.R * fc.R;
   std::uint32_t n = 0;
@@ -139,6 +144,212 @@ inline bool eval_tile_host(const NeighbourView<MemSpace>& nb, const CellRange* c
     phi(band.word_offset(w) + popcount64(full & ((std::uint64_t(1) << bit) - 1))) = Method::value(acc, fc);
   }
   return true;
+#endif
+}
+
+// Field value at x visiting the neighbour cells directly (no cell list):
+// the fallback for cells so coarse that a tile's cell list would not fit.
+template <class Method, class MemSpace>
+KOKKOS_INLINE_FUNCTION float eval_vertex_direct(const NeighbourView<MemSpace>& nb, const float x[3], float S,
+                                                const FieldConstants& fc, std::uint64_t& evals) {
+  float acc[Method::N];
+  for (int q = 0; q < Method::N; ++q) acc[q] = 0.f;
+  std::int64_t lo[3], hi[3];
+  cell_span(nb, x, x, fc.R, lo, hi);
+  const float* X = nb.pos.data();
+  for (std::int64_t z = lo[2]; z <= hi[2]; ++z)
+    for (std::int64_t y = lo[1]; y <= hi[1]; ++y)
+      for (std::int64_t xx = lo[0]; xx <= hi[0]; ++xx) {
+        std::uint32_t b, e;
+        if (!nb.cell_range(xx, y, z, b, e)) continue;
+        const float clo[3] = {float(xx) * S, float(y) * S, float(z) * S};
+        if (box_distance2(clo, S, x) >= fc.R * fc.R) continue;
+        evals += Method::accumulate(acc, X, X + nb.n, X + 2 * nb.n, b, e, x[0], x[1], x[2], fc.inv_R2);
+      }
+  return Method::value(acc, fc);
+}
+
+// Where the band grows, vertices that the previous (smaller) band already had
+// keep their values; returns the mask of the word's vertices to evaluate.
+template <class MemSpace>
+KOKKOS_INLINE_FUNCTION std::uint64_t carry_over(const BandView<MemSpace>& band, const BandView<MemSpace>& ob,
+                                                const Kokkos::View<float*, MemSpace>& phi,
+                                                const Kokkos::View<const float*, MemSpace>& old_phi, std::size_t w,
+                                                std::int64_t i0, std::int64_t j0, std::int64_t k0, int first,
+                                                int stride) {
+  const std::uint64_t full = band.words(w);
+  const std::uint32_t b =
+      ob.blocks.find(morton3(std::uint32_t(i0 >> 3), std::uint32_t(j0 >> 3), std::uint32_t(k0 >> 3)));
+  if (b == ~0u) return full;
+  const std::size_t ow = std::size_t(b) * 8 + (w & 7);
+  const std::uint64_t oword = ob.words(ow);
+  const std::uint64_t both = oword & full;
+  for (int bit = first; bit < 64; bit += stride) {
+    if (!((both >> bit) & 1)) continue;
+    const std::uint64_t below = (std::uint64_t(1) << bit) - 1;
+    phi(band.word_offset(w) + popcount64(full & below)) = old_phi(ob.word_offset(ow) + popcount64(oword & below));
+  }
+  return full & ~oword;
+}
+
+// Host gather: one work item per band word (4x4x4 tile), tile particles copied
+// once into a contiguous buffer, vectorised loop per vertex.
+template <class Method, class ExecSpace>
+std::uint64_t gather_words_host(const ExecSpace& space, const NeighbourView<typename ExecSpace::memory_space>& nb,
+                                const BandView<typename ExecSpace::memory_space>& band, std::size_t w0,
+                                std::size_t w1, const Grid& g, const FieldConstants& fc,
+                                const Kokkos::View<float*, typename ExecSpace::memory_space>& phi, bool has_old,
+                                const BandView<typename ExecSpace::memory_space>& ob,
+                                const Kokkos::View<const float*, typename ExecSpace::memory_space>& old_phi) {
+  const float c = float(g.cell), S = float(g.nb_cell);
+  std::uint64_t evals = 0;
+  Kokkos::parallel_reduce(
+      "nbmc::scalar_field::gather", Kokkos::RangePolicy<ExecSpace, Kokkos::Schedule<Kokkos::Dynamic>>(space, w0, w1),
+      KOKKOS_LAMBDA(const std::size_t w, std::uint64_t& acc_evals) {
+        const std::uint64_t full = band.words(w);
+        if (!full) return;
+        std::int64_t i0, j0, k0;
+        band.vertex(w, 0, i0, j0, k0);
+        std::uint64_t word = has_old ? carry_over(band, ob, phi, old_phi, w, i0, j0, k0, 0, 1) : full;
+        if (!word) return;
+        CellRange cells[kMaxTileCells];
+        int n_cells = 0;
+        const float tmin[3] = {float(i0) * c, float(j0) * c, float(k0) * c};
+        const float tmax[3] = {float(i0 + 3) * c, float(j0 + 3) * c, float(k0 + 3) * c};
+        std::int64_t lo[3], hi[3];
+        cell_span(nb, tmin, tmax, fc.R, lo, hi);
+        if (collect_cells(nb, lo, hi, S, cells, n_cells) &&
+            eval_tile_host<Method>(nb, cells, n_cells, tmin, tmax, S, fc, word, full, w, band, c, phi, acc_evals))
+          return;
+        while (word) {  // very coarse cells or a crowded tile: per vertex
+          const int bit = ctz64(word);
+          word &= word - 1;
+          std::int64_t i, j, k;
+          band.vertex(w, bit, i, j, k);
+          const float x[3] = {float(i) * c, float(j) * c, float(k) * c};
+          phi(band.word_offset(w) + popcount64(full & ((std::uint64_t(1) << bit) - 1))) =
+              eval_vertex_direct<Method>(nb, x, S, fc, acc_evals);
+        }
+      },
+      evals);
+  space.fence();
+  return evals;
+}
+
+// Device gather (the paper's future work, "data tiling"): one team of 64
+// threads per band word; the team looks up the tile's neighbour cells, then
+// stages the candidate particles through shared memory in chunks, and each
+// thread accumulates its own vertex. The summation order (cells in order,
+// particles in sorted order) is fixed, so results are deterministic.
+constexpr int kTeamChunk = 512;
+
+template <class Method, class ExecSpace>
+std::uint64_t gather_words_team(const ExecSpace& space, const NeighbourView<typename ExecSpace::memory_space>& nb,
+                                const BandView<typename ExecSpace::memory_space>& band, std::size_t w0,
+                                std::size_t w1, const Grid& g, const FieldConstants& fc,
+                                const Kokkos::View<float*, typename ExecSpace::memory_space>& phi, bool has_old,
+                                const BandView<typename ExecSpace::memory_space>& ob,
+                                const Kokkos::View<const float*, typename ExecSpace::memory_space>& old_phi) {
+  using MemSpace = typename ExecSpace::memory_space;
+  using Policy = Kokkos::TeamPolicy<ExecSpace>;
+  using Member = typename Policy::member_type;
+  using Scratch = typename ExecSpace::scratch_memory_space;
+  using U32 = Kokkos::View<std::uint32_t*, Scratch, Kokkos::MemoryUnmanaged>;
+  using F32 = Kokkos::View<float*, Scratch, Kokkos::MemoryUnmanaged>;
+  const float c = float(g.cell), S = float(g.nb_cell);
+  const std::size_t shmem = 3 * U32::shmem_size(kMaxTileCells + 1) + F32::shmem_size(3 * kTeamChunk);
+  Kokkos::View<std::uint64_t, MemSpace> counter("nbmc::scalar_field::evals");
+  Policy policy(space, int(w1 - w0), 64);
+  Kokkos::parallel_for(
+      "nbmc::scalar_field::gather_team", policy.set_scratch_size(0, Kokkos::PerTeam(shmem)),
+      KOKKOS_LAMBDA(const Member& team) {
+        const std::size_t w = w0 + std::size_t(team.league_rank());
+        const int t = team.team_rank();
+        const std::uint64_t full = band.words(w);
+        if (!full) return;
+        std::int64_t i0, j0, k0;
+        band.vertex(w, 0, i0, j0, k0);
+        const std::uint64_t word = has_old ? carry_over(band, ob, phi, old_phi, w, i0, j0, k0, t, 64) : full;
+        if (!word) return;
+        const bool mine = (word >> t) & 1;
+        std::int64_t i, j, k;
+        band.vertex(w, t, i, j, k);
+        const float x[3] = {float(i) * c, float(j) * c, float(k) * c};
+        const std::size_t out = band.word_offset(w) + popcount64(full & ((std::uint64_t(1) << t) - 1));
+        const float tmin[3] = {float(i0) * c, float(j0) * c, float(k0) * c};
+        const float tmax[3] = {float(i0 + 3) * c, float(j0 + 3) * c, float(k0 + 3) * c};
+        std::int64_t lo[3], hi[3];
+        cell_span(nb, tmin, tmax, fc.R, lo, hi);
+        const std::int64_t nx = hi[0] - lo[0] + 1, ny = hi[1] - lo[1] + 1, nz = hi[2] - lo[2] + 1;
+        const std::int64_t n_span = nx * ny * nz;
+        std::uint64_t evals = 0;
+        if (n_span > kMaxTileCells) {  // very coarse cells: per vertex, no tile
+          if (mine) phi(out) = eval_vertex_direct<Method>(nb, x, S, fc, evals);
+          if (evals) Kokkos::atomic_add(&counter(), evals);
+          return;
+        }
+        U32 begin(team.team_scratch(0), kMaxTileCells + 1), count(team.team_scratch(0), kMaxTileCells + 1),
+            start(team.team_scratch(0), kMaxTileCells + 1);
+        F32 px(team.team_scratch(0), 3 * kTeamChunk);
+        const float R2 = fc.R * fc.R;
+        // 1. the cells of the span (in order), empty or too far from the tile: count 0
+        Kokkos::parallel_for(Kokkos::TeamThreadRange(team, int(n_span)), [&](const int q) {
+          const std::int64_t cx = lo[0] + q % nx, cy = lo[1] + (q / nx) % ny, cz = lo[2] + q / (nx * ny);
+          std::uint32_t b = 0, e = 0;
+          float d2 = 0;
+          const float clo[3] = {float(cx) * S, float(cy) * S, float(cz) * S};
+          for (int a = 0; a < 3; ++a) {
+            const float gap = clo[a] > tmax[a] ? clo[a] - tmax[a] : (tmin[a] > clo[a] + S ? tmin[a] - clo[a] - S : 0.f);
+            d2 += gap * gap;
+          }
+          if (d2 < R2) nb.cell_range(cx, cy, cz, b, e);
+          begin(q) = b;
+          count(q) = e - b;
+        });
+        team.team_barrier();
+        // 2. prefix of the counts: where each cell's particles go in the staged sequence
+        Kokkos::parallel_scan(Kokkos::TeamThreadRange(team, int(n_span)),
+                              [&](const int q, std::uint32_t& upd, const bool final) {
+                                const std::uint32_t cq = count(q);
+                                if (final) start(q) = upd;
+                                upd += cq;
+                              });
+        team.team_barrier();
+        const std::uint32_t total = start(int(n_span) - 1) + count(int(n_span) - 1);
+        // 3. stage chunks through shared memory; each thread accumulates its vertex
+        float acc[Method::N];
+        for (int q = 0; q < Method::N; ++q) acc[q] = 0.f;
+        for (std::uint32_t base = 0; base < total; base += kTeamChunk) {
+          const std::uint32_t m = total - base < std::uint32_t(kTeamChunk) ? total - base : std::uint32_t(kTeamChunk);
+          Kokkos::parallel_for(Kokkos::TeamThreadRange(team, int(m)), [&](const int e) {
+            const std::uint32_t pos = base + std::uint32_t(e);
+            int a = 0, b = int(n_span) - 1;  // last cell with start <= pos and count > 0
+            while (a < b) {
+              const int mid = (a + b + 1) / 2;
+              if (start(mid) <= pos) a = mid;
+              else b = mid - 1;
+            }
+            while (count(a) == 0) --a;  // cells before a non-empty one share its start
+            const std::uint32_t j = begin(a) + (pos - start(a));
+            px(e) = nb.pos(j);
+            px(kTeamChunk + e) = nb.pos(nb.n + j);
+            px(2 * kTeamChunk + e) = nb.pos(2 * nb.n + j);
+          });
+          team.team_barrier();
+          if (mine)
+            evals += Method::accumulate(acc, px.data(), px.data() + kTeamChunk, px.data() + 2 * kTeamChunk, 0, m,
+                                        x[0], x[1], x[2], fc.inv_R2);
+          team.team_barrier();
+        }
+        if (mine) {
+          phi(out) = Method::value(acc, fc);
+          Kokkos::atomic_add(&counter(), evals);
+        }
+      });
+  space.fence();
+  std::uint64_t evals = 0;
+  Kokkos::deep_copy(evals, counter);
+  return evals;
 }
 
 // Evaluates the field on the band. With `old` (a band contained in `band`
@@ -154,70 +365,16 @@ std::uint64_t gather_field(const ExecSpace& space, const NeighbourView<typename 
                            const Kokkos::View<const float*, typename ExecSpace::memory_space>& old_phi = {}) {
   using MemSpace = typename ExecSpace::memory_space;
   ScopedRegion region("nbmc::scalar_field::gather");
-  constexpr bool host = Kokkos::SpaceAccessibility<Kokkos::HostSpace, MemSpace>::accessible;
-  const float c = float(g.cell), S = float(g.nb_cell);
   const bool has_old = old != nullptr;
   const BandView<MemSpace> ob = has_old ? *old : BandView<MemSpace>();
   std::uint64_t total_evals = 0;
   const std::size_t chunk = std::max<std::size_t>(4096, n_words / 64);
   for (std::size_t w0 = 0; w0 < n_words; w0 += chunk) {
     const std::size_t w1 = std::min(n_words, w0 + chunk);
-    std::uint64_t evals = 0;
-    Kokkos::parallel_reduce(
-        "nbmc::scalar_field::gather",
-        Kokkos::RangePolicy<ExecSpace, Kokkos::Schedule<Kokkos::Dynamic>>(space, w0, w1),
-        KOKKOS_LAMBDA(const std::size_t w, std::uint64_t& acc_evals) {
-          const std::uint64_t full = band.words(w);
-          std::uint64_t word = full;
-          if (!word) return;
-          std::int64_t i0, j0, k0;
-          band.vertex(w, 0, i0, j0, k0);
-          if (has_old) {  // carry over the values the smaller band already has
-            const std::uint32_t b = ob.blocks.find(
-                morton3(std::uint32_t(i0 >> 3), std::uint32_t(j0 >> 3), std::uint32_t(k0 >> 3)));
-            if (b != ~0u) {
-              const std::size_t ow = std::size_t(b) * 8 + (w & 7);
-              std::uint64_t both = ob.words(ow) & full;
-              word = full & ~ob.words(ow);
-              while (both) {
-                const int bit = ctz64(both);
-                both &= both - 1;
-                const std::uint64_t below = (std::uint64_t(1) << bit) - 1;
-                phi(band.word_offset(w) + popcount64(full & below)) =
-                    old_phi(ob.word_offset(ow) + popcount64(ob.words(ow) & below));
-              }
-            }
-            if (!word) return;
-          }
-          CellRange cells[kMaxTileCells];
-          int n_cells = 0;
-          const float tmin[3] = {float(i0) * c, float(j0) * c, float(k0) * c};
-          const float tmax[3] = {float(i0 + 3) * c, float(j0 + 3) * c, float(k0 + 3) * c};
-          std::int64_t lo[3], hi[3];
-          cell_span(nb, tmin, tmax, fc.R, lo, hi);
-          const bool tiled = collect_cells(nb, lo, hi, S, cells, n_cells);
-          if constexpr (host) {
-            if (tiled && eval_tile_host<Method>(nb, cells, n_cells, tmin, tmax, S, fc, word, full, w, band, c, phi,
-                                                acc_evals))
-              return;
-          }
-          while (word) {
-            const int bit = ctz64(word);
-            word &= word - 1;
-            std::int64_t i, j, k;
-            band.vertex(w, bit, i, j, k);
-            const float x[3] = {float(i) * c, float(j) * c, float(k) * c};
-            if (!tiled) {  // very coarse cells: look the cells up per vertex
-              cell_span(nb, x, x, fc.R, lo, hi);
-              collect_cells(nb, lo, hi, S, cells, n_cells);
-            }
-            phi(band.word_offset(w) + popcount64(full & ((std::uint64_t(1) << bit) - 1))) =
-                eval_vertex<Method>(nb, cells, n_cells, x, S, fc, acc_evals);
-          }
-        },
-        evals);
-    space.fence();
-    total_evals += evals;
+    if constexpr (Kokkos::SpaceAccessibility<Kokkos::HostSpace, MemSpace>::accessible)
+      total_evals += gather_words_host<Method>(space, nb, band, w0, w1, g, fc, phi, has_old, ob, old_phi);
+    else
+      total_evals += gather_words_team<Method>(space, nb, band, w0, w1, g, fc, phi, has_old, ob, old_phi);
     if (!has_old) progress(4 /*NBMC_STAGE_FIELD*/, double(w1) / double(n_words));
   }
   return total_evals;
