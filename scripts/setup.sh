@@ -7,7 +7,9 @@
 #   scripts/setup.sh --no-example    same, without running the example
 #   scripts/setup.sh --cuda          also build Kokkos with CUDA (+OpenMP host) for
 #                                    Hopper (sm_90) and an nbmc variant in build-cuda/
-#   scripts/setup.sh --kokkos-only   stop after Kokkos (used on the GPU machine)
+#   scripts/setup.sh --kokkos-only   stop after Kokkos
+#   scripts/setup.sh --cuda-only     only the CUDA build (GPU machines without the
+#                                    Debian packages; see scripts/gpu_check.sh)
 #
 # Environment:
 #   NBMC_CACHE        where the Kokkos source and builds are cached
@@ -28,6 +30,7 @@ JOBS=${NBMC_JOBS:-$(nproc)}
 CUDA_ARCH=${NBMC_CUDA_ARCH:-HOPPER90}
 KOKKOS_VERSION=3.4.01
 WITH_CUDA=0
+CUDA_ONLY=0
 RUN_EXAMPLE=1
 KOKKOS_ONLY=0
 SKIP_APT=${NBMC_SKIP_APT:-0}
@@ -35,6 +38,7 @@ SKIP_APT=${NBMC_SKIP_APT:-0}
 for arg in "$@"; do
   case "$arg" in
     --cuda) WITH_CUDA=1 ;;
+    --cuda-only) WITH_CUDA=1; CUDA_ONLY=1; RUN_EXAMPLE=0; SKIP_APT=1 ;;
     --no-example) RUN_EXAMPLE=0 ;;
     --kokkos-only) KOKKOS_ONLY=1; RUN_EXAMPLE=0 ;;
     --skip-apt) SKIP_APT=1 ;;
@@ -157,17 +161,21 @@ build_nbmc() { # $1 = build dir, $2 = kokkos prefix, rest = extra cmake args
 mkdir -p "$CACHE"
 install_packages
 fetch_kokkos
-build_kokkos openmp
-KOKKOS_OPENMP=$KOKKOS_PREFIX
+if [ "$CUDA_ONLY" = 0 ]; then build_kokkos openmp; KOKKOS_OPENMP=$KOKKOS_PREFIX; fi
 if [ "$WITH_CUDA" = 1 ]; then build_kokkos cuda; KOKKOS_CUDA=$KOKKOS_PREFIX; fi
-[ "$KOKKOS_ONLY" = 1 ] && { say "Kokkos ready in $KOKKOS_OPENMP"; exit 0; }
+[ "$KOKKOS_ONLY" = 1 ] && { say "Kokkos ready in $KOKKOS_PREFIX"; exit 0; }
 
-build_nbmc "$BUILD" "$KOKKOS_OPENMP"
-if [ "$WITH_CUDA" = 1 ]; then
-  build_nbmc "${NBMC_CUDA_BUILD_DIR:-$ROOT/build-cuda}" "$KOKKOS_CUDA" \
-    -DCMAKE_CXX_COMPILER="$KOKKOS_SRC/bin/nvcc_wrapper"
+if [ "$CUDA_ONLY" = 0 ]; then
+  build_nbmc "$BUILD" "$KOKKOS_OPENMP"
+  say "nbmc installed in $BUILD/install (command: $BUILD/install/bin/nbmc)"
 fi
-say "nbmc installed in $BUILD/install (command: $BUILD/install/bin/nbmc)"
+if [ "$WITH_CUDA" = 1 ]; then
+  # The CUDA variant: library, benchmark and GPU checks. Tests and CLI need
+  # Debian's GoogleTest/CLI11, which GPU machines may lack: NBMC_CUDA_CMAKE_ARGS.
+  build_nbmc "${NBMC_CUDA_BUILD_DIR:-$ROOT/build-cuda}" "$KOKKOS_CUDA" \
+    -DCMAKE_CXX_COMPILER="$KOKKOS_SRC/bin/nvcc_wrapper" ${NBMC_CUDA_CMAKE_ARGS:-}
+  say "CUDA variant built in ${NBMC_CUDA_BUILD_DIR:-$ROOT/build-cuda}"
+fi
 
 if [ "$RUN_EXAMPLE" = 1 ]; then
   mkdir -p "$ROOT/out"

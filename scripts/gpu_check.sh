@@ -1,0 +1,48 @@
+#!/usr/bin/env bash
+# SPDX-License-Identifier: MIT
+# On a machine with an NVIDIA GPU (Hopper by default; NBMC_CUDA_ARCH=AMPERE80
+# etc. for others): builds the CUDA variant, then runs the CPU/GPU
+# equivalence check, compute-sanitizer (memcheck, racecheck) on a small frame,
+# and the benchmarks on the largest frame, GPU and all CPU cores.
+#
+#   scripts/gpu_check.sh [DATA_DIR] [OUT_DIR]
+#
+# DATA_DIR holds xyz/*.xyz (default ../shared/data); logs go to OUT_DIR
+# (default out/gpu). Needs nvcc, cmake, ninja and a C++17 compiler; the
+# Kokkos source comes from scripts/setup.sh's cache (NBMC_CACHE), which a
+# machine without Debian's archive must be given (copy ~/.cache/nbmc/src).
+set -uo pipefail
+ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
+DATA=${1:-$ROOT/../shared/data}
+OUT=${2:-$ROOT/out/gpu}
+mkdir -p "$OUT"
+export PATH=/usr/local/cuda/bin:$PATH
+B=${NBMC_CUDA_BUILD_DIR:-$ROOT/build-cuda}
+status=0
+step() { echo; echo "== $*"; }
+
+step "build (Kokkos CUDA + nbmc CUDA variant)"
+t0=$(date +%s)
+NBMC_CUDA_CMAKE_ARGS="-DNBMC_BUILD_TESTS=OFF -DNBMC_BUILD_CLI=OFF ${NBMC_CUDA_CMAKE_ARGS:-}" \
+  NBMC_JOBS=${NBMC_JOBS:-$(nproc)} "$ROOT/scripts/setup.sh" --cuda-only >"$OUT/build.log" 2>&1 ||
+  { tail -50 "$OUT/build.log"; exit 1; }
+echo "built in $(( $(date +%s) - t0 )) s"
+nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader | tee "$OUT/device.txt"
+
+step "CPU (OpenMP) vs GPU (CUDA) equivalence"
+"$B/tests/gpu/nbmc_cuda_equivalence" "$DATA" 2>&1 | tee "$OUT/equivalence.txt" || status=1
+
+SMALL="$DATA/xyz/splashsurf_doubledambreak_f26_4732.xyz"
+for tool in memcheck racecheck; do
+  step "compute-sanitizer --tool $tool (4,732 particles, cell r)"
+  compute-sanitizer --tool $tool --error-exitcode 3 "$B/bench/nbmc_bench" "$SMALL" --spacing 0.05 \
+    --cell-size 1 --backend cuda 2>&1 | tail -5 | tee "$OUT/sanitizer-$tool.txt" || status=1
+done
+
+BIG="$DATA/xyz/cbd1654k_t040_1654104.xyz"
+step "benchmarks: $BIG"
+for cell in 1 0.5; do
+  "$B/bench/nbmc_bench" "$BIG" --spacing 0.00484 --cell-size $cell --backend cuda --repeat 5 2>&1 | tee -a "$OUT/bench.txt"
+  "$B/bench/nbmc_bench" "$BIG" --spacing 0.00484 --cell-size $cell --backend openmp --threads "$(nproc)" --repeat 3 2>&1 | tee -a "$OUT/bench.txt"
+done
+exit $status
