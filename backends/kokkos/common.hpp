@@ -7,6 +7,8 @@
 #include <Kokkos_Core.hpp>
 
 #include <atomic>
+#include <cstdio>
+#include <cstdlib>
 #include <cstdint>
 #include <functional>
 #include <new>
@@ -60,6 +62,17 @@ struct Progress {
 };
 
 namespace Details {
+
+// NBMC_TRACE=1 prints the time since the previous trace point (after a
+// fence) to stderr: a poor man's profiler for machines without tools.
+inline void trace(const char* what, std::uint64_t n = 0) {
+  static const bool on = std::getenv("NBMC_TRACE") != nullptr;
+  if (!on) return;
+  static Kokkos::Timer timer;
+  Kokkos::fence();
+  std::fprintf(stderr, "[nbmc trace] %-28s n=%-10llu %9.3f ms\n", what, (unsigned long long)n, timer.seconds() * 1e3);
+  timer.reset();
+}
 
 // Names a region for Kokkos Tools ("nbmc::..."); Kokkos 3.4 has no RAII form.
 struct ScopedRegion {

@@ -47,6 +47,7 @@ void reconstruct(const ExecSpace& space, const double* xyz, std::size_t count, c
   Kokkos::Timer total, timer;
   auto lap = [&](int stage) {
     space.fence();
+    trace("stage done", std::uint64_t(stage));
     st.stage[stage] += timer.seconds();
     timer.reset();
     progress(stage, 1.0);
@@ -141,6 +142,7 @@ void reconstruct(const ExecSpace& space, const double* xyz, std::size_t count, c
     for (int round = 0;; ++round) {
       const std::vector<std::int64_t> leaks =
           find_band_leaks(space, view_of(band, g), band.n_blocks * 8, Kokkos::View<const float*, MemSpace>(phi.view()));
+      trace("band leaks", leaks.size() / 3);
       if (leaks.empty()) break;
       if (round >= 1000) throw Error(9, "the narrow band did not close after 1000 growth rounds");
       Band<MemSpace> grown;
@@ -153,6 +155,7 @@ void reconstruct(const ExecSpace& space, const double* xyz, std::size_t count, c
                                               grown_phi.view(), progress, &old_view, old_phi);
       };
       st.evaluations += p.method == 1 ? grow(FieldZB05{}) : grow(FieldSSP07{});
+      trace("band growth round", grown.n_vertices);
       band = std::move(grown);
       phi = std::move(grown_phi);
       st.band_growth_rounds = std::uint64_t(round + 1);

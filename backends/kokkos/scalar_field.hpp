@@ -16,11 +16,23 @@
 #include "neighbourhood.hpp"
 
 #include <cmath>
+#include <cstdlib>
+#include <string>
 
 namespace nbmc {
 namespace Details {
 
 constexpr int kMaxTileCells = 1024;
+
+// Which device gather runs: 0 = team-tiled (default), 1 = one thread per
+// vertex (NBMC_GPU_GATHER=direct); for measurements.
+inline int device_gather_kind() {
+  static const int kind = [] {
+    const char* e = std::getenv("NBMC_GPU_GATHER");
+    return e && std::string(e) == "direct" ? 1 : 0;
+  }();
+  return kind;
+}
 
 struct CellRange {
   std::uint32_t begin, end;
@@ -352,6 +364,43 @@ std::uint64_t gather_words_team(const ExecSpace& space, const NeighbourView<type
   return evals;
 }
 
+// Device gather, simplest form: one thread per band vertex walking its
+// neighbour cells itself (pruned by distance); particles and the cell map are
+// small enough to stay in the GPU's L2 cache.
+template <class Method, class ExecSpace>
+std::uint64_t gather_words_direct(const ExecSpace& space, const NeighbourView<typename ExecSpace::memory_space>& nb,
+                                  const BandView<typename ExecSpace::memory_space>& band, std::size_t w0,
+                                  std::size_t w1, const Grid& g, const FieldConstants& fc,
+                                  const Kokkos::View<float*, typename ExecSpace::memory_space>& phi, bool has_old,
+                                  const BandView<typename ExecSpace::memory_space>& ob,
+                                  const Kokkos::View<const float*, typename ExecSpace::memory_space>& old_phi) {
+  const float c = float(g.cell), S = float(g.nb_cell);
+  std::uint64_t evals = 0;
+  Kokkos::parallel_reduce(
+      "nbmc::scalar_field::gather_direct", Kokkos::RangePolicy<ExecSpace>(space, w0 * 64, w1 * 64),
+      KOKKOS_LAMBDA(const std::size_t v, std::uint64_t& acc_evals) {
+        const std::size_t w = v >> 6;
+        const int bit = int(v & 63);
+        const std::uint64_t full = band.words(w);
+        if (!((full >> bit) & 1)) return;
+        std::int64_t i, j, k;
+        band.vertex(w, bit, i, j, k);
+        const std::size_t out = band.word_offset(w) + popcount64(full & ((std::uint64_t(1) << bit) - 1));
+        if (has_old) {
+          const std::int64_t o = ob.index(i, j, k);
+          if (o >= 0) {
+            phi(out) = old_phi(o);
+            return;
+          }
+        }
+        const float x[3] = {float(i) * c, float(j) * c, float(k) * c};
+        phi(out) = eval_vertex_direct<Method>(nb, x, S, fc, acc_evals);
+      },
+      evals);
+  space.fence();
+  return evals;
+}
+
 // Evaluates the field on the band. With `old` (a band contained in `band`
 // whose values are `old_phi`), values of vertices already in `old` are copied
 // and only the new vertices are evaluated (used when the band grows).
@@ -373,8 +422,11 @@ std::uint64_t gather_field(const ExecSpace& space, const NeighbourView<typename 
     const std::size_t w1 = std::min(n_words, w0 + chunk);
     if constexpr (Kokkos::SpaceAccessibility<Kokkos::HostSpace, MemSpace>::accessible)
       total_evals += gather_words_host<Method>(space, nb, band, w0, w1, g, fc, phi, has_old, ob, old_phi);
+    else if (device_gather_kind() == 1)
+      total_evals += gather_words_direct<Method>(space, nb, band, w0, w1, g, fc, phi, has_old, ob, old_phi);
     else
       total_evals += gather_words_team<Method>(space, nb, band, w0, w1, g, fc, phi, has_old, ob, old_phi);
+    trace("gather chunk", w1 - w0);
     if (!has_old) progress(4 /*NBMC_STAGE_FIELD*/, double(w1) / double(n_words));
   }
   return total_evals;
