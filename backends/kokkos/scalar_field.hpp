@@ -24,12 +24,15 @@ namespace Details {
 
 constexpr int kMaxTileCells = 1024;
 
-// Which device gather runs: 0 = team-tiled (default), 1 = one thread per
-// vertex (NBMC_GPU_GATHER=direct); for measurements.
+// Which device gather runs: 1 = one thread per vertex (default), 0 = the
+// team-tiled shared-memory kernel (NBMC_GPU_GATHER=team). Measured on an
+// H100 (bench/RESULTS.md): direct 54 ms, team 66 s on the 1.65 M frame at
+// r/2 -- the particles and the cell map fit in L2, so tiling buys nothing
+// and the team kernel's serial staging costs a lot.
 inline int device_gather_kind() {
   static const int kind = [] {
     const char* e = std::getenv("NBMC_GPU_GATHER");
-    return e && std::string(e) == "direct" ? 1 : 0;
+    return e && std::string(e) == "team" ? 0 : 1;
   }();
   return kind;
 }
