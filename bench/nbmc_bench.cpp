@@ -138,21 +138,25 @@ double value(const std::string& line, const std::string& key) {
   return std::atof(line.c_str() + at + key.size() + 2);
 }
 
-std::string child(const Options& o, int field, int threads, double cell) {
-  std::ostringstream cmd;
-  cmd << "'/proc/" << getpid() << "/exe' '" << o.file << "' --one --spacing " << o.spacing << " --cell-size " << cell
-      << " --threads " << threads << " --field " << field_name(field) << " --method "
-      << (o.method == NBMC_METHOD_ZB05 ? "zb05" : "ssp07") << " --backend "
-      << (o.backend == NBMC_BACKEND_SERIAL ? "serial" : o.backend == NBMC_BACKEND_CUDA ? "cuda" : o.backend == NBMC_BACKEND_OPENMP ? "openmp" : "auto");
-  // /proc/<pid>/exe must be read before popen's shell replaces nothing of ours.
+std::string self_path() {
   char self[4096];
   const ssize_t n = readlink("/proc/self/exe", self, sizeof self - 1);
-  std::string c = cmd.str();
-  if (n > 0) {
-    self[n] = 0;
-    c = "'" + std::string(self) + c.substr(c.find("' '") + 1);
-  }
-  FILE* f = popen(c.c_str(), "r");
+  if (n <= 0) usage("cannot find this program's path in /proc/self/exe");
+  self[n] = 0;
+  return self;
+}
+
+// Runs one configuration in a child process; returns its RESULT line.
+std::string child(const Options& o, int field, int threads, double cell) {
+  std::ostringstream cmd;
+  cmd << "'" << self_path() << "' '" << o.file << "' --one --spacing " << o.spacing << " --cell-size " << cell
+      << " --threads " << threads << " --field " << field_name(field) << " --method "
+      << (o.method == NBMC_METHOD_ZB05 ? "zb05" : "ssp07") << " --backend "
+      << (o.backend == NBMC_BACKEND_SERIAL   ? "serial"
+          : o.backend == NBMC_BACKEND_CUDA   ? "cuda"
+          : o.backend == NBMC_BACKEND_OPENMP ? "openmp"
+                                             : "auto");
+  FILE* f = popen(cmd.str().c_str(), "r");
   std::string out;
   char buf[4096];
   while (f && std::fgets(buf, sizeof buf, f))
@@ -229,9 +233,5 @@ int main(int argc, char** argv) {
   }
   if (o.file.empty() || !(o.spacing > 0)) usage("a frame and --spacing are required");
   if (o.table) return run_table(o);
-  const int rc = run_one(o);
-  if (rc == 0 && !o.one) {
-    // Human-readable breakdown of the RESULT line printed above.
-  }
-  return rc;
+  return run_one(o);
 }
