@@ -39,14 +39,16 @@ struct FieldSSP07 {
   // a[0] = W = sum k^3, a[1..3] = sum k^3 d, a[4..6] = sum k^2 d (grad k without 6/R^2),
   // a[7..15] = sum d_a k^2 d_b (row-major)
   static constexpr int N = 16;
-  KOKKOS_INLINE_FUNCTION static void add(float* a, float dx, float dy, float dz, float k) {
-    const float k2 = k * k;
-    const float w = k2 * k;
+  // T is float, or a host SIMD vector of floats (same formula, lane-wise).
+  template <class T>
+  KOKKOS_INLINE_FUNCTION static void add(T* a, T dx, T dy, T dz, T k) {
+    const T k2 = k * k;
+    const T w = k2 * k;
     a[0] += w;
     a[1] += w * dx;
     a[2] += w * dy;
     a[3] += w * dz;
-    const float gx = k2 * dx, gy = k2 * dy, gz = k2 * dz;
+    const T gx = k2 * dx, gy = k2 * dy, gz = k2 * dz;
     a[4] += gx;
     a[5] += gy;
     a[6] += gz;

@@ -15,8 +15,10 @@ struct FieldZB05 {
   static constexpr const char* name = "zb05";
   // a[0] = sum k^3, a[1..3] = sum k^3 d
   static constexpr int N = 4;
-  KOKKOS_INLINE_FUNCTION static void add(float* a, float dx, float dy, float dz, float k) {
-    const float w = k * k * k;
+  // T is float, or a host SIMD vector of floats (same formula, lane-wise).
+  template <class T>
+  KOKKOS_INLINE_FUNCTION static void add(T* a, T dx, T dy, T dz, T k) {
+    const T w = k * k * k;
     a[0] += w;
     a[1] += w * dx;
     a[2] += w * dy;

@@ -110,53 +110,93 @@ KOKKOS_INLINE_FUNCTION float eval_vertex(const NeighbourView<MemSpace>& nb, cons
 }
 
 // Host tile evaluation: the particles of all cells within R of the tile are
-// copied once into a contiguous buffer, then every vertex of the tile runs one
-// long vectorised loop over it (the CPU form of the GPU's shared-memory tile).
-constexpr std::uint32_t kTileParticles = 6144;
+// copied once into a contiguous buffer, each cell padded to a multiple of 4
+// with far-away sentinels (kernel weight exactly 0). Every vertex of the tile
+// then skips the cells farther than R and accumulates the others four
+// particles at a time in SIMD registers, with one horizontal sum at the end.
+// The order of the sums is fixed by the buffer, so results are deterministic.
+constexpr std::uint32_t kTileParticles = 8192;
+constexpr int kTileCellsHost = 1024;
 struct TileScratch {
-  float x[kTileParticles], y[kTileParticles], z[kTileParticles];
+  alignas(16) float x[kTileParticles];
+  alignas(16) float y[kTileParticles];
+  alignas(16) float z[kTileParticles];
+  std::uint32_t begin[kTileCellsHost], end[kTileCellsHost];
+  float lo[kTileCellsHost][3];
 };
 
+#if !defined(__CUDA_ARCH__)
+typedef float nbmc_v4f __attribute__((vector_size(16)));
+typedef int nbmc_v4i __attribute__((vector_size(16)));
+#endif
+
 template <class Method, class MemSpace>
-KOKKOS_INLINE_FUNCTION bool eval_tile_host(const NeighbourView<MemSpace>& nb, const CellRange* cells, int n_cells, const float tmin[3],
-                           const float tmax[3], float S, const FieldConstants& fc, std::uint64_t word,
-                           std::uint64_t full, std::size_t w, const BandView<MemSpace>& band, float c,
-                           const Kokkos::View<float*, MemSpace>& phi, std::uint64_t& evals) {
+KOKKOS_INLINE_FUNCTION bool eval_tile_host(const NeighbourView<MemSpace>& nb, const CellRange* cells, int n_cells,
+                                           const float tmin[3], const float tmax[3], float S, const FieldConstants& fc,
+                                           std::uint64_t word, std::uint64_t full, std::size_t w,
+                                           const BandView<MemSpace>& band, float c,
+                                           const Kokkos::View<float*, MemSpace>& phi, std::uint64_t& evals) {
 #if defined(__CUDA_ARCH__)
   (void)nb; (void)cells; (void)n_cells; (void)tmin; (void)tmax; (void)S; (void)fc; (void)word; (void)full;
   (void)w; (void)band; (void)c; (void)phi; (void)evals;
-  return false;  // device code uses gather_words_team
+  return false;  // device code uses gather_words_direct / gather_words_team
 #else
-  static thread_local TileScratch scratch;
+  static thread_local TileScratch t;
   const float R2 = fc.R * fc.R;
   std::uint32_t n = 0;
+  int kept = 0;
+  const float* X = nb.pos.data();
   for (int q = 0; q < n_cells; ++q) {
     const CellRange& cr = cells[q];
-    // distance between the cell box and the tile box
-    float d2 = 0;
+    float d2 = 0;  // distance between the cell box and the tile box
     for (int a = 0; a < 3; ++a) {
       const float gap = cr.lo[a] > tmax[a] ? cr.lo[a] - tmax[a] : (tmin[a] > cr.lo[a] + S ? tmin[a] - cr.lo[a] - S : 0.f);
       d2 += gap * gap;
     }
     if (d2 >= R2) continue;
-    if (n + (cr.end - cr.begin) > kTileParticles) return false;
-    const float* X = nb.pos.data();
-    for (std::uint32_t j = cr.begin; j < cr.end; ++j, ++n) {
-      scratch.x[n] = X[j];
-      scratch.y[n] = X[nb.n + j];
-      scratch.z[n] = X[2 * nb.n + j];
+    const std::uint32_t count = cr.end - cr.begin, padded = (count + 3u) & ~3u;
+    if (n + padded > kTileParticles || kept >= kTileCellsHost) return false;
+    for (std::uint32_t j = 0; j < count; ++j) {
+      t.x[n + j] = X[cr.begin + j];
+      t.y[n + j] = X[nb.n + cr.begin + j];
+      t.z[n + j] = X[2 * nb.n + cr.begin + j];
     }
+    for (std::uint32_t j = count; j < padded; ++j) t.x[n + j] = t.y[n + j] = t.z[n + j] = 1e18f;
+    t.begin[kept] = n;
+    t.end[kept] = n + padded;
+    for (int a = 0; a < 3; ++a) t.lo[kept][a] = cr.lo[a];
+    ++kept;
+    n += padded;
   }
+  const nbmc_v4f one = {1.f, 1.f, 1.f, 1.f}, zero = {0.f, 0.f, 0.f, 0.f};
+  const nbmc_v4f inv_R2 = one * fc.inv_R2;
   while (word) {
     const int bit = ctz64(word);
     word &= word - 1;
     std::int64_t i, j, k;
     band.vertex(w, bit, i, j, k);
-    float acc[Method::N];
-    for (int q = 0; q < Method::N; ++q) acc[q] = 0.f;
-    evals += Method::accumulate(acc, scratch.x, scratch.y, scratch.z, 0, n, float(i) * c, float(j) * c,
-                                float(k) * c, fc.inv_R2);
-    phi(band.word_offset(w) + popcount64(full & ((std::uint64_t(1) << bit) - 1))) = Method::value(acc, fc);
+    const float x[3] = {float(i) * c, float(j) * c, float(k) * c};
+    const nbmc_v4f vx = one * x[0], vy = one * x[1], vz = one * x[2];
+    nbmc_v4f acc[Method::N];
+    for (int q = 0; q < Method::N; ++q) acc[q] = zero;
+    nbmc_v4i count = {0, 0, 0, 0};
+    for (int q = 0; q < kept; ++q) {
+      if (box_distance2(t.lo[q], S, x) >= R2) continue;
+      for (std::uint32_t p = t.begin[q]; p < t.end[q]; p += 4) {
+        const nbmc_v4f dx = *reinterpret_cast<const nbmc_v4f*>(t.x + p) - vx;
+        const nbmc_v4f dy = *reinterpret_cast<const nbmc_v4f*>(t.y + p) - vy;
+        const nbmc_v4f dz = *reinterpret_cast<const nbmc_v4f*>(t.z + p) - vz;
+        const nbmc_v4f s2 = (dx * dx + dy * dy + dz * dz) * inv_R2;
+        const nbmc_v4i inside = s2 < one;  // -1 where the particle contributes
+        const nbmc_v4f kk = (nbmc_v4f)((nbmc_v4i)(one - s2) & inside);
+        count -= inside;
+        Method::add(acc, dx, dy, dz, kk);
+      }
+    }
+    float a[Method::N];
+    for (int q = 0; q < Method::N; ++q) a[q] = (acc[q][0] + acc[q][1]) + (acc[q][2] + acc[q][3]);
+    evals += std::uint64_t(count[0] + count[1] + count[2] + count[3]);
+    phi(band.word_offset(w) + popcount64(full & ((std::uint64_t(1) << bit) - 1))) = Method::value(a, fc);
   }
   return true;
 #endif
