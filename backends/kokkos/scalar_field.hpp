@@ -141,7 +141,8 @@ KOKKOS_INLINE_FUNCTION bool eval_tile_host(const NeighbourView<MemSpace>& nb, co
   (void)w; (void)band; (void)c; (void)phi; (void)evals;
   return false;  // device code uses gather_words_direct / gather_words_team
 #else
-  static thread_local TileScratch t;
+  static thread_local TileScratch scratch;
+  TileScratch& t = scratch;  // one TLS lookup per tile, not per access
   const float R2 = fc.R * fc.R;
   std::uint32_t n = 0;
   int kept = 0;
