@@ -17,9 +17,17 @@
  *    Every *_destroy(NULL) is a no-op.
  *
  * Thread safety
- *  - Different contexts and meshes may be used from different threads at once.
+ *  - Different contexts and meshes may be used from different threads at once;
+ *    reconstructions on one backend run one after the other (one Kokkos runtime
+ *    per process), each giving the same mesh as when run alone.
  *  - One context must not be used by two threads at the same time (no internal
  *    locking); it may move between threads.
+ *  - When nbmc initialises Kokkos, it does so on a thread of its own and runs
+ *    every reconstruction there (Kokkos 3.4's OpenMP space only accepts work
+ *    from the thread that initialised it), unless the first context asks for
+ *    NBMC_CONTEXT_KOKKOS_ON_CALLING_THREAD. When the Kokkos runtime belongs to
+ *    a thread of the host (it initialised Kokkos, or used that flag), call
+ *    nbmc_context_reconstruct from that thread, as Kokkos itself requires.
  *  - Mesh getters are read-only and may be called concurrently on one mesh.
  */
 #ifndef NBMC_H
@@ -81,6 +89,12 @@ extern "C" {
 #define NBMC_FIELD_DENSE        1  /* baseline: gather on every vertex of the bounding grid */
 #define NBMC_FIELD_SCATTER      2  /* baseline: serial scatter over a dense grid */
 
+/* Context flags (nbmc_context_desc.flags). */
+/* When nbmc initialises Kokkos, do it on the calling thread instead of a
+ * thread of nbmc's own: the host may then use that Kokkos runtime too, and
+ * must call nbmc_context_reconstruct from this thread only. */
+#define NBMC_CONTEXT_KOKKOS_ON_CALLING_THREAD 1u
+
 /* How lengths in nbmc_params are given (nbmc_params.length_unit). */
 #define NBMC_UNIT_SPACING   0  /* multiples of the particle spacing r (default) */
 #define NBMC_UNIT_ABSOLUTE  1  /* the same units as the particle positions */
@@ -116,9 +130,10 @@ NBMC_API int32_t nbmc_backend_available(int32_t backend);
 typedef struct nbmc_context_desc {
   uint32_t struct_size; /* sizeof(nbmc_context_desc) */
   int32_t backend;      /* NBMC_BACKEND_*, default AUTO */
-  int32_t num_threads;  /* host threads for OpenMP; 0 = all cores (default) */
+  int32_t num_threads;  /* host threads for OpenMP; 0 = all cores (default); at most 65536,
+                           clamped to 4x the cores (at least 16) */
   int32_t device_id;    /* CUDA device, default 0 */
-  uint32_t flags;       /* reserved, must be 0 */
+  uint32_t flags;       /* NBMC_CONTEXT_* bits, default 0 */
   uint32_t reserved0;
 } nbmc_context_desc;
 
@@ -156,12 +171,23 @@ NBMC_API int32_t nbmc_context_set_particles_f32(nbmc_context* ctx, const float* 
 NBMC_API int32_t nbmc_context_set_particles_f64(nbmc_context* ctx, const double* xyz,
                                                 uint64_t count, uint64_t byte_stride);
 
-/* Progress and cancellation. The callback is called from the calling thread
- * with the stage (NBMC_STAGE_*) and the fraction of that stage done in [0,1];
+/* Progress and cancellation. The callback is called during
+ * nbmc_context_reconstruct, on the thread that runs the reconstruction (see
+ * Thread safety; the calling thread waits meanwhile), with the stage
+ * (NBMC_STAGE_*) and the fraction of that stage done in [0,1];
  * returning non-zero cancels the reconstruction, which then returns
  * NBMC_ERROR_CANCELLED. fn == NULL removes it. */
 typedef int32_t (*nbmc_progress_fn)(void* user, int32_t stage, double fraction);
 NBMC_API int32_t nbmc_context_set_progress(nbmc_context* ctx, nbmc_progress_fn fn, void* user);
+
+/* Caps the memory nbmc may allocate for this context's reconstructions, host
+ * and device together, in bytes (0 = no cap, the default). Before it
+ * allocates, a reconstruction estimates what the frame needs (after sizing the
+ * grid, and again after finding the surface particles); over the cap it
+ * returns NBMC_ERROR_MEMORY_BUDGET with the estimate in the message, and any
+ * single allocation that would pass the cap fails the same way. The context
+ * stays usable. The returned mesh is counted while it is being built. */
+NBMC_API int32_t nbmc_context_set_memory_budget(nbmc_context* ctx, uint64_t bytes);
 
 /* -------------------------------------------------------------- parameters */
 typedef struct nbmc_params {

@@ -5,8 +5,12 @@
 
 #include <algorithm>
 #include <cmath>
+#include <condition_variable>
 #include <cstdlib>
+#include <deque>
 #include <exception>
+#include <functional>
+#include <future>
 #include <mutex>
 #include <sstream>
 #include <thread>
@@ -69,6 +73,87 @@ bool g_atexit_registered = false;
 // reconstructions on one backend are serialised (contexts stay independent).
 std::mutex g_run_mutex[4];
 
+// Kokkos 3.4's OpenMP space accepts parallel dispatch only from the thread
+// that initialised it. When nbmc owns the runtime, that is this worker
+// thread, and every reconstruction runs on it, whichever thread called.
+class KokkosThread {
+ public:
+  void start(const Kokkos::InitArguments& args) {
+    std::promise<void> ready;
+    auto started = ready.get_future();
+    thread_ = std::thread([this, args, &ready]() mutable {
+      try {
+#if defined(_OPENMP)
+        omp_set_max_active_levels(2);  // partition_master nests one level
+#endif
+        Kokkos::initialize(args);
+        ready.set_value();
+      } catch (...) {
+        ready.set_exception(std::current_exception());
+        return;
+      }
+      loop();
+      Kokkos::finalize();
+    });
+    try {
+      started.get();
+    } catch (...) {
+      thread_.join();
+      throw;
+    }
+  }
+  bool running() const { return thread_.joinable(); }
+  bool on_worker() const { return std::this_thread::get_id() == thread_.get_id(); }
+  void run(const std::function<void()>& fn) {
+    if (!running() || on_worker()) {
+      fn();
+      return;
+    }
+    std::packaged_task<void()> task(fn);
+    auto done = task.get_future();
+    {
+      std::lock_guard<std::mutex> lock(m_);
+      jobs_.push_back(std::move(task));
+    }
+    cv_.notify_one();
+    done.get();  // rethrows what fn threw
+  }
+  void stop() {
+    if (!running()) return;
+    {
+      std::lock_guard<std::mutex> lock(m_);
+      stop_ = true;
+    }
+    cv_.notify_one();
+    thread_.join();
+  }
+
+ private:
+  void loop() {
+    while (true) {
+      std::packaged_task<void()> job;
+      {
+        std::unique_lock<std::mutex> lock(m_);
+        cv_.wait(lock, [this] { return stop_ || !jobs_.empty(); });
+        if (jobs_.empty()) return;  // stop requested and nothing left
+        job = std::move(jobs_.front());
+        jobs_.pop_front();
+      }
+      job();
+    }
+  }
+  std::thread thread_;
+  std::mutex m_;
+  std::condition_variable cv_;
+  std::deque<std::packaged_task<void()>> jobs_;
+  bool stop_ = false;
+};
+
+KokkosThread& kokkos_thread() {
+  static KokkosThread* t = new KokkosThread();  // never destroyed: used from atexit
+  return *t;
+}
+
 int pool_threads() {
 #if defined(KOKKOS_ENABLE_OPENMP)
   return Kokkos::OpenMP::impl_thread_pool_size();
@@ -77,10 +162,18 @@ int pool_threads() {
 #endif
 }
 
+// Finalises the runtime nbmc initialised, on the thread that owns it.
+void stop_runtime() {
+  if (kokkos_thread().running())
+    kokkos_thread().stop();  // finalises on the worker
+  else if (Kokkos::is_initialized())
+    Kokkos::finalize();
+}
+
 void finalize_at_exit() {
   std::lock_guard<std::mutex> lock(g_runtime_mutex);
-  if (g_we_initialised && Kokkos::is_initialized() && !g_finalized) {
-    Kokkos::finalize();
+  if (g_we_initialised && !g_finalized) {
+    stop_runtime();
     g_finalized = true;
   }
   g_we_initialised = false;
@@ -114,6 +207,11 @@ int32_t auto_backend() {
   return NBMC_BACKEND_SERIAL;
 }
 
+int max_threads() {
+  const int hw = int(std::max(1u, std::thread::hardware_concurrency()));
+  return std::max(4 * hw, 16);
+}
+
 void runtime_acquire(nbmc_context& ctx) {
   std::lock_guard<std::mutex> lock(g_runtime_mutex);
   if (g_finalized)
@@ -124,14 +222,18 @@ void runtime_acquire(nbmc_context& ctx) {
     // 1..4 threads on small machines; each context uses only its own count.
     const int hw = int(std::max(1u, std::thread::hardware_concurrency()));
     int want = std::max(hw, 4);
-    if (ctx.backend == NBMC_BACKEND_OPENMP && ctx.num_threads > want) want = ctx.num_threads;
+    if (ctx.backend == NBMC_BACKEND_OPENMP && ctx.num_threads > want) want = std::min(ctx.num_threads, max_threads());
     args.num_threads = want;
     args.device_id = ctx.device_id;
     args.disable_warnings = true;
+    if (ctx.flags & NBMC_CONTEXT_KOKKOS_ON_CALLING_THREAD) {
 #if defined(_OPENMP)
-    omp_set_max_active_levels(2);  // partition_master nests one level
+      omp_set_max_active_levels(2);  // partition_master nests one level
 #endif
-    Kokkos::initialize(args);
+      Kokkos::initialize(args);
+    } else {
+      kokkos_thread().start(args);
+    }
     g_we_initialised = true;
     if (!g_atexit_registered) {
       std::atexit(finalize_at_exit);
@@ -149,8 +251,8 @@ void runtime_release(nbmc_context&) {
 bool runtime_finalize() {
   std::lock_guard<std::mutex> lock(g_runtime_mutex);
   if (g_contexts > 0) return false;
-  if (g_we_initialised && Kokkos::is_initialized() && !g_finalized) {
-    Kokkos::finalize();
+  if (g_we_initialised && !g_finalized) {
+    stop_runtime();
     g_finalized = true;
   }
   g_we_initialised = false;
@@ -246,34 +348,37 @@ void run_backend(nbmc_context& ctx, const Params& p, HostMesh& mesh, RunStats& s
   ctx.memory.reset_peak();
   const double* xyz = ctx.particles.data();
   const std::size_t n = ctx.particles.size() / 3;
-  switch (ctx.backend) {
-    case NBMC_BACKEND_SERIAL: reconstruct_serial(xyz, n, p, ctx.memory, progress, mesh, st); break;
-    case NBMC_BACKEND_OPENMP: {
+  auto job = [&]() {
+    switch (ctx.backend) {
+      case NBMC_BACKEND_SERIAL: reconstruct_serial(xyz, n, p, ctx.memory, progress, mesh, st); break;
+      case NBMC_BACKEND_OPENMP: {
 #if defined(KOKKOS_ENABLE_OPENMP)
-      const int pool = pool_threads();
-      const int hw = int(std::max(1u, std::thread::hardware_concurrency()));
-      const int threads = std::min(pool, ctx.num_threads > 0 ? ctx.num_threads : hw);
-      if (threads >= pool) {
-        reconstruct_openmp(xyz, n, p, ctx.memory, progress, mesh, st);
-      } else {
-        std::exception_ptr err;
-        Kokkos::OpenMP::partition_master(
-            [&](int, int) {
-              try {
-                reconstruct_openmp(xyz, n, p, ctx.memory, progress, mesh, st);
-              } catch (...) {
-                err = std::current_exception();
-              }
-            },
-            1, threads);
-        if (err) std::rethrow_exception(err);
-      }
+        const int pool = pool_threads();
+        const int hw = int(std::max(1u, std::thread::hardware_concurrency()));
+        const int threads = std::min(pool, ctx.num_threads > 0 ? ctx.num_threads : hw);
+        if (threads >= pool) {
+          reconstruct_openmp(xyz, n, p, ctx.memory, progress, mesh, st);
+        } else {
+          std::exception_ptr err;
+          Kokkos::OpenMP::partition_master(
+              [&](int, int) {
+                try {
+                  reconstruct_openmp(xyz, n, p, ctx.memory, progress, mesh, st);
+                } catch (...) {
+                  err = std::current_exception();
+                }
+              },
+              1, threads);
+          if (err) std::rethrow_exception(err);
+        }
 #endif
-      break;
+        break;
+      }
+      case NBMC_BACKEND_CUDA: reconstruct_cuda(xyz, n, p, ctx.memory, progress, mesh, st, ctx.device_id); break;
+      default: throw Error(NBMC_ERROR_BACKEND_UNAVAILABLE, "backend not available");
     }
-    case NBMC_BACKEND_CUDA: reconstruct_cuda(xyz, n, p, ctx.memory, progress, mesh, st, ctx.device_id); break;
-    default: throw Error(NBMC_ERROR_BACKEND_UNAVAILABLE, "backend not available");
-  }
+  };
+  kokkos_thread().run(job);
   ctx.peak_memory = ctx.memory.peak.load();
 }
 

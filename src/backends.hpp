@@ -17,6 +17,8 @@ int32_t auto_backend();
 void runtime_acquire(nbmc_context& ctx);
 void runtime_release(nbmc_context& ctx);
 bool runtime_finalize();
+// Upper bound of the OpenMP threads a context gets (4x the cores, at least 16).
+int max_threads();
 
 // Validates the user's parameters and converts them to absolute units.
 Params resolve_params(const nbmc_params& in);

@@ -104,10 +104,11 @@ int32_t nbmc_context_create(const nbmc_context_desc* desc, nbmc_context** out) {
   }
   if (d.backend < NBMC_BACKEND_AUTO || d.backend > NBMC_BACKEND_CUDA)
     return fail(nullptr, NBMC_ERROR_INVALID_ARGUMENT, "nbmc_context_create: unknown backend " + std::to_string(d.backend));
-  if (d.num_threads < 0)
-    return fail(nullptr, NBMC_ERROR_INVALID_ARGUMENT, "nbmc_context_create: num_threads must be >= 0");
-  if (d.flags != 0)
-    return fail(nullptr, NBMC_ERROR_INVALID_ARGUMENT, "nbmc_context_create: flags must be 0");
+  if (d.num_threads < 0 || d.num_threads > 65536)
+    return fail(nullptr, NBMC_ERROR_INVALID_ARGUMENT,
+                "nbmc_context_create: num_threads must be in [0, 65536] (larger counts are clamped to 4x the cores)");
+  if (d.flags & ~uint32_t(NBMC_CONTEXT_KOKKOS_ON_CALLING_THREAD))
+    return fail(nullptr, NBMC_ERROR_INVALID_ARGUMENT, "nbmc_context_create: unknown flags");
   try {
     int32_t backend = d.backend;
     if (backend == NBMC_BACKEND_AUTO) backend = nbmc::auto_backend();
@@ -119,6 +120,7 @@ int32_t nbmc_context_create(const nbmc_context_desc* desc, nbmc_context** out) {
     ctx->backend = backend;
     ctx->num_threads = d.num_threads;
     ctx->device_id = d.device_id;
+    ctx->flags = d.flags;
     nbmc::runtime_acquire(*ctx);
     *out = ctx;
     return NBMC_OK;
@@ -147,7 +149,10 @@ const char* nbmc_context_last_error(const nbmc_context* ctx) {
 }
 
 int32_t nbmc_context_backend(const nbmc_context* ctx, int32_t* backend) {
-  if (!ctx || !backend) return NBMC_ERROR_INVALID_ARGUMENT;
+  if (!ctx) return NBMC_ERROR_INVALID_ARGUMENT;
+  auto* c = const_cast<nbmc_context*>(ctx);
+  if (!backend) return fail(c, NBMC_ERROR_INVALID_ARGUMENT, "nbmc_context_backend: backend is NULL");
+  c->last_error.clear();
   *backend = ctx->backend;
   return NBMC_OK;
 }
@@ -207,8 +212,16 @@ int32_t nbmc_context_set_particles_f64(nbmc_context* ctx, const double* xyz, uin
 
 int32_t nbmc_context_set_progress(nbmc_context* ctx, nbmc_progress_fn fn, void* user) {
   if (!ctx) return NBMC_ERROR_INVALID_ARGUMENT;
+  ctx->last_error.clear();
   ctx->progress_fn = fn;
   ctx->progress_user = user;
+  return NBMC_OK;
+}
+
+int32_t nbmc_context_set_memory_budget(nbmc_context* ctx, uint64_t bytes) {
+  if (!ctx) return NBMC_ERROR_INVALID_ARGUMENT;
+  ctx->last_error.clear();
+  ctx->memory.budget = bytes;
   return NBMC_OK;
 }
 
@@ -263,9 +276,14 @@ void nbmc_stats_init(nbmc_stats* s) {
 }
 
 int32_t nbmc_context_stats(const nbmc_context* ctx, nbmc_stats* s) {
-  if (!ctx || !s) return NBMC_ERROR_INVALID_ARGUMENT;
-  if (s->struct_size < sizeof(nbmc_stats)) return NBMC_ERROR_INVALID_ARGUMENT;
-  if (!ctx->has_stats) return NBMC_ERROR_NO_PARTICLES;
+  if (!ctx) return NBMC_ERROR_INVALID_ARGUMENT;
+  auto* c = const_cast<nbmc_context*>(ctx);
+  if (!s) return fail(c, NBMC_ERROR_INVALID_ARGUMENT, "nbmc_context_stats: stats is NULL");
+  if (s->struct_size < sizeof(nbmc_stats))
+    return fail(c, NBMC_ERROR_INVALID_ARGUMENT, "nbmc_context_stats: fill the struct with nbmc_stats_init()");
+  if (!ctx->has_stats)
+    return fail(c, NBMC_ERROR_NO_PARTICLES, "nbmc_context_stats: no reconstruction has succeeded on this context yet");
+  c->last_error.clear();
   const nbmc::RunStats& st = ctx->stats;
   nbmc_stats_init(s);
   s->particle_count = st.particles;

@@ -15,6 +15,7 @@ struct nbmc_context {
   int32_t backend = NBMC_BACKEND_SERIAL;
   int32_t num_threads = 0;
   int32_t device_id = 0;
+  uint32_t flags = 0;
   std::string last_error;
   std::vector<double> particles;  // validated, 3 per particle
   nbmc_progress_fn progress_fn = nullptr;

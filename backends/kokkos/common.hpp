@@ -52,8 +52,19 @@ struct MemoryTracker {
     while (now > p && !peak.compare_exchange_weak(p, now)) {}
   }
   void sub(std::uint64_t b) { current.fetch_sub(b); }
+  // Throws NBMC_ERROR_MEMORY_BUDGET if `bytes` more would pass the budget.
+  void require(std::uint64_t bytes, const std::string& what) const;
   void reset_peak() { peak.store(current.load()); }
 };
+
+inline void MemoryTracker::require(std::uint64_t bytes, const std::string& what) const {
+  if (!budget || current.load() + bytes <= budget) return;
+  const double mib = 1.0 / (1024.0 * 1024.0);
+  char msg[512];
+  std::snprintf(msg, sizeof msg, "%s needs %.1f MiB more (%.1f MiB in use), over the memory budget of %.1f MiB",
+                what.c_str(), double(bytes) * mib, double(current.load()) * mib, double(budget) * mib);
+  throw Error(10 /*NBMC_ERROR_MEMORY_BUDGET*/, msg);
+}
 
 // Progress/cancellation hook supplied by the C API layer.
 struct Progress {
@@ -91,10 +102,7 @@ class Buffer {
   Buffer(MemoryTracker& tracker, const std::string& label, std::size_t n, bool zero = false)
       : tracker_(&tracker) {
     const std::uint64_t bytes = std::uint64_t(n) * sizeof(T);
-    if (tracker.budget && tracker.current.load() + bytes > tracker.budget)
-      throw Error(10 /*NBMC_ERROR_MEMORY_BUDGET*/,
-                  "allocation of " + std::to_string(bytes) + " bytes for " + label +
-                      " exceeds the memory budget");
+    tracker.require(bytes, "nbmc::" + label);
     if (zero)
       view_ = view_type("nbmc::" + label, n);
     else

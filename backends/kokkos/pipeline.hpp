@@ -92,6 +92,19 @@ void reconstruct(const ExecSpace& space, const double* xyz, std::size_t count, c
   st.cell = g.cell;
   lap(0);
 
+  // Up-front estimate (bytes) from what is known now: the particles, and for
+  // the baselines the dense grid. The band is estimated again below.
+  {
+    const std::uint64_t n = st.particles;
+    std::uint64_t need = n * (sizeof(SortRecord) + 3 * sizeof(float) + sizeof(std::uint32_t) + 1) + n / 2 * 24;
+    if (p.field != 0) {
+      const std::uint64_t nv = g.vertex_count();
+      need += nv * 14;  // field value, cell info, vertex numbering, bitmap
+      if (p.field == 2) need += nv * 4 * (p.method == 1 ? FieldZB05::N : FieldSSP07::N);
+    }
+    tracker.require(need, p.field == 0 ? "the neighbourhood" : "the dense baseline grid (estimated)");
+  }
+
   // ---------------------------------------------------------- neighbourhood
   Neighbourhood<MemSpace> nbh;
   build_neighbourhood(space, tracker, xyz, count, keep, g, nbh);
@@ -115,6 +128,12 @@ void reconstruct(const ExecSpace& space, const double* xyz, std::size_t count, c
   lap(3);
 
   // ------------------------------------------------------------------ field
+  {  // the per-vertex arrays of the field and of marching cubes, before allocating them
+    const std::uint64_t need = band.n_vertices * (sizeof(float) + 2 * sizeof(std::uint32_t)) +
+                               band.n_blocks * 8 * sizeof(std::uint64_t);
+    tracker.require(need, "the field and triangulation of " + std::to_string(band.n_vertices) +
+                              " band vertices (estimated)");
+  }
   const FieldConstants fc = field_constants(p.influence_radius, p.iso_radius, p.t_low, p.t_high);
   Buffer<float, MemSpace> phi(tracker, "scalar_field::values", band.n_vertices);
   const BandView<MemSpace> bv0 = view_of(band, g);
@@ -187,6 +206,7 @@ void reconstruct(const ExecSpace& space, const double* xyz, std::size_t count, c
 
   const std::uint64_t out_bytes =
       r.vertices * 3 * sizeof(float) * (p.normals ? 2 : 1) + r.triangles * 3 * sizeof(std::uint32_t);
+  tracker.require(out_bytes, "the mesh");
   mesh.positions.resize(3 * r.vertices);
   mesh.normals.resize(p.normals ? 3 * r.vertices : 0);
   mesh.triangles.resize(3 * r.triangles);

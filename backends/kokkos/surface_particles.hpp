@@ -17,6 +17,10 @@
 namespace nbmc {
 namespace Details {
 
+// Particles in one neighbour cell (edge R/2 = 2r) beyond which it is "crowded":
+// the rest density puts about 8 there.
+constexpr std::uint32_t kCrowdedCell = 2048;
+
 // Marks the particles of occupied neighbour cell `cell`: the neighbour cells
 // within `range` are looked up once for all particles of the cell.
 template <class MemSpace>
@@ -26,6 +30,14 @@ KOKKOS_INLINE_FUNCTION std::size_t surface_particles_of_cell(const NeighbourView
                                                              float threshold, int min_neighbours,
                                                              const Kokkos::View<std::uint8_t*, MemSpace>& flags) {
   constexpr int kMaxCells = 729;  // range <= 4
+  // A cell crowded far beyond any fluid density (256x the rest density: a
+  // solver blow-up, or many particles at one point) is all surface, without
+  // the pairwise test that would cost its count squared.
+  const std::uint32_t first = nb.cell_start(cell), last = nb.cell_start(cell + 1);
+  if (last - first > kCrowdedCell) {
+    for (std::uint32_t i = first; i < last; ++i) flags(i) = 1;
+    return last - first;
+  }
   std::uint32_t begin[kMaxCells], end[kMaxCells];
   int n_cells = 0;
   bool face_empty = false;
