@@ -116,13 +116,13 @@ int32_t nbmc_context_create(const nbmc_context_desc* desc, nbmc_context** out) {
       return fail(nullptr, NBMC_ERROR_BACKEND_UNAVAILABLE,
                   std::string("backend '") + nbmc::backend_name(backend) +
                       "' is not available (compiled-in backends: " + nbmc::version_string() + ")");
-    auto* ctx = new nbmc_context();
+    auto ctx = std::make_unique<nbmc_context>();  // freed if the runtime cannot start
     ctx->backend = backend;
     ctx->num_threads = d.num_threads;
     ctx->device_id = d.device_id;
     ctx->flags = d.flags;
     nbmc::runtime_acquire(*ctx);
-    *out = ctx;
+    *out = ctx.release();
     return NBMC_OK;
   } catch (const Error& e) {
     return fail(nullptr, e.status, e.what());
