@@ -106,29 +106,21 @@ McResult classify_cells(const ExecSpace& space, const BandView<typename ExecSpac
   Kokkos::parallel_reduce(
       "nbmc::marching_cubes::cases", Kokkos::RangePolicy<ExecSpace, Kokkos::Schedule<Kokkos::Dynamic>>(space, 0, n_words),
       KOKKOS_LAMBDA(const std::size_t w, std::uint64_t& acc) {
-        std::uint64_t word = band.words(w);
-        std::int64_t self = std::int64_t(band.word_offset(w));
         std::uint32_t tris = 0;
-        while (word) {
-          const int bit = ctz64(word);
-          word &= word - 1;
+        band.for_each_vertex(w, [&](const int bit, const std::int64_t self) {
           std::int64_t i, j, k, idx[8];
           band.vertex(w, bit, i, j, k);
-          if (cell_corners(band, i, j, k, self, idx)) {
-            int cs = 0;
-            for (int c = 0; c < 8; ++c) cs |= (phi(idx[c]) < 0.f ? 1 : 0) << c;
-            if (cs != 0 && cs != 255) {
-              Kokkos::atomic_fetch_or(&info(self), std::uint32_t(cs));
-              const std::uint16_t em = tables.edges(cs);
-              for (int e = 0; e < 12; ++e)
-                if (em & (1u << e))
-                  Kokkos::atomic_fetch_or(&info(idx[edge_start(e)]), std::uint32_t(1) << (8 + e / 4));
-              tris += tables.count(cs);
-              ++acc;
-            }
-          }
-          ++self;
-        }
+          if (!cell_corners(band, i, j, k, self, idx)) return;
+          int cs = 0;
+          for (int c = 0; c < 8; ++c) cs |= (phi(idx[c]) < 0.f ? 1 : 0) << c;
+          if (cs == 0 || cs == 255) return;
+          Kokkos::atomic_fetch_or(&info(self), std::uint32_t(cs));
+          const std::uint16_t em = tables.edges(cs);
+          for (int e = 0; e < 12; ++e)
+            if (em & (1u << e)) Kokkos::atomic_fetch_or(&info(idx[edge_start(e)]), std::uint32_t(1) << (8 + e / 4));
+          tris += tables.count(cs);
+          ++acc;
+        });
         tri_offset(w) = tris;
       },
       cells);
@@ -195,15 +187,10 @@ std::vector<std::int64_t> find_band_leaks(const ExecSpace& space, const BandView
       "nbmc::marching_cubes::count_leaks",
       Kokkos::RangePolicy<ExecSpace, Kokkos::Schedule<Kokkos::Dynamic>>(space, 0, n_words),
       KOKKOS_LAMBDA(const std::size_t w, std::uint64_t& acc) {
-        std::uint64_t word = band.words(w);
-        std::int64_t self = std::int64_t(band.word_offset(w));
         std::int64_t out[18];
-        while (word) {
-          const int bit = ctz64(word);
-          word &= word - 1;
+        band.for_each_vertex(w, [&](const int bit, const std::int64_t self) {
           acc += std::uint64_t(leaks_of(w, bit, self, out));
-          ++self;
-        }
+        });
       },
       count);
   space.fence();
@@ -214,19 +201,13 @@ std::vector<std::int64_t> find_band_leaks(const ExecSpace& space, const BandView
   Kokkos::parallel_for(
       "nbmc::marching_cubes::collect_leaks", Kokkos::RangePolicy<ExecSpace>(space, 0, n_words),
       KOKKOS_LAMBDA(const std::size_t w) {
-        std::uint64_t word = band.words(w);
-        std::int64_t self = std::int64_t(band.word_offset(w));
         std::int64_t out[18];
-        while (word) {
-          const int bit = ctz64(word);
-          word &= word - 1;
+        band.for_each_vertex(w, [&](const int bit, const std::int64_t self) {
           const int n = leaks_of(w, bit, self, out);
-          if (n) {
-            const std::uint64_t at = Kokkos::atomic_fetch_add(&cursor(), std::uint64_t(n));
-            for (int q = 0; q < 3 * n; ++q) list(3 * at + q) = out[q];
-          }
-          ++self;
-        }
+          if (!n) return;
+          const std::uint64_t at = Kokkos::atomic_fetch_add(&cursor(), std::uint64_t(n));
+          for (int q = 0; q < 3 * n; ++q) list(3 * at + q) = out[q];
+        });
       });
   space.fence();
   auto h = Kokkos::create_mirror_view_and_copy(Kokkos::HostSpace(), list);
@@ -250,11 +231,7 @@ void compute_vertices(const ExecSpace& space, const BandView<typename ExecSpace:
       "nbmc::marching_cubes::vertices",
       Kokkos::RangePolicy<ExecSpace, Kokkos::Schedule<Kokkos::Dynamic>>(space, 0, n_words),
       KOKKOS_LAMBDA(const std::size_t w) {
-        std::uint64_t word = band.words(w);
-        std::int64_t self = std::int64_t(band.word_offset(w));
-        while (word) {
-          const int bit = ctz64(word);
-          word &= word - 1;
+        band.for_each_vertex(w, [&](const int bit, const std::int64_t self) {
           const std::uint32_t edges = (info(self) >> 8) & 7u;
           if (edges) {
             std::int64_t i, j, k;
@@ -291,8 +268,7 @@ void compute_vertices(const ExecSpace& space, const BandView<typename ExecSpace:
               ++out;
             }
           }
-          ++self;
-        }
+        });
       });
   space.fence();
 }
@@ -311,12 +287,8 @@ void compute_triangles(const ExecSpace& space, const BandView<typename ExecSpace
       "nbmc::marching_cubes::triangles",
       Kokkos::RangePolicy<ExecSpace, Kokkos::Schedule<Kokkos::Dynamic>>(space, 0, n_words),
       KOKKOS_LAMBDA(const std::size_t w) {
-        std::uint64_t word = band.words(w);
-        std::int64_t self = std::int64_t(band.word_offset(w));
         std::uint64_t out = tri_offset(w);
-        while (word) {
-          const int bit = ctz64(word);
-          word &= word - 1;
+        band.for_each_vertex(w, [&](const int bit, const std::int64_t self) {
           const int cs = int(info(self) & 0xffu);
           if (cs) {
             std::int64_t i, j, k, idx[8];
@@ -332,8 +304,7 @@ void compute_triangles(const ExecSpace& space, const BandView<typename ExecSpace
             }
             out += std::uint64_t(nt);
           }
-          ++self;
-        }
+        });
       });
   space.fence();
 }

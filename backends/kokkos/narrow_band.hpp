@@ -50,6 +50,18 @@ struct BandView {
     j = std::int64_t(compact3(key >> 1)) * 8 + ((sub >> 1) & 1) * 4 + ((bit >> 2) & 3);
     k = std::int64_t(compact3(key >> 2)) * 8 + ((sub >> 2) & 1) * 4 + (bit >> 4);
   }
+  // Calls f(bit, band_index) for every vertex of word w, in band order.
+  template <class F>
+  KOKKOS_INLINE_FUNCTION void for_each_vertex(std::size_t w, F&& f) const {
+    std::uint64_t word = words(w);
+    std::int64_t index = std::int64_t(word_offset(w));
+    while (word) {
+      const int bit = ctz64(word);
+      word &= word - 1;
+      f(bit, index);
+      ++index;
+    }
+  }
   // Band index of grid vertex (i, j, k), or -1 when it is not in the band.
   KOKKOS_INLINE_FUNCTION std::int64_t index(std::int64_t i, std::int64_t j, std::int64_t k) const {
     if (i < 0 || j < 0 || k < 0 || i >= dims[0] || j >= dims[1] || k >= dims[2]) return -1;

@@ -520,15 +520,12 @@ std::uint64_t scatter_field(const ExecSpace& space, MemoryTracker& tracker,
   Kokkos::parallel_for(
       "nbmc::scalar_field::scatter_finalize", Kokkos::RangePolicy<ExecSpace>(space, 0, n_words),
       KOKKOS_LAMBDA(const std::size_t w) {
-        std::uint64_t word = band.words(w);
-        std::uint64_t out = band.word_offset(w);
-        while (word) {
-          const int bit = ctz64(word);
-          word &= word - 1;
+        band.for_each_vertex(w, [&](const int bit, const std::int64_t out) {
           std::int64_t i, j, k;
           band.vertex(w, bit, i, j, k);
-          phi(out++) = Method::value(a + N * (std::size_t(i) + std::size_t(d0) * (std::size_t(j) + std::size_t(d1) * std::size_t(k))), fc);
-        }
+          const std::size_t lin = std::size_t(i) + std::size_t(d0) * (std::size_t(j) + std::size_t(d1) * std::size_t(k));
+          phi(out) = Method::value(a + N * lin, fc);
+        });
       });
   space.fence();
   progress(4, 1.0);
