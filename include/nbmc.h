@@ -261,6 +261,45 @@ NBMC_API const float* nbmc_mesh_normals(const nbmc_mesh* mesh);
 NBMC_API const uint32_t* nbmc_mesh_triangles(const nbmc_mesh* mesh);
 NBMC_API void nbmc_mesh_destroy(nbmc_mesh* mesh);
 
+/* ---- File I/O ---- */
+/* Particle files and mesh files through nbmc's own readers and writers
+ * (docs/formats.md). Formats are named in lower case; NULL or "" means "from
+ * the file name's extension".
+ *   particles: "xyz", "ply", "vtk", "vtu", "vtp", "bgeo", "h5part", "pysph",
+ *              "gadget" (also "swift"), "hdf5"; an HDF5 object is named after
+ *              the file: "run.h5:/PartType1" or "data.h5:/group/positions".
+ *   meshes:    "ply", "obj", "vtk", "vtu", "glb".
+ * Errors: NBMC_ERROR_IO when a file cannot be opened, read or written,
+ * NBMC_ERROR_FORMAT when it is malformed or of an unsupported kind,
+ * NBMC_ERROR_INVALID_ARGUMENT for NULL pointers or an unknown format name.
+ * Messages name the file. */
+
+/* Reads the particle positions of the file at path and uploads them to ctx
+ * as nbmc_context_set_particles_f64 does (same validation: NaN/Inf gives
+ * NBMC_ERROR_INVALID_PARTICLES, an empty file NBMC_ERROR_NO_PARTICLES).
+ * Multi-step files (H5Part) give their first step. On success *count_out
+ * (may be NULL) is the number of particles; on failure it is 0 and the
+ * context keeps no particles. The file is only read during the call.
+ * Same threading rules as every call on ctx; reading HDF5 files is
+ * serialised inside nbmc. */
+NBMC_API int32_t nbmc_context_load_particles(nbmc_context* ctx, const char* path, const char* format,
+                                             uint64_t* count_out);
+
+/* Writes mesh to path in format (NULL: by the extension). The file is written
+ * under a temporary name in the same folder and renamed into place, so a
+ * failed call leaves no partial file and an existing file is replaced only
+ * on success. mesh is only read; several threads may write the same mesh at
+ * once. On failure the message is nbmc_last_error(). An empty mesh gives an
+ * empty but valid file. */
+NBMC_API int32_t nbmc_mesh_write(const nbmc_mesh* mesh, const char* path, const char* format);
+
+/* Message of the last failed call on this thread that has no context to keep
+ * it (nbmc_mesh_write, and nbmc_context_load_particles with ctx == NULL);
+ * "" after such a call succeeds. Thread-local; valid until the next such call
+ * on the same thread. Calls on a context keep theirs in
+ * nbmc_context_last_error(ctx). */
+NBMC_API const char* nbmc_last_error(void);
+
 /* ------------------------------------------------------------------ Kokkos */
 /* nbmc initialises Kokkos on the first nbmc_context_create unless the host
  * program already did. nbmc never finalises a Kokkos runtime it did not

@@ -2,14 +2,18 @@
 // nbmc — command-line surface reconstruction of particle files.
 //
 //   nbmc reconstruct IN -o OUT (--spacing R | --particle-radius P) [options]
+//   nbmc reconstruct 'frames/fluid_{}.bgeo' -o 'out/surface_{}.ply' ...   (a sequence)
+//   nbmc reconstruct dump.h5part -o 'out/surface_{}.glb' ...              (every step)
 //
-// Exit codes: 0 success, 1 error (input, library, output), 2 usage error,
-// 130 cancelled with Ctrl-C.
+// Exit codes: 0 success, 1 error (input, library, output; in a sequence: any
+// frame failed), 2 usage error, 130 cancelled with Ctrl-C.
+#include "io/attributes.hpp"
 #include "io/error.hpp"
 #include "io/mesh.hpp"
 #include "io/particles.hpp"
 #include "progress.hpp"
 #include "report.hpp"
+#include "sequence.hpp"
 
 #include <nbmc.h>
 
@@ -84,6 +88,10 @@ struct Options {
   std::string progress = "auto";
   bool json = false;
   std::string json_path;
+  std::vector<std::string> attributes; // --attributes
+  std::string frames;                   // --frames a:b[:step]
+  bool resume = false;
+  std::int64_t step = -1; // H5Part step of a single-frame run (-1: the first)
 };
 
 // --------------------------------------------------------------- helpers
@@ -123,6 +131,151 @@ bool write_text(const std::string& path, const std::string& text) {
   return true;
 }
 
+// R of the field in absolute units (what attributes are interpolated with).
+double absolute_radius(const nbmc_params& p) {
+  return p.length_unit == NBMC_UNIT_ABSOLUTE ? p.influence_radius : p.influence_radius * p.spacing;
+}
+
+// Every name asked for with --attributes must be in the file. The message
+// lists what the file has (read again with all attributes: only on error).
+void check_attributes(const std::string& path, const nbmc::io::Particles& p, const std::vector<std::string>& names,
+                      const nbmc::io::ReadOptions& read) {
+  for (const std::string& n : names) {
+    if (p.attribute(n)) continue;
+    std::string have = "?";
+    try {
+      nbmc::io::ReadOptions all = read;
+      all.only.clear();
+      all.attributes = true;
+      have = nbmc::io::attribute_names(nbmc::io::read_particles(path, all).attributes);
+    } catch (const nbmc::io::Error&) {
+    }
+    throw nbmc::io::Error(path + ": no particle attribute '" + n + "' (the file has: " + have + ")");
+  }
+}
+
+// ------------------------------------------------------------ a sequence
+int reconstruct_sequence(Options& o, const std::vector<nbmc::cli::Frame>& frames) {
+  using namespace nbmc;
+  const auto t_start = Clock::now();
+  const bool json_to_stdout = o.json && (o.json_path.empty() || o.json_path == "-");
+  const bool show = !o.quiet && o.progress != "never";
+  const bool stderr_tty = ::isatty(STDERR_FILENO) == 1;
+  // The per-stage bar is replaced by one line per frame.
+  cli::Progress bar(false, stderr_tty);
+
+  nbmc_context* raw = nullptr;
+  std::int32_t st = nbmc_context_create(&o.desc, &raw);
+  if (st != NBMC_OK) return library_error(st, nbmc_context_last_error(nullptr));
+  ContextPtr ctx(raw);
+  nbmc_context_set_progress(ctx.get(), &cli::Progress::callback, &bar);
+  std::int32_t backend = o.desc.backend;
+  nbmc_context_backend(ctx.get(), &backend);
+
+  std::vector<cli::FrameResult> results;
+  cli::RateMeter meter(frames.size());
+  bool cancelled_run = false;
+  for (std::size_t i = 0; i < frames.size(); ++i) {
+    const cli::Frame& f = frames[i];
+    cli::FrameResult r;
+    r.label = f.label;
+    r.input = f.input;
+    r.output = f.output;
+    const auto t0 = Clock::now();
+    if (cli::interrupted()) {
+      cancelled_run = true;
+      break;
+    }
+    if (!f.missing.empty()) {
+      r.status = "failed";
+      r.error = f.missing;
+    } else if (o.resume && cli::output_exists(f.output)) {
+      r.status = "skipped";
+    } else {
+      try {
+        io::ReadOptions ro;
+        ro.format = o.input_format;
+        ro.attributes = !o.attributes.empty();
+        ro.only = o.attributes;
+        ro.frame = f.step;
+        io::Particles particles = io::read_particles(f.input, ro);
+        check_attributes(f.input, particles, o.attributes, ro);
+        r.particles = particles.count();
+        st = nbmc_context_set_particles_f64(ctx.get(), particles.xyz.data(), particles.count(), 0);
+        if (st != NBMC_OK) throw cli::FrameError(std::string(nbmc_status_string(st)) + ": " + nbmc_context_last_error(ctx.get()));
+        nbmc_mesh* raw_mesh = nullptr;
+        st = nbmc_context_reconstruct(ctx.get(), &o.params, &raw_mesh);
+        MeshPtr mesh(raw_mesh);
+        if (st == NBMC_ERROR_CANCELLED) {
+          cancelled_run = true;
+          break;
+        }
+        if (st != NBMC_OK) throw cli::FrameError(std::string(nbmc_status_string(st)) + ": " + nbmc_context_last_error(ctx.get()));
+        io::MeshView view;
+        view.positions = nbmc_mesh_positions(mesh.get());
+        view.normals = nbmc_mesh_normals(mesh.get());
+        view.triangles = nbmc_mesh_triangles(mesh.get());
+        view.vertex_count = nbmc_mesh_vertex_count(mesh.get());
+        view.triangle_count = nbmc_mesh_triangle_count(mesh.get());
+        std::vector<io::Attribute> attrs;
+        if (!o.attributes.empty()) {
+          attrs = io::interpolate_attributes(particles.xyz, particles.attributes, o.attributes, view.positions,
+                                             view.vertex_count, absolute_radius(o.params));
+          view.attributes = attrs.data();
+          view.attribute_count = attrs.size();
+        }
+        particles = io::Particles();
+        cli::make_parent_folders(f.output);
+        io::write_mesh(f.output, view, "", [] { return cli::interrupted(); });
+        r.vertices = view.vertex_count;
+        r.triangles = view.triangle_count;
+        r.status = "written";
+      } catch (const io::Cancelled&) {
+        cancelled_run = true;
+        break;
+      } catch (const std::bad_alloc&) {
+        r.status = "failed";
+        r.error = "out of memory";
+      } catch (const std::exception& e) {
+        r.status = "failed";
+        r.error = e.what();
+      }
+    }
+    r.seconds = seconds_since(t0);
+    meter.done(r.status == "written", r.seconds);
+    if (r.status == "failed") {
+      if (r.error.rfind(r.input, 0) == 0) // the message names the file already
+        std::fprintf(stderr, "nbmc: error: frame %s: %s\n", r.label.c_str(), r.error.c_str());
+      else
+        std::fprintf(stderr, "nbmc: error: frame %s (%s): %s\n", r.label.c_str(), r.input.c_str(), r.error.c_str());
+    }
+    if (show) std::fputs(cli::progress_line(i + 1, frames.size(), r, meter).c_str(), stderr);
+    results.push_back(std::move(r));
+  }
+  ctx.reset();
+  nbmc_kokkos_finalize();
+  if (cancelled_run) {
+    std::fputs("nbmc: cancelled\n", stderr);
+    return 130;
+  }
+  cli::SequenceReport rep;
+  rep.version = nbmc_version_string();
+  rep.backend = name_of(kBackends, backend);
+  rep.params = o.params;
+  rep.frames = std::move(results);
+  rep.total_seconds = seconds_since(t_start);
+  if (!o.quiet && !json_to_stdout) std::fputs(cli::format_sequence(rep).c_str(), stdout);
+  if (o.json) {
+    const std::string text = cli::format_sequence_json(rep);
+    if (json_to_stdout)
+      std::fputs(text.c_str(), stdout);
+    else if (!write_text(o.json_path, text))
+      return 1;
+  }
+  std::fflush(stdout);
+  return rep.failed() > 0 ? 1 : 0;
+}
+
 // -------------------------------------------------------------- the run
 int reconstruct(Options& o) {
   using namespace nbmc;
@@ -146,8 +299,14 @@ int reconstruct(Options& o) {
     report.output_format = io::mesh_format(o.output);
     report.input_format = io::particle_format(o.input, o.input_format);
     const auto t0 = Clock::now();
-    particles = io::read_particles(o.input, o.input_format);
+    io::ReadOptions ro;
+    ro.format = o.input_format;
+    ro.attributes = !o.attributes.empty();
+    ro.only = o.attributes;
+    ro.frame = o.step;
+    particles = io::read_particles(o.input, ro);
     report.read_seconds = seconds_since(t0);
+    check_attributes(o.input, particles, o.attributes, ro);
   } catch (const io::Error& e) {
     std::fprintf(stderr, "nbmc: error: %s\n", e.what());
     return 1;
@@ -166,7 +325,7 @@ int reconstruct(Options& o) {
 
   st = nbmc_context_set_particles_f64(ctx.get(), particles.xyz.data(), particles.count(), 0);
   if (st != NBMC_OK) return library_error(st, nbmc_context_last_error(ctx.get()));
-  particles = io::Particles(); // the context has its copy
+  if (o.attributes.empty()) particles = io::Particles(); // the context has its copy
 
   nbmc_mesh* raw_mesh = nullptr;
   st = nbmc_context_reconstruct(ctx.get(), &o.params, &raw_mesh);
@@ -188,7 +347,18 @@ int reconstruct(Options& o) {
   view.vertex_count = nbmc_mesh_vertex_count(mesh.get());
   view.triangle_count = nbmc_mesh_triangle_count(mesh.get());
   report.normals = view.normals != nullptr;
+  std::vector<io::Attribute> vertex_attributes;
   try {
+    if (!o.attributes.empty()) {
+      const auto t0 = Clock::now();
+      vertex_attributes = io::interpolate_attributes(particles.xyz, particles.attributes, o.attributes,
+                                                     view.positions, view.vertex_count, absolute_radius(o.params));
+      report.interpolate_seconds = seconds_since(t0);
+      particles = io::Particles();
+      view.attributes = vertex_attributes.data();
+      view.attribute_count = vertex_attributes.size();
+      for (const io::Attribute& a : vertex_attributes) report.attributes.push_back(a.name);
+    }
     const auto t0 = Clock::now();
     io::write_mesh(o.output, view, report.output_format, [] { return cli::interrupted(); });
     report.write_seconds = seconds_since(t0);
@@ -236,11 +406,18 @@ int main(int argc, char** argv) {
       "reconstruct", "Reconstruct the surface of a particle file and write a triangle mesh.");
   rec->footer(
       "Lengths are multiples of the spacing unless stated. The mesh format follows OUT's extension (.ply: binary "
-      "PLY, .obj: Wavefront OBJ). Exit codes: 0 ok, 1 error, 2 usage, 130 cancelled (Ctrl-C).");
-  rec->add_option("input", o.input, "Particle file (.xyz: raw float32 triples, .ply: point set)")
+      "PLY, .obj: Wavefront OBJ, .vtk: legacy VTK, .vtu: VTK XML, .glb: glTF binary). Sequences: "
+      "'frames/f_{}.bgeo' -o 'out/s_{}.ply' reconstructs every matching file in numeric order; a multi-step "
+      "H5Part file with -o 'out/s_{}.glb' every step. Exit codes: 0 ok, 1 error (or a failed frame), 2 usage, "
+      "130 cancelled (Ctrl-C).");
+  rec->add_option("input", o.input,
+                  "Particle file (.xyz .ply .vtk .vtu .vtp .bgeo[.gz] .h5part .h5 .hdf5; FILE.h5:/object); "
+                  "{} in the name: a numbered sequence")
       ->required()
       ->option_text("IN");
-  rec->add_option("-o,--output", o.output, "Mesh to write (.ply or .obj)")->required()->option_text("OUT");
+  rec->add_option("-o,--output", o.output, "Mesh to write (.ply .obj .vtk .vtu .glb); {} in the name: per frame")
+      ->required()
+      ->option_text("OUT");
   auto* sp = rec->add_option("--spacing", o.spacing, "Particle spacing r (absolute); this or --particle-radius")
                  ->option_text("R");
   auto* pr = rec->add_option("--particle-radius", o.particle_radius,
@@ -278,9 +455,19 @@ int main(int argc, char** argv) {
   rec->add_option("--backend", o.backend, "Compute backend")
       ->check(CLI::IsMember(names(kBackends), CLI::ignore_case))
       ->capture_default_str();
-  rec->add_option("--format", o.input_format, "Input format, overriding the extension")
-      ->check(CLI::IsMember({"xyz", "ply"}, CLI::ignore_case))
-      ->option_text("xyz|ply");
+  rec->add_option("--format", o.input_format,
+                  "Input format, overriding the extension (HDF5 objects: FILE.h5:/path; see docs/formats.md)")
+      ->check(CLI::IsMember(nbmc::io::particle_format_names(), CLI::ignore_case))
+      ->option_text("xyz|ply|vtk|vtu|vtp|bgeo|h5part|pysph|gadget|swift|hdf5");
+  rec->add_option("--attributes", o.attributes,
+                  "Particle attributes to interpolate onto the mesh vertices (comma-separated, e.g. vel,rho); "
+                  "written by the PLY, VTK, VTU and glTF writers")
+      ->delimiter(',')
+      ->option_text("NAME[,NAME...]");
+  rec->add_option("--frames", o.frames,
+                  "Sequences: only frames a to b (inclusive), every step-th; IN with {} or a multi-step H5Part file")
+      ->option_text("A:B[:STEP]");
+  rec->add_flag("--resume", o.resume, "Sequences: skip frames whose output exists already");
   auto* json = rec->add_option("--json", o.json_path,
                                "Write a machine-readable report to FILE ('-' or no value: stdout, instead of the "
                                "table); use --json=FILE before other arguments")
@@ -320,6 +507,35 @@ int main(int argc, char** argv) {
   o.progress = lower(o.progress);
 
   try {
+    if (!o.attributes.empty()) {
+      for (const std::string& a : o.attributes)
+        if (a.empty()) {
+          std::fputs("nbmc: error: --attributes has an empty name\n", stderr);
+          return 2;
+        }
+      std::string fmt;
+      try {
+        fmt = nbmc::io::mesh_format(nbmc::cli::without_braces(o.output));
+      } catch (const nbmc::io::Error&) {
+      }
+      if (fmt == "obj") {
+        std::fputs("nbmc: error: OBJ has no place for vertex attributes; write .ply, .vtk, .vtu or .glb with "
+                   "--attributes\n",
+                   stderr);
+        return 2;
+      }
+    }
+    nbmc::cli::SequencePlan plan;
+    std::string usage;
+    if (!nbmc::cli::plan_sequence(o.input, o.output, o.input_format, o.frames, plan, usage)) {
+      std::fprintf(stderr, "nbmc: error: %s\n", usage.c_str());
+      return plan.usage_error ? 2 : 1;
+    }
+    if (plan.is_sequence) {
+      nbmc::cli::install_interrupt_handler();
+      return reconstruct_sequence(o, plan.frames);
+    }
+    o.step = plan.step;
     return reconstruct(o);
   } catch (const std::bad_alloc&) {
     std::fputs("nbmc: error: out of memory\n", stderr);

@@ -138,6 +138,11 @@ std::string format_report(const Report& r) {
   line("input", r.input_path + " (" + r.input_format + ", " + grouped(r.particle_count) + " particles)");
   line("output", r.output_path + " (" + r.output_format + ", " + grouped(s.vertex_count) + " vertices, " +
                      grouped(s.triangle_count) + " triangles" + (r.normals ? ", normals" : "") + ")");
+  if (!r.attributes.empty()) {
+    std::string names;
+    for (const std::string& a : r.attributes) names += (names.empty() ? "" : ", ") + a;
+    line("attributes", names + " (interpolated, " + printf_string("%.4f", r.interpolate_seconds) + " s)");
+  }
   line("backend", r.backend);
   line("method", std::string(method_name(r.params.method)) + ", " + field_name(r.params.field) + " field");
   line("spacing", printf_string("%g", r.params.spacing) + " (cell size " + printf_string("%g", s.cell_size) + ")");
@@ -187,6 +192,9 @@ std::string format_json(const Report& r) {
   o += "  \"output\": {\"path\": " + json_string(r.output_path) + ", \"format\": " + json_string(r.output_format) +
        ", \"normals\": " + (r.normals ? "true" : "false") + "},\n";
   o += "  \"backend\": " + json_string(r.backend) + ",\n";
+  o += "  \"attributes\": [";
+  for (std::size_t i = 0; i < r.attributes.size(); ++i) o += (i ? ", " : "") + json_string(r.attributes[i]);
+  o += "],\n";
 
   o += "  \"params\": {";
   o += "\"length_unit\": " + json_string(p.length_unit == NBMC_UNIT_ABSOLUTE ? "absolute" : "spacing");

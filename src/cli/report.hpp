@@ -7,6 +7,7 @@
 
 #include <cstdint>
 #include <string>
+#include <vector>
 
 namespace nbmc::cli {
 
@@ -21,6 +22,8 @@ struct Report {
   nbmc_params params{};  // as passed (spacing absolute)
   nbmc_stats stats{};    // of the reconstruction
   bool normals = false;  // the mesh has normals
+  std::vector<std::string> attributes; // interpolated onto the vertices
+  double interpolate_seconds = 0;
   double read_seconds = 0;
   double write_seconds = 0;
   double total_seconds = 0; // wall clock of the whole command

@@ -16,6 +16,50 @@
 namespace nbmc::io::detail {
 
 void fail(const std::string& name, const std::string& what) { throw Error(name + ": " + what); }
+void fail_io(const std::string& name, const std::string& what) { throw Error(name + ": " + what, Error::Kind::io); }
+void fail_arg(const std::string& name, const std::string& what) {
+  throw Error(name + ": " + what, Error::Kind::argument);
+}
+
+bool host_is_little_endian() {
+  const std::uint16_t one = 1;
+  unsigned char first = 0;
+  std::memcpy(&first, &one, 1);
+  return first == 1;
+}
+
+std::size_t scalar_size(Scalar t) {
+  switch (t) {
+  case Scalar::int8:
+  case Scalar::uint8: return 1;
+  case Scalar::int16:
+  case Scalar::uint16: return 2;
+  case Scalar::int32:
+  case Scalar::uint32:
+  case Scalar::float32: return 4;
+  case Scalar::int64:
+  case Scalar::uint64:
+  case Scalar::float64: return 8;
+  }
+  return 1;
+}
+
+double load_scalar(Scalar t, const unsigned char* base, std::size_t i, bool be) {
+  const unsigned char* p = base + i * scalar_size(t);
+  switch (t) {
+  case Scalar::int8: return static_cast<double>(static_cast<std::int8_t>(p[0]));
+  case Scalar::uint8: return static_cast<double>(p[0]);
+  case Scalar::int16: return static_cast<double>(load_as<std::int16_t>(p, be));
+  case Scalar::uint16: return static_cast<double>(load_as<std::uint16_t>(p, be));
+  case Scalar::int32: return static_cast<double>(load_as<std::int32_t>(p, be));
+  case Scalar::uint32: return static_cast<double>(load_as<std::uint32_t>(p, be));
+  case Scalar::int64: return static_cast<double>(load_as<std::int64_t>(p, be));
+  case Scalar::uint64: return static_cast<double>(load_as<std::uint64_t>(p, be));
+  case Scalar::float32: return static_cast<double>(load_as<float>(p, be));
+  case Scalar::float64: return load_as<double>(p, be);
+  }
+  return 0;
+}
 
 std::string to_lower(std::string s) {
   for (char& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
@@ -39,16 +83,16 @@ ByteReader::ByteReader(const std::string& path) : name_(path) {
   do {
     fd_ = ::open(path.c_str(), O_RDONLY | O_CLOEXEC);
   } while (fd_ < 0 && errno == EINTR);
-  if (fd_ < 0) fail(path, std::string("cannot open: ") + std::strerror(errno));
+  if (fd_ < 0) fail_io(path, std::string("cannot open: ") + std::strerror(errno));
   struct stat st {};
   if (::fstat(fd_, &st) != 0) {
     const int err = errno;
     ::close(fd_);
-    fail(path, std::string("cannot stat: ") + std::strerror(err));
+    fail_io(path, std::string("cannot stat: ") + std::strerror(err));
   }
   if (!S_ISREG(st.st_mode)) {
     ::close(fd_);
-    fail(path, S_ISDIR(st.st_mode) ? "is a directory" : "is not a regular file");
+    fail_io(path, S_ISDIR(st.st_mode) ? "is a directory" : "is not a regular file");
   }
   size_ = static_cast<std::uint64_t>(st.st_size);
   buffer_.resize(static_cast<std::size_t>(std::min<std::uint64_t>(size_ + 1, kFileBuffer)));
@@ -77,7 +121,7 @@ bool ByteReader::refill() {
       return true;
     }
     if (n == 0) return false;
-    if (errno != EINTR) fail(name_, std::string("read error: ") + std::strerror(errno));
+    if (errno != EINTR) fail_io(name_, std::string("read error: ") + std::strerror(errno));
   }
 }
 
@@ -103,6 +147,15 @@ std::uint64_t ByteReader::skip(std::uint64_t n) {
     done += k;
   }
   return done;
+}
+
+std::vector<unsigned char> ByteReader::read_rest() {
+  std::vector<unsigned char> out(static_cast<std::size_t>(remaining()));
+  const std::size_t got = read(out.data(), out.size());
+  if (got != out.size())
+    fail_io(name_, "file ends after " + std::to_string(tell()) + " of " + std::to_string(size_) +
+                       " bytes (did it change while being read?)");
+  return out;
 }
 
 // --------------------------------------------------------------------- PLY
@@ -172,18 +225,6 @@ bool parse_type(std::string_view s, PlyType& t) {
   return false;
 }
 
-// A header line shown in a message: at most 40 characters, non-printable
-// bytes replaced, so that a binary file does not garble the terminal.
-std::string printable(std::string_view s) {
-  std::string out;
-  for (std::size_t i = 0; i < s.size() && i < 40; ++i) {
-    const unsigned char c = static_cast<unsigned char>(s[i]);
-    out += (c >= 0x20 && c < 0x7f) ? static_cast<char>(c) : '?';
-  }
-  if (s.size() > 40) out += "...";
-  return out;
-}
-
 std::vector<std::string_view> split(std::string_view line) {
   std::vector<std::string_view> out;
   std::size_t i = 0;
@@ -217,14 +258,19 @@ bool read_line(ByteReader& in, std::string& line, std::uint64_t limit) {
   return true;
 }
 
-inline bool host_is_little_endian() {
-  const std::uint16_t one = 1;
-  unsigned char first = 0;
-  std::memcpy(&first, &one, 1);
-  return first == 1;
-}
-
 } // namespace
+
+// A header line shown in a message: at most 40 characters, non-printable
+// bytes replaced, so that a binary file does not garble the terminal.
+std::string printable(std::string_view s) {
+  std::string out;
+  for (std::size_t i = 0; i < s.size() && i < 40; ++i) {
+    const unsigned char c = static_cast<unsigned char>(s[i]);
+    out += (c >= 0x20 && c < 0x7f) ? static_cast<char>(c) : '?';
+  }
+  if (s.size() > 40) out += "...";
+  return out;
+}
 
 PlyHeader read_ply_header(ByteReader& in) {
   const std::string& name = in.name();

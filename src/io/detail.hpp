@@ -9,14 +9,46 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 #include <string>
 #include <string_view>
 #include <vector>
 
 namespace nbmc::io::detail {
 
-// Throws Error("<name>: <what>").
+// Throws Error("<name>: <what>") of kind format (malformed or unsupported
+// data), io (cannot open, read or write) or argument (bad request).
 [[noreturn]] void fail(const std::string& name, const std::string& what);
+[[noreturn]] void fail_io(const std::string& name, const std::string& what);
+[[noreturn]] void fail_arg(const std::string& name, const std::string& what);
+
+// At most 40 characters of s with non-printable bytes replaced by '?', for
+// quoting file content in messages.
+std::string printable(std::string_view s);
+
+bool host_is_little_endian();
+
+// Loads a value of type T stored in n = sizeof(T) bytes of the given byte
+// order.
+template <class T> T load_as(const unsigned char* src, bool big_endian) {
+  unsigned char b[sizeof(T)];
+  for (std::size_t i = 0; i < sizeof(T); ++i) b[i] = src[i];
+  if (big_endian == host_is_little_endian())
+    for (std::size_t i = 0; i < sizeof(T) / 2; ++i) {
+      const unsigned char t = b[i];
+      b[i] = b[sizeof(T) - 1 - i];
+      b[sizeof(T) - 1 - i] = t;
+    }
+  T v;
+  std::memcpy(&v, b, sizeof v);
+  return v;
+}
+
+// Numeric element types shared by the VTK readers.
+enum class Scalar { int8, uint8, int16, uint16, int32, uint32, int64, uint64, float32, float64 };
+std::size_t scalar_size(Scalar t);
+// Value i of an array of type t stored with the given byte order, as double.
+double load_scalar(Scalar t, const unsigned char* base, std::size_t i, bool big_endian);
 
 // Lower-case extension of path including the dot (".ply"), "" if none.
 std::string lower_extension(const std::string& path);
@@ -54,6 +86,11 @@ public:
   std::size_t read(void* dst, std::size_t n);
   // Skips up to n bytes; returns how many were skipped.
   std::uint64_t skip(std::uint64_t n);
+  // Reads everything left (remaining() bytes at most); for formats that are
+  // parsed in memory.
+  std::vector<unsigned char> read_rest();
+  // The memory block of a memory reader (null for a file reader).
+  const unsigned char* memory() const { return fd_ < 0 ? begin_ : nullptr; }
 
 private:
   bool refill();

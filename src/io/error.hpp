@@ -10,17 +10,25 @@ namespace nbmc::io {
 
 // Thrown by every reader and writer of nbmc::io. what() names the file and
 // what is wrong with it ("frame.ply: header says 1000 vertices but the file
-// ends after 10").
+// ends after 10"). kind() tells a malformed or unsupported file (format) from
+// a file that cannot be opened, read or written (io) and from a bad request
+// such as an unknown format name (argument); the C API maps them to
+// NBMC_ERROR_FORMAT, NBMC_ERROR_IO and NBMC_ERROR_INVALID_ARGUMENT.
 class Error : public std::runtime_error {
 public:
-  using std::runtime_error::runtime_error;
+  enum class Kind { format, io, argument };
+  explicit Error(const std::string& what, Kind kind = Kind::format) : std::runtime_error(what), kind_(kind) {}
+  Kind kind() const noexcept { return kind_; }
+
+private:
+  Kind kind_;
 };
 
 // Thrown by a writer whose cancellation check returned true; the destination
 // is left untouched.
 class Cancelled : public Error {
 public:
-  using Error::Error;
+  explicit Cancelled(const std::string& what) : Error(what, Kind::io) {}
 };
 
 } // namespace nbmc::io

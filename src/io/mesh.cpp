@@ -2,11 +2,15 @@
 #include "io/mesh.hpp"
 
 #include "io/detail.hpp"
+#include "io/readers.hpp"
 
 #include <algorithm>
 #include <atomic>
 #include <cerrno>
 #include <charconv>
+#include <cctype>
+#include <climits>
+#include <cmath>
 #include <cstdio>
 #include <cstring>
 
@@ -51,7 +55,7 @@ public:
     const std::size_t slash = path.find_last_of('/');
     const std::string dir = slash == std::string::npos ? std::string() : path.substr(0, slash + 1);
     std::string base = slash == std::string::npos ? path : path.substr(slash + 1);
-    if (base.empty()) fail(path, "the output path names a folder, not a file");
+    if (base.empty()) detail::fail_io(path, "the output path names a folder, not a file");
     if (base.size() > 180) base.resize(180); // keep the temporary name under NAME_MAX
     static std::atomic<unsigned> serial{0};
     for (int attempt = 0; attempt < 100; ++attempt) {
@@ -62,7 +66,7 @@ public:
       if (fd_ >= 0) return;
       if (errno != EEXIST) break;
     }
-    fail(path, std::string("cannot create a temporary file in ") + (dir.empty() ? "." : dir) + ": " +
+    detail::fail_io(path, std::string("cannot create a temporary file in ") + (dir.empty() ? "." : dir) + ": " +
                    std::strerror(errno));
   }
   ~AtomicFile() {
@@ -77,7 +81,7 @@ public:
       const ssize_t k = ::write(fd_, data, n);
       if (k < 0) {
         if (errno == EINTR) continue;
-        fail(path_, std::string("write error: ") + std::strerror(errno));
+        detail::fail_io(path_, std::string("write error: ") + std::strerror(errno));
       }
       data += k;
       n -= static_cast<std::size_t>(k);
@@ -87,9 +91,9 @@ public:
   void commit() {
     const int fd = fd_;
     fd_ = -1;
-    if (::close(fd) != 0) fail(path_, std::string("write error: ") + std::strerror(errno));
+    if (::close(fd) != 0) detail::fail_io(path_, std::string("write error: ") + std::strerror(errno));
     if (::rename(tmp_.c_str(), path_.c_str()) != 0)
-      fail(path_, std::string("cannot replace the file: ") + std::strerror(errno));
+      detail::fail_io(path_, std::string("cannot replace the file: ") + std::strerror(errno));
     committed_ = true;
   }
 
@@ -142,12 +146,32 @@ private:
 
 void check(const std::string& path, const MeshView& m) {
   if (m.vertex_count > 0 && !m.positions) fail(path, "mesh has vertices but no positions");
+  if (m.attribute_count > 0 && !m.attributes) fail(path, "mesh has attributes but no attribute array");
+  for (std::size_t a = 0; a < m.attribute_count; ++a) {
+    const Attribute& at = m.attributes[a];
+    if (at.components != 1 && at.components != 3)
+      fail(path, "attribute '" + at.name + "' has " + std::to_string(at.components) + " components (1 or 3)");
+    if (at.values.size() != static_cast<std::size_t>(m.vertex_count) * static_cast<std::size_t>(at.components))
+      fail(path, "attribute '" + at.name + "' has " + std::to_string(at.values.size()) + " values for " +
+                     std::to_string(m.vertex_count) + " vertices");
+    if (at.name.empty()) fail(path, "an attribute has no name");
+  }
   if (m.triangle_count > 0 && !m.triangles) fail(path, "mesh has triangles but no index array");
   const std::uint64_t n = 3 * m.triangle_count;
   for (std::uint64_t i = 0; i < n; ++i)
     if (m.triangles[i] >= m.vertex_count)
       fail(path, "triangle " + std::to_string(i / 3) + " refers to vertex " + std::to_string(m.triangles[i]) +
                      " but the mesh has " + std::to_string(m.vertex_count) + " vertices");
+}
+
+// An attribute name usable as a PLY property or a legacy VTK array name.
+std::string safe_name(const std::string& s) {
+  std::string out;
+  for (char c : s) {
+    const unsigned char u = static_cast<unsigned char>(c);
+    out += (u > 0x20 && u < 0x7f) ? c : '_';
+  }
+  return out.empty() ? std::string("attribute") : out;
 }
 
 void put_floats(char* dst, const float* src, std::size_t n, bool swap) {
@@ -162,15 +186,52 @@ void write_ply(Output& out, const MeshView& m) {
   h += "element vertex " + std::to_string(m.vertex_count) + "\n";
   h += "property float x\nproperty float y\nproperty float z\n";
   if (normals) h += "property float nx\nproperty float ny\nproperty float nz\n";
+  std::size_t extra = 0;
+  std::vector<std::string> taken = {"x", "y", "z", "nx", "ny", "nz"};
+  for (std::size_t a = 0; a < m.attribute_count; ++a) {
+    const Attribute& at = m.attributes[a];
+    std::string nm = safe_name(at.name);
+    // Property names must be unique within the element.
+    const auto clash = [&](const std::string& n) {
+      for (const char* suffix : {"", "_x", "_y", "_z"})
+        if (std::find(taken.begin(), taken.end(), n + suffix) != taken.end()) return true;
+      return false;
+    };
+    while (clash(nm)) nm += "_";
+    if (at.components == 1) {
+      taken.push_back(nm);
+    } else {
+      for (const char* suffix : {"_x", "_y", "_z"}) taken.push_back(nm + suffix);
+    }
+    if (at.components == 1)
+      h += "property float " + nm + "\n";
+    else
+      h += "property float " + nm + "_x\nproperty float " + nm + "_y\nproperty float " + nm + "_z\n";
+    extra += static_cast<std::size_t>(at.components);
+  }
   h += "element face " + std::to_string(m.triangle_count) + "\n";
   h += "property list uchar uint vertex_indices\nend_header\n";
   out.put(h);
   const bool swap = !host_is_little_endian();
+  std::vector<float> values(extra);
   for (std::uint64_t i = 0; i < m.vertex_count; ++i) {
     char* p = out.room(24);
     put_floats(p, m.positions + 3 * i, 3, swap);
     if (normals) put_floats(p + 12, m.normals + 3 * i, 3, swap);
     out.advance(normals ? 24 : 12);
+    if (extra) {
+      std::size_t k = 0;
+      for (std::size_t a = 0; a < m.attribute_count; ++a) {
+        const Attribute& at = m.attributes[a];
+        const std::size_t c = static_cast<std::size_t>(at.components);
+        for (std::size_t j = 0; j < c; ++j) values[k++] = static_cast<float>(at.values[i * c + j]);
+      }
+      for (std::size_t off = 0; off < extra; off += 32) {
+        const std::size_t n = std::min<std::size_t>(32, extra - off);
+        put_floats(out.room(4 * n), values.data() + off, n, swap);
+        out.advance(4 * n);
+      }
+    }
   }
   for (std::uint64_t i = 0; i < m.triangle_count; ++i) {
     char* p = out.room(13);
@@ -332,20 +393,325 @@ Mesh parse_ply(ByteReader& in) {
   return mesh;
 }
 
+// ------------------------------------------------------------ legacy VTK
+// Appends n floats in big-endian order (legacy VTK binary data).
+void put_floats_be(Output& out, const float* src, std::size_t n) {
+  const bool swap = host_is_little_endian();
+  for (std::size_t off = 0; off < n; off += 64) {
+    const std::size_t k = std::min<std::size_t>(64, n - off);
+    put_floats(out.room(4 * k), src + off, k, swap);
+    out.advance(4 * k);
+  }
+}
+
+void put_i32_be(char* p, std::int32_t v) {
+  std::uint32_t u = static_cast<std::uint32_t>(v);
+  for (int i = 3; i >= 0; --i) {
+    p[i] = static_cast<char>(u & 0xff);
+    u >>= 8;
+  }
+}
+
+void write_vtk(Output& out, const std::string& path, const MeshView& m) {
+  if (m.triangle_count > (std::uint64_t(INT32_MAX) / 4) || m.vertex_count > std::uint64_t(INT32_MAX))
+    fail(path, "mesh too large for legacy VTK (32-bit cell lists); write .vtu instead");
+  std::string h = "# vtk DataFile Version 4.2\nwritten by nbmc\nBINARY\nDATASET POLYDATA\n";
+  h += "POINTS " + std::to_string(m.vertex_count) + " float\n";
+  out.put(h);
+  put_floats_be(out, m.positions, static_cast<std::size_t>(3 * m.vertex_count));
+  out.put("\nPOLYGONS " + std::to_string(m.triangle_count) + " " + std::to_string(4 * m.triangle_count) + "\n");
+  for (std::uint64_t i = 0; i < m.triangle_count; ++i) {
+    char* p = out.room(16);
+    put_i32_be(p, 3);
+    for (int k = 0; k < 3; ++k) put_i32_be(p + 4 + 4 * k, static_cast<std::int32_t>(m.triangles[3 * i + k]));
+    out.advance(16);
+  }
+  out.put("\n");
+  if (!m.normals && m.attribute_count == 0) return;
+  out.put("POINT_DATA " + std::to_string(m.vertex_count) + "\n");
+  if (m.normals) {
+    out.put("NORMALS Normals float\n");
+    put_floats_be(out, m.normals, static_cast<std::size_t>(3 * m.vertex_count));
+    out.put("\n");
+  }
+  std::vector<float> tmp;
+  for (std::size_t a = 0; a < m.attribute_count; ++a) {
+    const Attribute& at = m.attributes[a];
+    const std::string nm = safe_name(at.name);
+    if (at.components == 1)
+      out.put("SCALARS " + nm + " float 1\nLOOKUP_TABLE default\n");
+    else
+      out.put("VECTORS " + nm + " float\n");
+    tmp.assign(at.values.begin(), at.values.end());
+    put_floats_be(out, tmp.data(), tmp.size());
+    out.put("\n");
+  }
+}
+
+// ---------------------------------------------------------------- VTU
+std::string xml_escape(const std::string& s) {
+  std::string out;
+  for (char c : s) {
+    switch (c) {
+    case '<': out += "&lt;"; break;
+    case '>': out += "&gt;"; break;
+    case '&': out += "&amp;"; break;
+    case '"': out += "&quot;"; break;
+    default: {
+      const unsigned char u = static_cast<unsigned char>(c);
+      out += (u < 0x20) ? '_' : c;
+    }
+    }
+  }
+  return out;
+}
+
+void put_u64_le(Output& out, std::uint64_t v) {
+  char b[8];
+  for (int i = 0; i < 8; ++i) b[i] = static_cast<char>((v >> (8 * i)) & 0xff);
+  out.put(b, 8);
+}
+
+void write_vtu(Output& out, const MeshView& m) {
+  const std::uint64_t nv = m.vertex_count, nt = m.triangle_count;
+  // Appended blocks in order: points, normals, attributes, connectivity,
+  // offsets, types; each is a UInt64 byte count and the little-endian data.
+  std::uint64_t offset = 0;
+  const auto array = [&](const std::string& name, const char* type, int comps, std::uint64_t bytes) {
+    std::string a = "        <DataArray type=\"" + std::string(type) + "\"";
+    if (!name.empty()) a += " Name=\"" + xml_escape(name) + "\"";
+    if (comps != 1) a += " NumberOfComponents=\"" + std::to_string(comps) + "\"";
+    a += " format=\"appended\" offset=\"" + std::to_string(offset) + "\"/>\n";
+    offset += 8 + bytes;
+    return a;
+  };
+  // Points come after the point data in the XML, but their block is first
+  // in the appended section: the offsets follow the block order.
+  std::string points = "      <Points>\n";
+  points += array("Points", "Float32", 3, 12 * nv);
+  points += "      </Points>\n";
+  std::string pdata;
+  if (m.normals || m.attribute_count) {
+    pdata = "      <PointData";
+    if (m.normals) pdata += " Normals=\"Normals\"";
+    pdata += ">\n";
+    if (m.normals) pdata += array("Normals", "Float32", 3, 12 * nv);
+    for (std::size_t a = 0; a < m.attribute_count; ++a)
+      pdata += array(m.attributes[a].name, "Float32", m.attributes[a].components,
+                     4 * nv * static_cast<std::uint64_t>(m.attributes[a].components));
+    pdata += "      </PointData>\n";
+  }
+  // (One statement each: the offsets depend on the order of the calls.)
+  std::string cells = "      <Cells>\n";
+  cells += array("connectivity", "Int64", 1, 24 * nt);
+  cells += array("offsets", "Int64", 1, 8 * nt);
+  cells += array("types", "UInt8", 1, nt);
+  cells += "      </Cells>\n";
+  std::string head = "<?xml version=\"1.0\"?>\n<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" "
+                     "byte_order=\"LittleEndian\" header_type=\"UInt64\">\n  <UnstructuredGrid>\n";
+  head += "    <Piece NumberOfPoints=\"" + std::to_string(nv) + "\" NumberOfCells=\"" + std::to_string(nt) + "\">\n";
+  head += pdata + points + cells;
+  head += "    </Piece>\n  </UnstructuredGrid>\n  <AppendedData encoding=\"raw\">\n   _";
+  out.put(head);
+
+  const bool swap = !host_is_little_endian();
+  const auto floats = [&](const float* src, std::size_t n) {
+    for (std::size_t off = 0; off < n; off += 64) {
+      const std::size_t k = std::min<std::size_t>(64, n - off);
+      put_floats(out.room(4 * k), src + off, k, swap);
+      out.advance(4 * k);
+    }
+  };
+  put_u64_le(out, 12 * nv);
+  floats(m.positions, static_cast<std::size_t>(3 * nv));
+  if (m.normals) {
+    put_u64_le(out, 12 * nv);
+    floats(m.normals, static_cast<std::size_t>(3 * nv));
+  }
+  std::vector<float> tmp;
+  for (std::size_t a = 0; a < m.attribute_count; ++a) {
+    const Attribute& at = m.attributes[a];
+    put_u64_le(out, 4 * nv * static_cast<std::uint64_t>(at.components));
+    tmp.assign(at.values.begin(), at.values.end());
+    floats(tmp.data(), tmp.size());
+  }
+  put_u64_le(out, 24 * nt);
+  for (std::uint64_t i = 0; i < 3 * nt; ++i) {
+    char* p = out.room(8);
+    const std::uint64_t v = m.triangles[i];
+    for (int b = 0; b < 8; ++b) p[b] = static_cast<char>((v >> (8 * b)) & 0xff);
+    out.advance(8);
+  }
+  put_u64_le(out, 8 * nt);
+  for (std::uint64_t i = 0; i < nt; ++i) {
+    char* p = out.room(8);
+    const std::uint64_t v = 3 * (i + 1);
+    for (int b = 0; b < 8; ++b) p[b] = static_cast<char>((v >> (8 * b)) & 0xff);
+    out.advance(8);
+  }
+  put_u64_le(out, nt);
+  for (std::uint64_t i = 0; i < nt; ++i) {
+    *out.room(1) = 5; // VTK_TRIANGLE
+    out.advance(1);
+  }
+  out.put("\n  </AppendedData>\n</VTKFile>\n");
+}
+
+// ---------------------------------------------------------------- glTF
+std::string json_float(float v) {
+  if (!std::isfinite(v)) return "0";
+  char buf[32];
+  const auto r = std::to_chars(buf, buf + sizeof buf, v);
+  return std::string(buf, r.ptr);
+}
+
+void put_u32_le(char* p, std::uint32_t v) {
+  for (int i = 0; i < 4; ++i) p[i] = static_cast<char>((v >> (8 * i)) & 0xff);
+}
+
+void write_glb(Output& out, const std::string& path, const MeshView& m) {
+  const std::uint64_t nv = m.vertex_count, nt = m.triangle_count;
+  // Buffer layout: positions, normals, attributes, indices (all 4-byte aligned).
+  struct View {
+    std::uint64_t offset, length;
+    int target; // 34962 ARRAY_BUFFER, 34963 ELEMENT_ARRAY_BUFFER
+  };
+  std::vector<View> views;
+  std::uint64_t bin = 0;
+  const auto add_view = [&](std::uint64_t len, int target) {
+    views.push_back({bin, len, target});
+    bin += len;
+    return views.size() - 1;
+  };
+  std::string attrs, accessors;
+  std::size_t accessor_count = 0;
+  const auto add_accessor = [&](std::size_t view, int comp_type, std::uint64_t count, const char* type,
+                                const std::string& extra) {
+    if (accessor_count) accessors += ",";
+    accessors += "{\"bufferView\":" + std::to_string(view) + ",\"componentType\":" + std::to_string(comp_type) +
+                 ",\"count\":" + std::to_string(count) + ",\"type\":\"" + type + "\"" + extra + "}";
+    return accessor_count++;
+  };
+  std::string json = "{\"asset\":{\"version\":\"2.0\",\"generator\":\"nbmc\"},\"scene\":0,";
+  if (nv == 0) {
+    json += "\"scenes\":[{\"nodes\":[]}]}";
+  } else {
+    if (nv > UINT32_MAX) fail(path, "too many vertices for glTF");
+    float lo[3], hi[3];
+    for (int a = 0; a < 3; ++a) lo[a] = hi[a] = m.positions[a];
+    for (std::uint64_t i = 0; i < nv; ++i)
+      for (int a = 0; a < 3; ++a) {
+        const float v = m.positions[3 * i + static_cast<std::uint64_t>(a)];
+        if (!std::isfinite(v)) fail(path, "vertex " + std::to_string(i) + " is not finite (glTF needs finite positions)");
+        lo[a] = std::min(lo[a], v);
+        hi[a] = std::max(hi[a], v);
+      }
+    const std::string mm = ",\"min\":[" + json_float(lo[0]) + "," + json_float(lo[1]) + "," + json_float(lo[2]) +
+                           "],\"max\":[" + json_float(hi[0]) + "," + json_float(hi[1]) + "," + json_float(hi[2]) + "]";
+    attrs += "\"POSITION\":" + std::to_string(add_accessor(add_view(12 * nv, 34962), 5126, nv, "VEC3", mm));
+    if (m.normals)
+      attrs += ",\"NORMAL\":" + std::to_string(add_accessor(add_view(12 * nv, 34962), 5126, nv, "VEC3", ""));
+    std::vector<std::string> used;
+    for (std::size_t a = 0; a < m.attribute_count; ++a) {
+      const Attribute& at = m.attributes[a];
+      std::string sem = "_";
+      for (char c : at.name) {
+        const unsigned char u = static_cast<unsigned char>(c);
+        sem += std::isalnum(u) ? static_cast<char>(std::toupper(u)) : '_';
+      }
+      while (std::find(used.begin(), used.end(), sem) != used.end()) sem += "_";
+      used.push_back(sem);
+      const std::size_t view = add_view(4 * nv * static_cast<std::uint64_t>(at.components), 34962);
+      attrs += ",\"" + sem + "\":" +
+               std::to_string(add_accessor(view, 5126, nv, at.components == 1 ? "SCALAR" : "VEC3", ""));
+    }
+    std::string prim = "{\"attributes\":{" + attrs + "}";
+    if (nt > 0) {
+      if (3 * nt > UINT32_MAX) fail(path, "too many triangles for glTF");
+      prim += ",\"indices\":" + std::to_string(add_accessor(add_view(12 * nt, 34963), 5125, 3 * nt, "SCALAR", "")) +
+              ",\"mode\":4}";
+    } else {
+      prim += ",\"mode\":0}";
+    }
+    json += "\"scenes\":[{\"nodes\":[0]}],\"nodes\":[{\"mesh\":0}],\"meshes\":[{\"primitives\":[" + prim + "]}],";
+    json += "\"buffers\":[{\"byteLength\":" + std::to_string(bin) + "}],\"bufferViews\":[";
+    for (std::size_t i = 0; i < views.size(); ++i) {
+      if (i) json += ",";
+      json += "{\"buffer\":0,\"byteOffset\":" + std::to_string(views[i].offset) +
+              ",\"byteLength\":" + std::to_string(views[i].length) + ",\"target\":" + std::to_string(views[i].target) +
+              "}";
+    }
+    json += "],\"accessors\":[" + accessors + "]}";
+  }
+  while (json.size() % 4) json += ' ';
+  const std::uint64_t total = 12 + 8 + json.size() + (bin ? 8 + bin : 0);
+  if (total > UINT32_MAX) fail(path, "mesh too large for one .glb file (4 GiB)");
+  char head[20];
+  std::memcpy(head, "glTF", 4);
+  put_u32_le(head + 4, 2);
+  put_u32_le(head + 8, static_cast<std::uint32_t>(total));
+  put_u32_le(head + 12, static_cast<std::uint32_t>(json.size()));
+  std::memcpy(head + 16, "JSON", 4);
+  out.put(head, 20);
+  out.put(json);
+  if (!bin) return;
+  char chunk[8];
+  put_u32_le(chunk, static_cast<std::uint32_t>(bin));
+  std::memcpy(chunk + 4, "BIN\0", 4);
+  out.put(chunk, 8);
+  const bool swap = !host_is_little_endian();
+  const auto floats = [&](const float* src, std::size_t n) {
+    for (std::size_t off = 0; off < n; off += 64) {
+      const std::size_t k = std::min<std::size_t>(64, n - off);
+      put_floats(out.room(4 * k), src + off, k, swap);
+      out.advance(4 * k);
+    }
+  };
+  floats(m.positions, static_cast<std::size_t>(3 * nv));
+  if (m.normals) {
+    // glTF requires unit normals: normalise, and give degenerate ones +z.
+    for (std::uint64_t i = 0; i < nv; ++i) {
+      float n[3] = {m.normals[3 * i], m.normals[3 * i + 1], m.normals[3 * i + 2]};
+      const double len = std::sqrt(double(n[0]) * n[0] + double(n[1]) * n[1] + double(n[2]) * n[2]);
+      if (std::isfinite(len) && len > 1e-30) {
+        for (float& c : n) c = static_cast<float>(c / len);
+      } else {
+        n[0] = n[1] = 0;
+        n[2] = 1;
+      }
+      put_floats(out.room(12), n, 3, swap);
+      out.advance(12);
+    }
+  }
+  std::vector<float> tmp;
+  for (std::size_t a = 0; a < m.attribute_count; ++a) {
+    tmp.assign(m.attributes[a].values.begin(), m.attributes[a].values.end());
+    floats(tmp.data(), tmp.size());
+  }
+  for (std::uint64_t i = 0; i < 3 * nt; ++i) {
+    put_u32_le(out.room(4), m.triangles[i]);
+    out.advance(4);
+  }
+}
+
 } // namespace
 
 std::string mesh_format(const std::string& path, const std::string& format) {
+  static const char* kSupported = "supported: .ply, .obj, .vtk, .vtu, .glb";
   if (!format.empty()) {
     std::string f = detail::to_lower(format);
     if (!f.empty() && f[0] == '.') f.erase(0, 1);
-    if (f == "ply" || f == "obj") return f;
-    fail(path, "unknown mesh format '" + format + "' (supported: ply, obj)");
+    if (f == "ply" || f == "obj" || f == "vtk" || f == "vtu" || f == "glb") return f;
+    detail::fail_arg(path, "unknown mesh format '" + format + "' (supported: ply, obj, vtk, vtu, glb)");
   }
   const std::string ext = detail::lower_extension(path);
   if (ext == ".ply") return "ply";
   if (ext == ".obj") return "obj";
-  if (ext.empty()) fail(path, "no file extension to tell the mesh format (supported: .ply, .obj)");
-  fail(path, "unknown mesh extension '" + ext + "' (supported: .ply, .obj)");
+  if (ext == ".vtk") return "vtk";
+  if (ext == ".vtu") return "vtu";
+  if (ext == ".glb") return "glb";
+  if (ext.empty()) fail(path, std::string("no file extension to tell the mesh format (") + kSupported + ")");
+  fail(path, "unknown mesh extension '" + ext + "' (" + kSupported + ")");
 }
 
 void write_mesh(const std::string& path, const MeshView& m, const std::string& format,
@@ -356,10 +722,71 @@ void write_mesh(const std::string& path, const MeshView& m, const std::string& f
   Output out(file, path, cancelled);
   if (f == "ply")
     write_ply(out, m);
-  else
+  else if (f == "obj")
     write_obj(out, m);
+  else if (f == "vtk")
+    write_vtk(out, path, m);
+  else if (f == "vtu")
+    write_vtu(out, m);
+  else
+    write_glb(out, path, m);
   out.flush();
   file.commit();
+}
+
+namespace {
+Mesh mesh_from(Particles&& p, std::vector<std::uint32_t>&& tris) {
+  Mesh m;
+  m.positions.assign(p.xyz.begin(), p.xyz.end());
+  m.triangles = std::move(tris);
+  for (Attribute& a : p.attributes) {
+    if (a.name == "Normals" && a.components == 3 && m.normals.empty())
+      m.normals.assign(a.values.begin(), a.values.end());
+    else
+      m.attributes.push_back(std::move(a));
+  }
+  return m;
+}
+
+Mesh parse_mesh_any(ByteReader& in, const std::string& f) {
+  std::vector<std::uint32_t> tris;
+  ReadOptions o;
+  if (f == "ply") return parse_ply(in);
+  if (f == "vtk") {
+    Particles p = detail::read_vtk_legacy(in, o, &tris);
+    return mesh_from(std::move(p), std::move(tris));
+  }
+  if (f == "vtu" || f == "vtp") {
+    std::vector<unsigned char> all;
+    const unsigned char* mem = in.memory();
+    if (!mem) {
+      all = in.read_rest();
+      mem = all.data();
+    }
+    Particles p = detail::read_vtk_xml(mem, static_cast<std::size_t>(in.size()), in.name(), o, &tris);
+    return mesh_from(std::move(p), std::move(tris));
+  }
+  detail::fail_arg(in.name(), "cannot read meshes in format '" + f + "' (ply, vtk, vtu, vtp)");
+}
+
+std::string mesh_read_format(const std::string& path, const std::string& format) {
+  std::string f = format.empty() ? detail::lower_extension(path) : detail::to_lower(format);
+  if (!f.empty() && f[0] == '.') f.erase(0, 1);
+  if (f == "ply" || f == "vtk" || f == "vtu" || f == "vtp") return f;
+  detail::fail_arg(path, "cannot read meshes in format '" + f + "' (ply, vtk, vtu, vtp)");
+}
+} // namespace
+
+Mesh read_mesh(const std::string& path, const std::string& format) {
+  const std::string f = mesh_read_format(path, format);
+  ByteReader in(path);
+  return parse_mesh_any(in, f);
+}
+
+Mesh parse_mesh(const void* data, std::size_t size, const std::string& format, const std::string& name) {
+  const std::string f = mesh_read_format(name, format);
+  ByteReader in(data, size, name);
+  return parse_mesh_any(in, f);
 }
 
 Mesh read_mesh_ply(const std::string& path) {

@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
-// nbmc::io — triangle mesh writers (binary PLY, Wavefront OBJ) and a reader
-// for PLY meshes such as the ones written here.
+// nbmc::io — triangle mesh writers (binary PLY, Wavefront OBJ, legacy VTK,
+// VTK XML .vtu, glTF 2.0 binary .glb) and readers for the PLY, VTK and VTU
+// meshes written here.
 //
 // Writers create a temporary file next to the destination and rename it into
 // place once complete, so an interrupted or failed run never leaves a
@@ -10,6 +11,7 @@
 #ifndef NBMC_IO_MESH_HPP
 #define NBMC_IO_MESH_HPP
 
+#include "io/attributes.hpp"
 #include "io/error.hpp"
 
 #include <cstdint>
@@ -27,6 +29,12 @@ struct MeshView {
   const std::uint32_t* triangles = nullptr; // 3 * triangle_count, 0-based
   std::uint64_t vertex_count = 0;
   std::uint64_t triangle_count = 0;
+  // Per-vertex attributes (each with vertex_count items), written where the
+  // format allows: PLY (extra vertex properties; vectors as <name>_x, _y, _z),
+  // VTK and VTU (point data), glTF (custom attributes "_<NAME>"). OBJ has no
+  // place for them.
+  const Attribute* attributes = nullptr;
+  std::size_t attribute_count = 0;
 };
 
 // An owning mesh (what read_mesh_ply returns).
@@ -34,21 +42,31 @@ struct Mesh {
   std::vector<float> positions;
   std::vector<float> normals; // empty when the file has none
   std::vector<std::uint32_t> triangles;
+  std::vector<Attribute> attributes; // per vertex (VTK and VTU readers)
   std::uint64_t vertex_count() const { return positions.size() / 3; }
   std::uint64_t triangle_count() const { return triangles.size() / 3; }
   MeshView view() const;
 };
 
-// Writes m to path. format: "ply" (binary little-endian: vertex x y z
-// [nx ny nz] float, face "list uchar uint vertex_indices") or "obj" (v, vn,
-// f a//a b//b c//c, 1-based), case-insensitive, or "" to take it from the
-// extension of path. Triangle indices are checked against vertex_count.
+// Writes m to path. format, case-insensitive, or "" to take it from the
+// extension of path:
+//  - "ply": binary little-endian, vertex x y z [nx ny nz] [attributes] float,
+//    face "list uchar uint vertex_indices";
+//  - "obj": v, vn, f a//a b//b c//c (1-based); no attributes;
+//  - "vtk": legacy VTK 4.2 BINARY POLYDATA (big-endian): POINTS float,
+//    POLYGONS, POINT_DATA with NORMALS "Normals" and SCALARS / VECTORS;
+//  - "vtu": VTK XML UnstructuredGrid, raw appended data (UInt64 headers,
+//    uncompressed), Float32 points and point data, Int64 cells;
+//  - "glb": glTF 2.0 binary: POSITION (with min/max), NORMAL (unit length),
+//    UNSIGNED_INT indices, attributes as "_<NAME>" accessors.
+// Triangle indices are checked against vertex_count.
 // cancelled, when set, is polled while writing; if it returns true the
 // temporary file is removed and Cancelled is thrown.
 void write_mesh(const std::string& path, const MeshView& m, const std::string& format = "",
                 const std::function<bool()>& cancelled = {});
 
-// The format write_mesh would use: "ply" or "obj"; throws Error otherwise.
+// The format write_mesh would use: "ply", "obj", "vtk", "vtu" or "glb";
+// throws Error otherwise.
 std::string mesh_format(const std::string& path, const std::string& format = "");
 
 // Reads a triangle mesh from a PLY file (any of the three encodings): vertex
@@ -56,6 +74,13 @@ std::string mesh_format(const std::string& path, const std::string& format = "")
 // "vertex_index") of triangles only.
 Mesh read_mesh_ply(const std::string& path);
 Mesh parse_mesh_ply(const void* data, std::size_t size, const std::string& name = "<memory>");
+
+// Reads a triangle mesh with its point data from PLY, legacy VTK or VTK XML
+// (.vtu / .vtp); format as for write_mesh ("" = by extension). An array
+// "Normals" (3 components) becomes the normals; the other point data become
+// attributes (PLY: positions and normals only).
+Mesh read_mesh(const std::string& path, const std::string& format = "");
+Mesh parse_mesh(const void* data, std::size_t size, const std::string& format, const std::string& name = "<memory>");
 
 } // namespace nbmc::io
 

@@ -1,0 +1,110 @@
+// SPDX-License-Identifier: MIT
+// The File I/O section of include/nbmc.h: particle files into a context,
+// meshes to files, through the nbmc_io readers and writers. Nothing thrown
+// crosses the boundary.
+#include "nbmc.h"
+
+#include "context.hpp"
+#include "io/error.hpp"
+#include "io/mesh.hpp"
+#include "io/particles.hpp"
+
+#include <new>
+#include <string>
+
+namespace {
+
+thread_local std::string g_last_error;
+
+int32_t status_of(const nbmc::io::Error& e) {
+  switch (e.kind()) {
+  case nbmc::io::Error::Kind::io: return NBMC_ERROR_IO;
+  case nbmc::io::Error::Kind::argument: return NBMC_ERROR_INVALID_ARGUMENT;
+  case nbmc::io::Error::Kind::format: break;
+  }
+  return NBMC_ERROR_FORMAT;
+}
+
+// Records msg where the caller will look for it.
+int32_t fail(nbmc_context* ctx, int32_t status, const std::string& msg) {
+  try {
+    if (ctx)
+      ctx->last_error = msg;
+    else
+      g_last_error = msg;
+  } catch (...) {
+  }
+  return status;
+}
+
+// Runs f, mapping exceptions to a status and message.
+template <class F> int32_t guarded(nbmc_context* ctx, const char* fn, F&& f) {
+  try {
+    return f();
+  } catch (const nbmc::io::Error& e) {
+    return fail(ctx, status_of(e), std::string(fn) + ": " + e.what());
+  } catch (const std::bad_alloc&) {
+    return fail(ctx, NBMC_ERROR_OUT_OF_MEMORY, std::string(fn) + ": out of memory");
+  } catch (const std::exception& e) {
+    return fail(ctx, NBMC_ERROR_INTERNAL, std::string(fn) + ": internal error: " + e.what());
+  } catch (...) {
+    return fail(ctx, NBMC_ERROR_INTERNAL, std::string(fn) + ": internal error: unknown exception");
+  }
+}
+
+} // namespace
+
+extern "C" {
+
+int32_t nbmc_context_load_particles(nbmc_context* ctx, const char* path, const char* format, uint64_t* count_out) {
+  static const char* fn = "nbmc_context_load_particles";
+  if (count_out) *count_out = 0;
+  if (!ctx) {
+    g_last_error = std::string(fn) + ": ctx is NULL";
+    return NBMC_ERROR_INVALID_ARGUMENT;
+  }
+  ctx->last_error.clear();
+  return guarded(ctx, fn, [&]() -> int32_t {
+    ctx->particles.clear();
+    ctx->particles.shrink_to_fit();
+    if (!path) return fail(ctx, NBMC_ERROR_INVALID_ARGUMENT, std::string(fn) + ": path is NULL");
+    nbmc::io::ReadOptions o;
+    o.format = format ? format : "";
+    o.attributes = false;
+    nbmc::io::Particles p = nbmc::io::read_particles(path, o);
+    const uint64_t n = p.count();
+    // The upload path validates (NaN/Inf, count 0, size limits) and copies.
+    const int32_t st = nbmc_context_set_particles_f64(ctx, p.xyz.empty() ? nullptr : p.xyz.data(), n, 0);
+    if (st != NBMC_OK) {
+      std::string detail = ctx->last_error;
+      const std::string prefix = "nbmc_context_set_particles_f64: ";
+      if (detail.rfind(prefix, 0) == 0) detail.erase(0, prefix.size());
+      if (n == 0) detail = "the file holds no particles";
+      return fail(ctx, st, std::string(fn) + ": " + path + ": " + detail);
+    }
+    if (count_out) *count_out = n;
+    return NBMC_OK;
+  });
+}
+
+int32_t nbmc_mesh_write(const nbmc_mesh* mesh, const char* path, const char* format) {
+  static const char* fn = "nbmc_mesh_write";
+  g_last_error.clear();
+  if (!mesh) return fail(nullptr, NBMC_ERROR_INVALID_ARGUMENT, std::string(fn) + ": mesh is NULL");
+  if (!path) return fail(nullptr, NBMC_ERROR_INVALID_ARGUMENT, std::string(fn) + ": path is NULL");
+  return guarded(nullptr, fn, [&]() -> int32_t {
+    nbmc::io::MeshView v;
+    const nbmc::HostMesh& m = mesh->mesh;
+    v.vertex_count = m.positions.size() / 3;
+    v.triangle_count = m.triangles.size() / 3;
+    v.positions = m.positions.empty() ? nullptr : m.positions.data();
+    v.normals = m.normals.size() == m.positions.size() && !m.normals.empty() ? m.normals.data() : nullptr;
+    v.triangles = m.triangles.empty() ? nullptr : m.triangles.data();
+    nbmc::io::write_mesh(path, v, format ? format : "");
+    return NBMC_OK;
+  });
+}
+
+const char* nbmc_last_error(void) { return g_last_error.c_str(); }
+
+} // extern "C"

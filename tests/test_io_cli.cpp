@@ -1,0 +1,198 @@
+// SPDX-License-Identifier: MIT
+// The nbmc command with the formats of issue 4: numbered sequences, H5Part
+// steps, --frames, --resume, --attributes, --format, failed frames.
+#include "io/mesh.hpp"
+#include "io/particles.hpp"
+#include "nbmc.h"
+#include "nbmc_test.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include <sys/wait.h>
+#include <unistd.h>
+
+namespace fs = std::filesystem;
+
+namespace {
+
+const std::string kBinary = std::string(NBMC_BINARY_DIR) + "/src/cli/nbmc";
+const std::string kData = std::string(NBMC_SOURCE_DIR) + "/tests/data/";
+
+std::string quote(const std::string& s) {
+  std::string out = "'";
+  for (char c : s) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
+  return out + "'";
+}
+
+std::string slurp(const fs::path& p) {
+  std::ifstream f(p, std::ios::binary);
+  return std::string((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
+}
+
+bool contains(const std::string& h, const std::string& n) { return h.find(n) != std::string::npos; }
+
+struct Result {
+  int exit_code = -1;
+  std::string out, err;
+};
+
+class CliIo : public ::testing::Test {
+protected:
+  void SetUp() override {
+    if (!fs::exists(kBinary)) FAIL() << kBinary << " does not exist: build the nbmc_cli target first";
+    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+    dir_ = fs::temp_directory_path() / ("nbmc_test_cli_io_" + std::to_string(::getpid()) + "_" + info->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_ / "frames");
+  }
+  void TearDown() override {
+    std::error_code ec;
+    fs::remove_all(dir_, ec);
+  }
+  std::string path(const std::string& n) const { return (dir_ / n).string(); }
+  Result run(const std::string& args) const {
+    const fs::path out = dir_ / "stdout.txt", err = dir_ / "stderr.txt";
+    const std::string cmd = "cd " + quote(dir_.string()) + " && " + quote(kBinary) + " " + args + " >" +
+                            quote(out.string()) + " 2>" + quote(err.string()) + " </dev/null";
+    const int status = std::system(cmd.c_str());
+    Result r;
+    r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+    r.out = slurp(out);
+    r.err = slurp(err);
+    return r;
+  }
+  // A small sphere of particles as a raw .xyz frame.
+  void frame(const std::string& name, double radius) const {
+    const auto p = nbmc_test::sphere(0, 0, 0, radius, 0.1);
+    std::string bytes;
+    for (double v : p) {
+      const float f = static_cast<float>(v);
+      bytes.append(reinterpret_cast<const char*>(&f), 4);
+    }
+    std::ofstream(path(name), std::ios::binary) << bytes;
+  }
+  fs::path dir_;
+};
+
+} // namespace
+
+TEST_F(CliIo, NumberedFilesInNaturalOrder) {
+  frame("frames/fluid_1.xyz", 0.3);
+  frame("frames/fluid_2.xyz", 0.35);
+  frame("frames/fluid_10.xyz", 0.4);
+  std::ofstream(path("frames/fluid_x.xyz")) << "not a frame number";
+  const Result r = run("reconstruct 'frames/fluid_{}.xyz' -o 'out/s_{}.ply' --spacing 0.1 --progress always");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  for (const char* f : {"out/s_1.ply", "out/s_2.ply", "out/s_10.ply"}) {
+    ASSERT_TRUE(fs::exists(path(f))) << f;
+    EXPECT_GT(nbmc::io::read_mesh_ply(path(f)).triangle_count(), 0u) << f;
+  }
+  const std::size_t a = r.err.find("[1/3] frame 1:"), b = r.err.find("[2/3] frame 2:"), c = r.err.find("[3/3] frame 10:");
+  ASSERT_NE(a, std::string::npos) << r.err;
+  ASSERT_NE(b, std::string::npos) << r.err;
+  ASSERT_NE(c, std::string::npos) << r.err;
+  EXPECT_LT(a, b);
+  EXPECT_LT(b, c);
+  EXPECT_TRUE(contains(r.err, "frames/s")) << r.err;
+  EXPECT_TRUE(contains(r.err, "left")) << r.err;
+  EXPECT_TRUE(contains(r.out, "3 (3 written, 0 skipped, 0 failed)")) << r.out;
+}
+
+TEST_F(CliIo, AFailedFrameIsReportedAndTheRestGoOn) {
+  frame("frames/f_1.xyz", 0.3);
+  std::ofstream(path("frames/f_2.xyz")) << "1234567890123"; // 13 bytes
+  frame("frames/f_3.xyz", 0.3);
+  const Result r = run("reconstruct 'frames/f_{}.xyz' -o 'out/s_{}.vtk' --spacing 0.1 --json");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_TRUE(contains(r.err, "frame 2")) << r.err;
+  EXPECT_TRUE(contains(r.err, "f_2.xyz")) << r.err;
+  EXPECT_TRUE(fs::exists(path("out/s_1.vtk")));
+  EXPECT_FALSE(fs::exists(path("out/s_2.vtk")));
+  EXPECT_TRUE(fs::exists(path("out/s_3.vtk")));
+  EXPECT_TRUE(contains(r.out, "\"failed\": 1")) << r.out;
+  EXPECT_TRUE(contains(r.out, "\"written\": 2")) << r.out;
+}
+
+TEST_F(CliIo, ResumeAndFrames) {
+  for (int i = 0; i < 4; ++i) frame("frames/f_000" + std::to_string(i) + ".xyz", 0.3);
+  Result r = run("reconstruct 'frames/f_{}.xyz' -o 'out/s_{}.glb' --spacing 0.1 --frames 1:3:2 -q");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_FALSE(fs::exists(path("out/s_0000.glb")));
+  EXPECT_TRUE(fs::exists(path("out/s_0001.glb"))); // zero padding kept
+  EXPECT_FALSE(fs::exists(path("out/s_0002.glb")));
+  EXPECT_TRUE(fs::exists(path("out/s_0003.glb")));
+  r = run("reconstruct 'frames/f_{}.xyz' -o 'out/s_{}.glb' --spacing 0.1 --resume --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(contains(r.out, "\"skipped\": 2")) << r.out;
+  EXPECT_TRUE(contains(r.out, "\"written\": 2")) << r.out;
+  EXPECT_TRUE(fs::exists(path("out/s_0000.glb")));
+  // A frame asked for that does not exist fails on its own.
+  r = run("reconstruct 'frames/f_{}.xyz' -o 'out/t_{}.ply' --spacing 0.1 --frames 3:4 -q");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_TRUE(contains(r.err, "frame 4")) << r.err;
+  EXPECT_TRUE(fs::exists(path("out/t_0003.ply")));
+  EXPECT_EQ(run("reconstruct 'frames/f_{}.xyz' -o 'out/t_{}.ply' --spacing 0.1 --frames 3").exit_code, 2);
+  EXPECT_EQ(run("reconstruct 'frames/none_{}.xyz' -o 'out/t_{}.ply' --spacing 0.1").exit_code, 1);
+}
+
+TEST_F(CliIo, H5PartStepsWithAttributes) {
+  const std::string h5 = kData + "h5part_steps.h5part";
+  Result r = run("reconstruct " + quote(h5) + " -o 'out/h_{}.vtu' --spacing 0.1 --attributes rho,v --frames 0:1 -q");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_FALSE(fs::exists(path("out/h_2.vtu")));
+  for (int s = 0; s < 2; ++s) {
+    const std::string f = path("out/h_" + std::to_string(s) + ".vtu");
+    ASSERT_TRUE(fs::exists(f)) << f;
+    const nbmc::io::Mesh m = nbmc::io::read_mesh(f);
+    ASSERT_GT(m.vertex_count(), 0u);
+    const nbmc::io::Attribute* rho = nbmc::io::find_attribute(m.attributes, "rho");
+    const nbmc::io::Attribute* v = nbmc::io::find_attribute(m.attributes, "v");
+    ASSERT_NE(rho, nullptr);
+    ASSERT_NE(v, nullptr);
+    EXPECT_EQ(v->components, 3);
+    for (double x : rho->values) {
+      EXPECT_GE(x, 1000 - 1e-3);
+      EXPECT_LE(x, 1019 + 1e-3);
+    }
+  }
+  // Step 2 has no velocity: that frame fails, the others are written.
+  r = run("reconstruct " + quote(h5) + " -o 'out/g_{}.ply' --spacing 0.1 --attributes v -q");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_TRUE(contains(r.err, "no particle attribute 'v'")) << r.err;
+  EXPECT_TRUE(contains(r.err, "id (scalar), rho (scalar)")) << r.err;
+  EXPECT_TRUE(fs::exists(path("out/g_1.ply")));
+  EXPECT_FALSE(fs::exists(path("out/g_2.ply")));
+  // One output name: the first step, or the one --frames picks.
+  r = run("reconstruct " + quote(h5) + " -o single.ply --spacing 0.1 --frames 2:2 --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(contains(r.out, "\"format\": \"h5part\"")) << r.out;
+  EXPECT_EQ(run("reconstruct " + quote(h5) + " -o single.ply --spacing 0.1 --frames 0:2").exit_code, 2);
+}
+
+TEST_F(CliIo, FormatsAndUsageErrors) {
+  frame("one.xyz", 0.3);
+  // --format for a file without a telling extension.
+  fs::copy_file(kData + "legacy_poly_binary.vtk", path("cloud.dat"));
+  Result r = run("reconstruct cloud.dat --format vtk -o c.vtu --spacing 0.1 -q");
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  r = run("reconstruct cloud.dat --format VTK -o c.obj --spacing 0.1 --attributes density");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_TRUE(contains(r.err, "OBJ")) << r.err;
+  r = run("reconstruct cloud.dat --format vtk -o c.ply --spacing 0.1 --attributes pressure");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_TRUE(contains(r.err, "no particle attribute 'pressure'")) << r.err;
+  EXPECT_TRUE(contains(r.err, "velocity")) << r.err;
+  EXPECT_EQ(run("reconstruct 'f_{}.xyz' -o out.ply --spacing 0.1").exit_code, 2);
+  EXPECT_EQ(run("reconstruct one.xyz -o 'out_{}.ply' --spacing 0.1").exit_code, 2);
+  EXPECT_EQ(run("reconstruct one.xyz -o out.ply --spacing 0.1 --frames 1:2").exit_code, 2);
+  EXPECT_EQ(run("reconstruct one.xyz -o out.ply --spacing 0.1 --format stl").exit_code, 2);
+  r = run("reconstruct one.xyz -o out.vtk --spacing 0.1 --json");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(contains(r.out, "\"attributes\": []")) << r.out;
+  EXPECT_EQ(nbmc::io::read_mesh(path("out.vtk")).normals.size(), nbmc::io::read_mesh(path("out.vtk")).positions.size());
+}
