@@ -1,0 +1,199 @@
+// SPDX-License-Identifier: MIT
+//! Raw, hand-written declarations of the nbmc C ABI (`include/nbmc.h`).
+//!
+//! Everything here mirrors the header one to one: the opaque handles, the
+//! `#[repr(C)]` structs, every `NBMC_*` constant and every `nbmc_*` function.
+//! `tests/layout.rs` compiles a C program against the real header and checks
+//! sizes, field offsets, constant values and function signatures, so a change
+//! to the header that is not mirrored here fails `cargo test`.
+//!
+//! Use the `nbmc` crate for a safe API.
+#![allow(non_camel_case_types)]
+#![no_std]
+
+use core::ffi::{c_char, c_void};
+
+// ------------------------------------------------------------------ version
+pub const NBMC_VERSION_MAJOR: u32 = 0;
+pub const NBMC_VERSION_MINOR: u32 = 1;
+pub const NBMC_VERSION_PATCH: u32 = 0;
+pub const NBMC_VERSION: u32 = NBMC_VERSION_MAJOR * 10000 + NBMC_VERSION_MINOR * 100 + NBMC_VERSION_PATCH;
+
+// ------------------------------------------------------------------- status
+pub const NBMC_OK: i32 = 0;
+pub const NBMC_ERROR_INVALID_ARGUMENT: i32 = 1;
+pub const NBMC_ERROR_INVALID_PARTICLES: i32 = 2;
+pub const NBMC_ERROR_NO_PARTICLES: i32 = 3;
+pub const NBMC_ERROR_INVALID_PARAMETER: i32 = 4;
+pub const NBMC_ERROR_DOMAIN_TOO_LARGE: i32 = 5;
+pub const NBMC_ERROR_OUT_OF_MEMORY: i32 = 6;
+pub const NBMC_ERROR_BACKEND_UNAVAILABLE: i32 = 7;
+pub const NBMC_ERROR_IO: i32 = 8;
+pub const NBMC_ERROR_INTERNAL: i32 = 9;
+pub const NBMC_ERROR_MEMORY_BUDGET: i32 = 10;
+pub const NBMC_ERROR_CANCELLED: i32 = 11;
+pub const NBMC_ERROR_FORMAT: i32 = 12;
+
+// ---------------------------------------------------------------- constants
+pub const NBMC_BACKEND_AUTO: i32 = 0;
+pub const NBMC_BACKEND_SERIAL: i32 = 1;
+pub const NBMC_BACKEND_OPENMP: i32 = 2;
+pub const NBMC_BACKEND_CUDA: i32 = 3;
+
+pub const NBMC_METHOD_SSP07: i32 = 0;
+pub const NBMC_METHOD_ZB05: i32 = 1;
+
+pub const NBMC_FIELD_NARROW_BAND: i32 = 0;
+pub const NBMC_FIELD_DENSE: i32 = 1;
+pub const NBMC_FIELD_SCATTER: i32 = 2;
+
+/// Context flag: initialise Kokkos on the calling thread (see nbmc.h).
+pub const NBMC_CONTEXT_KOKKOS_ON_CALLING_THREAD: u32 = 1;
+
+pub const NBMC_UNIT_SPACING: i32 = 0;
+pub const NBMC_UNIT_ABSOLUTE: i32 = 1;
+
+pub const NBMC_STAGE_UPLOAD: i32 = 0;
+pub const NBMC_STAGE_NEIGHBOURHOOD: i32 = 1;
+pub const NBMC_STAGE_SURFACE_PARTICLES: i32 = 2;
+pub const NBMC_STAGE_BAND: i32 = 3;
+pub const NBMC_STAGE_FIELD: i32 = 4;
+pub const NBMC_STAGE_TRIANGULATION: i32 = 5;
+pub const NBMC_STAGE_OUTPUT: i32 = 6;
+pub const NBMC_STAGE_COUNT: i32 = 7;
+pub const NBMC_STAGE_SLOTS: usize = 16;
+
+// ------------------------------------------------------------- opaque types
+/// `nbmc_context`: never constructed in Rust, only pointed to.
+#[repr(C)]
+pub struct nbmc_context {
+    _opaque: [u8; 0],
+    // Not Send, Sync or Unpin: a raw handle carries no guarantees.
+    _marker: core::marker::PhantomData<(*mut u8, core::marker::PhantomPinned)>,
+}
+
+/// `nbmc_mesh`: never constructed in Rust, only pointed to.
+#[repr(C)]
+pub struct nbmc_mesh {
+    _opaque: [u8; 0],
+    _marker: core::marker::PhantomData<(*mut u8, core::marker::PhantomPinned)>,
+}
+
+// ------------------------------------------------------------------ structs
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct nbmc_context_desc {
+    pub struct_size: u32,
+    pub backend: i32,
+    pub num_threads: i32,
+    pub device_id: i32,
+    pub flags: u32,
+    pub reserved0: u32,
+}
+
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct nbmc_params {
+    pub struct_size: u32,
+    pub length_unit: i32,
+    pub spacing: f64,
+    pub cell_size: f64,
+    pub influence_radius: f64,
+    pub band_width: f64,
+    pub surface_radius: f64,
+    pub iso_radius: f64,
+    pub method: i32,
+    pub field: i32,
+    pub t_low: f64,
+    pub t_high: f64,
+    pub color_threshold: f64,
+    pub neighbour_threshold: i32,
+    pub compute_normals: i32,
+    pub use_bbox: i32,
+    pub reserved0: i32,
+    pub bbox_min: [f64; 3],
+    pub bbox_max: [f64; 3],
+}
+
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct nbmc_stats {
+    pub struct_size: u32,
+    pub reserved0: u32,
+    pub particle_count: u64,
+    pub surface_particle_count: u64,
+    pub occupied_cell_count: u64,
+    pub band_vertex_count: u64,
+    pub band_block_count: u64,
+    pub grid_vertex_count: u64,
+    pub triangulated_cell_count: u64,
+    pub vertex_count: u64,
+    pub triangle_count: u64,
+    pub grid_dims: [u64; 3],
+    pub peak_memory_bytes: u64,
+    pub neighbour_evaluations: u64,
+    pub stage_seconds: [f64; NBMC_STAGE_SLOTS],
+    pub total_seconds: f64,
+    pub grid_origin: [f64; 3],
+    pub cell_size: f64,
+}
+
+/// `int32_t (*)(void* user, int32_t stage, double fraction)`; `None` is NULL.
+/// The callback must not unwind: catch panics before returning to C.
+pub type nbmc_progress_fn = Option<unsafe extern "C" fn(user: *mut c_void, stage: i32, fraction: f64) -> i32>;
+
+// ---------------------------------------------------------------- functions
+extern "C" {
+    // version
+    pub fn nbmc_version() -> u32;
+    pub fn nbmc_version_string() -> *const c_char;
+    pub fn nbmc_status_string(status: i32) -> *const c_char;
+    pub fn nbmc_stage_name(stage: i32) -> *const c_char;
+    pub fn nbmc_backend_available(backend: i32) -> i32;
+
+    // context
+    pub fn nbmc_context_desc_init(desc: *mut nbmc_context_desc);
+    pub fn nbmc_context_create(desc: *const nbmc_context_desc, out: *mut *mut nbmc_context) -> i32;
+    pub fn nbmc_context_destroy(ctx: *mut nbmc_context);
+    pub fn nbmc_context_last_error(ctx: *const nbmc_context) -> *const c_char;
+    pub fn nbmc_context_backend(ctx: *const nbmc_context, backend: *mut i32) -> i32;
+    pub fn nbmc_context_set_particles_f32(ctx: *mut nbmc_context, xyz: *const f32, count: u64, byte_stride: u64)
+        -> i32;
+    pub fn nbmc_context_set_particles_f64(ctx: *mut nbmc_context, xyz: *const f64, count: u64, byte_stride: u64)
+        -> i32;
+    pub fn nbmc_context_set_progress(ctx: *mut nbmc_context, fn_: nbmc_progress_fn, user: *mut c_void) -> i32;
+    pub fn nbmc_context_set_memory_budget(ctx: *mut nbmc_context, bytes: u64) -> i32;
+
+    // parameters
+    pub fn nbmc_params_init(params: *mut nbmc_params);
+
+    // reconstruct
+    pub fn nbmc_context_reconstruct(
+        ctx: *mut nbmc_context,
+        params: *const nbmc_params,
+        mesh: *mut *mut nbmc_mesh,
+    ) -> i32;
+    pub fn nbmc_stats_init(stats: *mut nbmc_stats);
+    pub fn nbmc_context_stats(ctx: *const nbmc_context, stats: *mut nbmc_stats) -> i32;
+
+    // mesh
+    pub fn nbmc_mesh_vertex_count(mesh: *const nbmc_mesh) -> u64;
+    pub fn nbmc_mesh_triangle_count(mesh: *const nbmc_mesh) -> u64;
+    pub fn nbmc_mesh_positions(mesh: *const nbmc_mesh) -> *const f32;
+    pub fn nbmc_mesh_normals(mesh: *const nbmc_mesh) -> *const f32;
+    pub fn nbmc_mesh_triangles(mesh: *const nbmc_mesh) -> *const u32;
+    pub fn nbmc_mesh_destroy(mesh: *mut nbmc_mesh);
+
+    // file I/O
+    pub fn nbmc_context_load_particles(
+        ctx: *mut nbmc_context,
+        path: *const c_char,
+        format: *const c_char,
+        count_out: *mut u64,
+    ) -> i32;
+    pub fn nbmc_mesh_write(mesh: *const nbmc_mesh, path: *const c_char, format: *const c_char) -> i32;
+    pub fn nbmc_last_error() -> *const c_char;
+
+    // Kokkos
+    pub fn nbmc_kokkos_finalize() -> i32;
+}
