@@ -166,7 +166,7 @@ if [ "$WITH_CUDA" = 1 ]; then build_kokkos cuda; KOKKOS_CUDA=$KOKKOS_PREFIX; fi
 [ "$KOKKOS_ONLY" = 1 ] && { say "Kokkos ready in $KOKKOS_PREFIX"; exit 0; }
 
 if [ "$CUDA_ONLY" = 0 ]; then
-  build_nbmc "$BUILD" "$KOKKOS_OPENMP"
+  build_nbmc "$BUILD" "$KOKKOS_OPENMP" -DNBMC_BUILD_CLI=ON -DNBMC_BUILD_TESTS=ON -DNBMC_BUILD_BENCH=ON
   say "nbmc installed in $BUILD/install (command: $BUILD/install/bin/nbmc)"
 fi
 if [ "$WITH_CUDA" = 1 ]; then
