@@ -249,3 +249,18 @@ TEST_F(CliTest, InterruptCancels) {
   EXPECT_TRUE(contains(slurp(err), "cancelled")) << slurp(err);
   EXPECT_FALSE(fs::exists(out));
 }
+
+TEST_F(CliTest, MemoryBudget) {
+  const std::string frame = std::string(NBMC_SOURCE_DIR) + "/examples/data/double_dam_break_4732.xyz";
+  const std::string base = "reconstruct " + quote(frame) + " -o " + quote(path("budget.ply")) +
+                           " --particle-radius 0.025 --cell-size 1 --quiet";
+  Result r = run(base + " --memory-budget 64k");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_NE(r.err.find("memory budget exceeded"), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("MiB"), std::string::npos) << r.err;
+  EXPECT_FALSE(fs::exists(path("budget.ply")));
+  EXPECT_EQ(run(base + " --memory-budget 12parsecs").exit_code, 2);
+  r = run(base + " --memory-budget 2G");
+  EXPECT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(fs::exists(path("budget.ply")));
+}

@@ -92,9 +92,37 @@ struct Options {
   std::string frames;                   // --frames a:b[:step]
   bool resume = false;
   std::int64_t step = -1; // H5Part step of a single-frame run (-1: the first)
+  std::string memory_budget;  // --memory-budget, "" = no cap
 };
 
 // --------------------------------------------------------------- helpers
+// "4G", "512M", "64k", "1000000" -> bytes; false if malformed.
+bool parse_size(const std::string& text, std::uint64_t& bytes) {
+  if (text.empty()) return false;
+  std::size_t used = 0;
+  double v = 0;
+  try {
+    v = std::stod(text, &used);
+  } catch (...) {
+    return false;
+  }
+  const std::string unit = lower(text.substr(used));
+  double scale = 1;
+  if (unit == "k" || unit == "kb" || unit == "kib") scale = 1024.0;
+  else if (unit == "m" || unit == "mb" || unit == "mib") scale = 1024.0 * 1024.0;
+  else if (unit == "g" || unit == "gb" || unit == "gib") scale = 1024.0 * 1024.0 * 1024.0;
+  else if (unit == "t" || unit == "tb" || unit == "tib") scale = 1024.0 * 1024.0 * 1024.0 * 1024.0;
+  else if (!unit.empty() && unit != "b") return false;
+  if (!(v >= 0) || v * scale > 1.8e19) return false;
+  bytes = std::uint64_t(v * scale);
+  return true;
+}
+
+void apply_memory_budget(nbmc_context* ctx, const Options& o) {
+  std::uint64_t bytes = 0;
+  if (!o.memory_budget.empty() && parse_size(o.memory_budget, bytes)) nbmc_context_set_memory_budget(ctx, bytes);
+}
+
 struct ContextDeleter {
   void operator()(nbmc_context* c) const { nbmc_context_destroy(c); }
 };
@@ -168,6 +196,7 @@ int reconstruct_sequence(Options& o, const std::vector<nbmc::cli::Frame>& frames
   std::int32_t st = nbmc_context_create(&o.desc, &raw);
   if (st != NBMC_OK) return library_error(st, nbmc_context_last_error(nullptr));
   ContextPtr ctx(raw);
+  apply_memory_budget(ctx.get(), o);
   nbmc_context_set_progress(ctx.get(), &cli::Progress::callback, &bar);
   std::int32_t backend = o.desc.backend;
   nbmc_context_backend(ctx.get(), &backend);
@@ -319,6 +348,7 @@ int reconstruct(Options& o) {
   std::int32_t st = nbmc_context_create(&o.desc, &raw);
   if (st != NBMC_OK) return library_error(st, nbmc_context_last_error(nullptr));
   ContextPtr ctx(raw);
+  apply_memory_budget(ctx.get(), o);
   std::int32_t backend = o.desc.backend;
   if (nbmc_context_backend(ctx.get(), &backend) == NBMC_OK) report.backend = name_of(kBackends, backend);
   nbmc_context_set_progress(ctx.get(), &cli::Progress::callback, &progress);
@@ -452,6 +482,13 @@ int main(int argc, char** argv) {
       ->expected(6)
       ->option_text("XMIN YMIN ZMIN XMAX YMAX ZMAX");
   rec->add_option("--threads", o.desc.num_threads, "Host threads (0 = all cores)")->capture_default_str();
+  rec->add_option("--memory-budget", o.memory_budget,
+                  "Cap on the memory nbmc may allocate (host and GPU), e.g. 4G, 512M; over it the run stops "
+                  "with 'memory budget exceeded' and the estimate")
+      ->check([](const std::string& v) {
+        std::uint64_t b = 0;
+        return parse_size(v, b) ? std::string() : std::string("expected a size such as 4G, 512M or 1000000");
+      });
   rec->add_option("--backend", o.backend, "Compute backend")
       ->check(CLI::IsMember(names(kBackends), CLI::ignore_case))
       ->capture_default_str();
