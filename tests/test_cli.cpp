@@ -4,6 +4,7 @@
 #include "io/mesh.hpp"
 #include "io/particles.hpp"
 #include "nbmc.h"
+#include "cli_fixture.hpp"
 #include "nbmc_test.hpp"
 
 #include <gtest/gtest.h>
@@ -27,59 +28,17 @@ namespace fs = std::filesystem;
 
 namespace {
 
-const std::string kBinary = std::string(NBMC_BINARY_DIR) + "/src/cli/nbmc";
+using nbmc_test::contains;
+using nbmc_test::quote;
+using nbmc_test::slurp;
+using Result = nbmc_test::CliResult;
+const std::string kBinary = nbmc_test::cli_binary();
 const std::string kFrame = std::string(NBMC_DATA_DIR) + "/xyz/splashsurf_doubledambreak_f26_4732.xyz";
 
-std::string quote(const std::string& s) {
-  std::string out = "'";
-  for (char c : s) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
-  return out + "'";
-}
-
-std::string slurp(const fs::path& p) {
-  std::ifstream f(p, std::ios::binary);
-  return std::string((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
-}
-
-struct Result {
-  int exit_code = -1;
-  std::string out, err;
-};
-
-class CliTest : public ::testing::Test {
+class CliTest : public nbmc_test::CliFixture {
 protected:
-  void SetUp() override {
-    if (!fs::exists(kBinary)) FAIL() << kBinary << " does not exist: build the nbmc_cli target first";
-    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-    dir_ = fs::temp_directory_path() / ("nbmc_test_cli_" + std::to_string(::getpid()) + "_" + info->name());
-    fs::remove_all(dir_);
-    fs::create_directories(dir_);
-  }
-  void TearDown() override {
-    std::error_code ec;
-    fs::remove_all(dir_, ec);
-  }
-  std::string path(const std::string& name) const { return (dir_ / name).string(); }
-
-  // Runs "nbmc ARGS" (args already quoted where needed) with stdout and
-  // stderr captured.
-  Result run(const std::string& args) const {
-    const fs::path out = dir_ / "stdout.txt", err = dir_ / "stderr.txt";
-    const std::string cmd = quote(kBinary) + " " + args + " >" + quote(out.string()) + " 2>" + quote(err.string()) +
-                            " </dev/null";
-    const int status = std::system(cmd.c_str());
-    Result r;
-    r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-    r.out = slurp(out);
-    r.err = slurp(err);
-    return r;
-  }
-  fs::path dir_;
+  CliTest() : CliFixture("nbmc_test_cli_") {}
 };
-
-bool contains(const std::string& haystack, const std::string& needle) {
-  return haystack.find(needle) != std::string::npos;
-}
 
 // The unsigned integer after "\"key\":" in a JSON text, or -1.
 long long json_uint(const std::string& json, const std::string& key) {

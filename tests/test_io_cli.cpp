@@ -4,6 +4,7 @@
 #include "io/mesh.hpp"
 #include "io/particles.hpp"
 #include "nbmc.h"
+#include "cli_fixture.hpp"
 #include "nbmc_test.hpp"
 
 #include <gtest/gtest.h>
@@ -20,51 +21,19 @@ namespace fs = std::filesystem;
 
 namespace {
 
-const std::string kBinary = std::string(NBMC_BINARY_DIR) + "/src/cli/nbmc";
+using nbmc_test::contains;
+using nbmc_test::quote;
+using nbmc_test::slurp;
+using Result = nbmc_test::CliResult;
+const std::string kBinary = nbmc_test::cli_binary();
 const std::string kData = std::string(NBMC_SOURCE_DIR) + "/tests/data/";
 
-std::string quote(const std::string& s) {
-  std::string out = "'";
-  for (char c : s) out += c == '\'' ? std::string("'\\''") : std::string(1, c);
-  return out + "'";
-}
-
-std::string slurp(const fs::path& p) {
-  std::ifstream f(p, std::ios::binary);
-  return std::string((std::istreambuf_iterator<char>(f)), std::istreambuf_iterator<char>());
-}
-
-bool contains(const std::string& h, const std::string& n) { return h.find(n) != std::string::npos; }
-
-struct Result {
-  int exit_code = -1;
-  std::string out, err;
-};
-
-class CliIo : public ::testing::Test {
+class CliIo : public nbmc_test::CliFixture {
 protected:
+  CliIo() : CliFixture("nbmc_test_cli_io_") {}
   void SetUp() override {
-    if (!fs::exists(kBinary)) FAIL() << kBinary << " does not exist: build the nbmc_cli target first";
-    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
-    dir_ = fs::temp_directory_path() / ("nbmc_test_cli_io_" + std::to_string(::getpid()) + "_" + info->name());
-    fs::remove_all(dir_);
+    CliFixture::SetUp();
     fs::create_directories(dir_ / "frames");
-  }
-  void TearDown() override {
-    std::error_code ec;
-    fs::remove_all(dir_, ec);
-  }
-  std::string path(const std::string& n) const { return (dir_ / n).string(); }
-  Result run(const std::string& args) const {
-    const fs::path out = dir_ / "stdout.txt", err = dir_ / "stderr.txt";
-    const std::string cmd = "cd " + quote(dir_.string()) + " && " + quote(kBinary) + " " + args + " >" +
-                            quote(out.string()) + " 2>" + quote(err.string()) + " </dev/null";
-    const int status = std::system(cmd.c_str());
-    Result r;
-    r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-    r.out = slurp(out);
-    r.err = slurp(err);
-    return r;
   }
   // A small sphere of particles as a raw .xyz frame.
   void frame(const std::string& name, double radius) const {
@@ -76,7 +45,6 @@ protected:
     }
     std::ofstream(path(name), std::ios::binary) << bytes;
   }
-  fs::path dir_;
 };
 
 } // namespace
