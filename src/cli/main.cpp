@@ -159,6 +159,23 @@ bool write_text(const std::string& path, const std::string& text) {
   return true;
 }
 
+// Prints the text report (unless --quiet or JSON goes to stdout) and writes
+// the JSON report where --json asked; false if the JSON file failed.
+template <class Text, class Json>
+bool emit_report(const Options& o, bool json_to_stdout, Text text, Json json) {
+  if (!o.quiet && !json_to_stdout) std::fputs(text().c_str(), stdout);
+  bool ok = true;
+  if (o.json) {
+    const std::string j = json();
+    if (json_to_stdout)
+      std::fputs(j.c_str(), stdout);
+    else
+      ok = write_text(o.json_path, j);
+  }
+  std::fflush(stdout);
+  return ok;
+}
+
 // R of the field in absolute units (what attributes are interpolated with).
 double absolute_radius(const nbmc_params& p) {
   return p.length_unit == NBMC_UNIT_ABSOLUTE ? p.influence_radius : p.influence_radius * p.spacing;
@@ -293,15 +310,9 @@ int reconstruct_sequence(Options& o, const std::vector<nbmc::cli::Frame>& frames
   rep.params = o.params;
   rep.frames = std::move(results);
   rep.total_seconds = seconds_since(t_start);
-  if (!o.quiet && !json_to_stdout) std::fputs(cli::format_sequence(rep).c_str(), stdout);
-  if (o.json) {
-    const std::string text = cli::format_sequence_json(rep);
-    if (json_to_stdout)
-      std::fputs(text.c_str(), stdout);
-    else if (!write_text(o.json_path, text))
-      return 1;
-  }
-  std::fflush(stdout);
+  if (!emit_report(o, json_to_stdout, [&] { return cli::format_sequence(rep); },
+                   [&] { return cli::format_sequence_json(rep); }))
+    return 1;
   return rep.failed() > 0 ? 1 : 0;
 }
 
@@ -404,15 +415,9 @@ int reconstruct(Options& o) {
 
   report.total_seconds = seconds_since(t_start);
   report.peak_rss_bytes = cli::peak_rss_bytes();
-  if (!o.quiet && !json_to_stdout) std::fputs(cli::format_report(report).c_str(), stdout);
-  if (o.json) {
-    const std::string text = cli::format_json(report);
-    if (json_to_stdout)
-      std::fputs(text.c_str(), stdout);
-    else if (!write_text(o.json_path, text))
-      return 1;
-  }
-  std::fflush(stdout);
+  if (!emit_report(o, json_to_stdout, [&] { return cli::format_report(report); },
+                   [&] { return cli::format_json(report); }))
+    return 1;
   return 0;
 }
 
