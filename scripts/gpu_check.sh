@@ -43,7 +43,7 @@ if command -v ncu >/dev/null; then
   step "ncu: the team-tiled gather (NBMC_GPU_GATHER=team) against the direct one, 46k frame, cell r"
   for k in team direct; do
     NBMC_GPU_GATHER=$k timeout 180 ncu --section SpeedOfLight --section Occupancy --section LaunchStats \
-      -k regex:gather --launch-count 1 "$B/bench/nbmc_bench" "$DATA/xyz/cbd46k_t050_46250.xyz" \
+      --kernel-name-base demangled -k regex:gather --launch-count 1 "$B/bench/nbmc_bench" "$DATA/xyz/cbd46k_t050_46250.xyz" \
       --spacing 0.0156 --cell-size 1 --backend cuda >"$OUT/ncu-$k.txt" 2>&1
     grep -E "Duration|Throughput|Registers|Achieved Occupancy|Theoretical Occupancy|Block Size|Shared Memory|Local" \
       "$OUT/ncu-$k.txt" | head -20
