@@ -39,7 +39,7 @@ for tool in memcheck racecheck; do
     --cell-size 1 --backend cuda 2>&1 | tail -5 | tee "$OUT/sanitizer-$tool.txt" || status=1
 done
 
-if command -v ncu >/dev/null; then
+if command -v ncu >/dev/null && [ "${NBMC_GPU_CHECK_NCU:-1}" = 1 ]; then
   step "ncu: the team-tiled gather (NBMC_GPU_GATHER=team) against the direct one, 46k frame, cell r"
   for k in team direct; do
     NBMC_GPU_GATHER=$k timeout 180 ncu --section SpeedOfLight --section Occupancy --section LaunchStats \

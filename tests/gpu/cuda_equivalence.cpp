@@ -6,13 +6,14 @@
 // Exits non-zero on any difference beyond tolerance.
 //
 // Tolerance: the two backends sum the same particles in a different order
-// (4-lane SIMD partial sums on the CPU, sequential per thread on the GPU,
-// which also contracts to FMA), so field values differ by float rounding
-// (~1e-6 relative). A vertex on an edge moves by that error divided by the
-// field difference along the edge, which is small where an edge runs almost
-// along the surface: positions must agree within 5e-3 of a cell (measured
-// maximum 1.5e-3). Where a field value is within rounding of zero a cell may
-// be triangulated differently: at most 0.01% of the triangles may differ.
+// (on the CPU each cell's particles in 4 SIMD lanes with one horizontal sum
+// per vertex; on the GPU sequentially per thread, contracted to FMA), so field
+// values differ by float rounding (~1e-6 relative). A vertex on an edge moves
+// by that error divided by the field difference along the edge, which is tiny
+// where an edge runs almost along the surface: positions must agree within
+// 1e-2 of a cell (measured maximum 7.7e-3 with the 4-lane CPU sums, 1.5e-3
+// before them). Where a field value is within rounding of zero a cell may be
+// triangulated differently: at most 0.01% of the triangles may differ.
 #include "nbmc_test.hpp"
 
 #include <cmath>
@@ -54,7 +55,7 @@ void compare(const char* name, const Points& pts, double spacing, double cell) {
   }
   const MeshReport rep = check_mesh(gpu.mesh);
   const bool ok = rep.closed && rep.oriented && rep.vertex_manifold &&
-                  (same_topology ? worst <= 5e-3 * c
+                  (same_topology ? worst <= 1e-2 * c
                                  : (cpu.mesh.triangle_count() == gpu.mesh.triangle_count() &&
                                     double(diff_tris) <= 1e-4 * double(cpu.mesh.triangle_count())));
   std::printf("%s %-36s cell %.2gr tris cpu %zu gpu %zu topology %s max|dpos| %.2e cell (normals %.1e) "
