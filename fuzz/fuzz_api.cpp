@@ -619,11 +619,15 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       const double per_particle = std::pow(2 * bw / c + 2, 3);
       return dense ? grid : std::min(grid, double(n) * per_particle);
     };
+    // The band may grow over dozens of rounds, each a scan of all of it
+    // (finding 4), most when the surface lies beyond the band (iso radius +
+    // cell > band width): the vertex count is bounded on its own, besides
+    // the field work, and tighter then.
+    const bool grows = iso + cell > bw;
     auto too_much = [&](double c, bool dense) {
       const double v = vertices(c, dense);
-      // The band may grow over a dozen rounds, each a scan of all of it: the
-      // vertex count is bounded on its own, besides the field work.
-      return v > kMaxVertices || v * double(max_nb) * (prm.method == NBMC_METHOD_SSP07 ? 2.0 : 1.0) > kMaxWork;
+      return v > (grows ? kMaxVertices / 4 : kMaxVertices) ||
+             v * double(max_nb) * (prm.method == NBMC_METHOD_SSP07 ? 2.0 : 1.0) > kMaxWork;
     };
     if (prm.field == NBMC_FIELD_DENSE && too_much(cell, true)) prm.field = NBMC_FIELD_NARROW_BAND;
     for (int i = 0; i < 60 && too_much(cell, false); ++i) cell *= 1.15;

@@ -197,7 +197,8 @@ typedef struct nbmc_params {
   double cell_size;         /* marching-cubes cell edge; default 0.5 (r/2) */
   double influence_radius;  /* R, kernel support of the field; default 4 (4r) */
   double band_width;        /* half width of the band box around surface particles; default 2 (2r) */
-  double surface_radius;    /* neighbourhood radius of the surface-particle test; default 2 (2r) */
+  double surface_radius;    /* neighbourhood radius of the surface-particle test; default 2 (2r);
+                               at most 2 * influence_radius */
   double iso_radius;        /* r-bar of eq. (1) (SSP07) / particle radius (ZB05); default 1 (r) */
   int32_t method;           /* NBMC_METHOD_*, default SSP07 */
   int32_t field;            /* NBMC_FIELD_*, default NARROW_BAND */
@@ -207,7 +208,10 @@ typedef struct nbmc_params {
                                surface; default 0.75 */
   int32_t neighbour_threshold; /* fewer neighbours within surface_radius => surface; default 25 */
   int32_t compute_normals;  /* non-zero (default): per-vertex normals from the field gradient */
-  int32_t use_bbox;         /* non-zero: only reconstruct inside [bbox_min, bbox_max] (absolute) */
+  int32_t use_bbox;         /* non-zero: only particles within R of [bbox_min, bbox_max] (absolute)
+                               are used and the grid covers the box plus a margin of
+                               max(band_width, iso_radius + cell_size) + 2 cells; the mesh is
+                               not clipped to the box and may reach into that margin */
   int32_t reserved0;
   double bbox_min[3];
   double bbox_max[3];

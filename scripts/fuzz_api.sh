@@ -106,7 +106,7 @@ WORK=${NBMC_FUZZ_API_WORK:-$(mktemp -d /tmp/nbmc-fuzz-api.XXXXXX)}
 mkdir -p "$WORK/corpus" "$WORK/crashes"
 say "fuzzing for $SECONDS_TO_RUN s: work corpus $WORK/corpus, crashes in $WORK/crashes"
 set +e
-nice -n 19 "$BIN" -max_total_time="$SECONDS_TO_RUN" -timeout=10 -rss_limit_mb=2048 -max_len=4096 \
+nice -n 19 "$BIN" -max_total_time="$SECONDS_TO_RUN" -timeout=10 -rss_limit_mb=2048 -max_len=512 \
   -print_final_stats=1 -artifact_prefix="$WORK/crashes/" "${EXTRA[@]}" \
   "$WORK/corpus" "$CORPUS" 2>&1 | tee "$WORK/fuzz.log"
 rc=${PIPESTATUS[0]}

@@ -301,6 +301,9 @@ Params resolve_params(const nbmc_params& in) {
   p.surface_radius = length(in, in.surface_radius, r);
   p.iso_radius = length(in, in.iso_radius, r);
   require(p.iso_radius < p.influence_radius, "iso_radius must be smaller than influence_radius");
+  require(p.surface_radius <= 2 * p.influence_radius,
+          "surface_radius may be at most twice the influence radius (got " + num(p.surface_radius) + " and " +
+              num(p.influence_radius) + ")");
   p.method = in.method;
   p.field = in.field;
   p.t_low = in.t_low;

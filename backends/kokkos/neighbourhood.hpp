@@ -93,6 +93,7 @@ void build_neighbourhood(const ExecSpace& space, MemoryTracker& tracker, const d
   SortRecord* r = rec.data();
   const double o0 = g.origin[0], o1 = g.origin[1], o2 = g.origin[2];
   const double inv_s = 1.0 / g.nb_cell;
+  const std::int64_t nd0 = g.nb_dims[0], nd1 = g.nb_dims[1], nd2 = g.nb_dims[2];
   const std::uint32_t* kp = keep.empty() ? nullptr : keep.data();
   using HostExec = Kokkos::DefaultHostExecutionSpace;
   auto host_space = [&]() {
@@ -112,7 +113,15 @@ void build_neighbourhood(const ExecSpace& space, MemoryTracker& tracker, const d
         s.x = float(px);
         s.y = float(py);
         s.z = float(pz);
-        s.key = morton3(std::uint32_t(px * inv_s), std::uint32_t(py * inv_s), std::uint32_t(pz * inv_s));
+        // With a bounding box, kept particles may lie up to R outside the
+        // grid: they go to the boundary cell. That is exact for the searches,
+        // since a vertex whose cell range stops short of the boundary cell is
+        // farther than R from anything beyond it.
+        auto cell = [](double x, double inv, std::int64_t dim) {
+          const double c = x * inv;
+          return std::uint32_t(c <= 0 ? 0.0 : (c >= double(dim - 1) ? double(dim - 1) : c));
+        };
+        s.key = morton3(cell(px, inv_s, nd0), cell(py, inv_s, nd1), cell(pz, inv_s, nd2));
         s.index = src;
         r[i] = s;
       });

@@ -210,6 +210,13 @@ void reconstruct(const ExecSpace& space, const double* xyz, std::size_t count, c
   mesh.positions.resize(3 * r.vertices);
   mesh.normals.resize(p.normals ? 3 * r.vertices : 0);
   mesh.triangles.resize(3 * r.triangles);
+  // Counted while nbmc builds it; released on every exit (a cancel in the
+  // last stages too), since the mesh then belongs to the caller or is freed.
+  struct Counted {
+    MemoryTracker& t;
+    std::uint64_t b;
+    ~Counted() { t.sub(b); }
+  } counted{tracker, out_bytes};
   tracker.add(out_bytes);
   using Unmanaged = Kokkos::MemoryTraits<Kokkos::Unmanaged>;
   Kokkos::View<float*, Kokkos::HostSpace, Unmanaged> hpos(mesh.positions.data(), mesh.positions.size());
@@ -236,7 +243,6 @@ void reconstruct(const ExecSpace& space, const double* xyz, std::size_t count, c
     Kokkos::deep_copy(space, htri, dtri.view());
   }
   lap(6);
-  tracker.sub(out_bytes);  // the mesh now belongs to the caller
   st.total = total.seconds();
 }
 
