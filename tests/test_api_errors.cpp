@@ -125,6 +125,8 @@ TEST(BadInput, InvalidParameters) {
       {"radius < 0", [](nbmc_params& p) { p.influence_radius = -4; }, NBMC_ERROR_INVALID_PARAMETER, "influence_radius"},
       {"band inf", [](nbmc_params& p) { p.band_width = INFINITY; }, NBMC_ERROR_INVALID_PARAMETER, "band_width"},
       {"iso >= R", [](nbmc_params& p) { p.iso_radius = 5; }, NBMC_ERROR_INVALID_PARAMETER, "iso_radius"},
+      {"surface radius > 2R", [](nbmc_params& p) { p.surface_radius = 9; }, NBMC_ERROR_INVALID_PARAMETER,
+       "surface_radius"},
       {"t_low >= t_high", [](nbmc_params& p) { p.t_low = 4; }, NBMC_ERROR_INVALID_PARAMETER, "t_low"},
       {"method", [](nbmc_params& p) { p.method = 7; }, NBMC_ERROR_INVALID_PARAMETER, "method"},
       {"field", [](nbmc_params& p) { p.field = -1; }, NBMC_ERROR_INVALID_PARAMETER, "field"},
