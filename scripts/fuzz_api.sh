@@ -25,8 +25,8 @@
 # Environment: NBMC_CACHE (default ~/.cache/nbmc), NBMC_JOBS (default 2),
 # NBMC_FUZZ_API_BUILD, NBMC_FUZZ_API_WORK (temp dir to use), NBMC_FUZZ_API_MERGE=1
 # (merge new coverage back into fuzz/corpus/api after the run), NBMC_SKIP_APT=1
-# (passed to setup.sh). The target itself reads NBMC_FUZZ_API_STRICT=1 (also
-# check what known core bugs break) and NBMC_FUZZ_API_VERBOSE=1.
+# (passed to setup.sh). The target prints one line per input with
+# NBMC_FUZZ_API_VERBOSE=1.
 set -euo pipefail
 
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)

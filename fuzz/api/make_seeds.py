@@ -126,21 +126,21 @@ SEEDS = {
     # A few points placed by hand, some almost coincident; ZB05, no normals.
     "points-zb05": header(zb05=True, normals=False, iso=0.8, R=3.0) +
                    pieces(points([(0, 0, 0), (1, 0, 0), (0, 1, 0), (0, 0, 1), (0.001, 0, 0), (3, 3, 3)])),
-    # Findings (fuzz/README_api.md); they pass by default and fail with
-    # NBMC_FUZZ_API_STRICT=1 until the core is fixed.
+    # Regression inputs for the core findings of the fuzzer (fuzz/README_api.md),
+    # fixed or documented in eedcfb7.
     # 1: cancelled on the 8th progress call (stage 5 done) under a 32 KiB
-    #    budget: the mesh's bytes stay counted, the second run hits the budget.
+    #    budget: the mesh's bytes stayed counted, the second run hit the budget.
     "finding1-budget-cancel-accounting": header(budget_log2=15, cancel_call=7) + pieces(ball((0, 0, 0), 4.0)),
-    # 2: vertices up to the grid margin outside the bounding box.
+    # 2: vertices in the grid margin outside the bounding box (now documented).
     "finding2-bbox-margin": header(cell=0.7, bbox=[(0.2, 0.5), (-0.2, 0.8), (-0.3, 1.3)]) +
                             pieces(sheet((-4, -4, 0), 10, 10, 2)),
-    # 3: surface_radius 4 > 2 * influence_radius 1.5: INVALID_PARAMETER,
-    #    although docs/api.md only asks for surface_radius > 0.
+    # 3: surface_radius 4 > 2 * influence_radius 1.5: INVALID_PARAMETER
+    #    (was undocumented and raised late, from the surface stage).
     "finding3-surface-radius": header(R=1.5, surf=4.0, iso=0.5) + pieces(ball((0, 0, 0), 2.0)),
     # 5: with a box, a particle more than pad + R/2 below it (but within R)
-    #    gets a negative neighbour-cell coordinate converted to uint32_t:
+    #    got a negative neighbour-cell coordinate converted to uint32_t:
     #    undefined behaviour (UBSan: neighbourhood.hpp, "outside the range of
-    #    representable values of type 'unsigned int'").
+    #    representable values of type 'unsigned int'"); now clamped.
     "finding5-bbox-negative-cell": header(R=6.0, band=1.0, cell=0.5, iso=0.5,
                                           bbox=[(5.5 / 6.5, 0.2), (0.0, 1.0), (0.0, 1.0)]) +
                                    pieces(points([(0, 0, 0), (1, 0, 0), (0, 1, 0), (0, 0, 1), (1, 1, 1),
