@@ -13,7 +13,8 @@
  *  - Enumerations travel as int32_t; their values are never renumbered.
  *  - Structs passed in start with `uint32_t struct_size`; fill them with the
  *    matching nbmc_*_init() function before changing fields.
- *  - Uploads copy. A mesh owns its memory and outlives its context.
+ *  - Uploads copy. A mesh owns its memory and outlives its context. Arrays
+ *    are host memory unless a function says otherwise (NBMC_MEMORY_DEVICE).
  *    Every *_destroy(NULL) is a no-op.
  *
  * Thread safety
@@ -37,7 +38,7 @@
 #include <stdint.h>
 
 #define NBMC_VERSION_MAJOR 0
-#define NBMC_VERSION_MINOR 1
+#define NBMC_VERSION_MINOR 2
 #define NBMC_VERSION_PATCH 0
 #define NBMC_VERSION (NBMC_VERSION_MAJOR * 10000 + NBMC_VERSION_MINOR * 100 + NBMC_VERSION_PATCH)
 
@@ -94,6 +95,10 @@ extern "C" {
  * thread of nbmc's own: the host may then use that Kokkos runtime too, and
  * must call nbmc_context_reconstruct from this thread only. */
 #define NBMC_CONTEXT_KOKKOS_ON_CALLING_THREAD 1u
+
+/* Where arrays handed to or returned by nbmc live. */
+#define NBMC_MEMORY_HOST    0  /* ordinary host memory (default) */
+#define NBMC_MEMORY_DEVICE  1  /* CUDA memory of the context's GPU (CUDA backend only) */
 
 /* How lengths in nbmc_params are given (nbmc_params.length_unit). */
 #define NBMC_UNIT_SPACING   0  /* multiples of the particle spacing r (default) */
@@ -170,6 +175,28 @@ NBMC_API int32_t nbmc_context_set_particles_f32(nbmc_context* ctx, const float* 
                                                 uint64_t count, uint64_t byte_stride);
 NBMC_API int32_t nbmc_context_set_particles_f64(nbmc_context* ctx, const double* xyz,
                                                 uint64_t count, uint64_t byte_stride);
+
+/* The same from CUDA device memory (cudaMalloc'd or managed memory of the
+ * context's GPU), for solvers whose particles live on the GPU: the positions
+ * are copied and validated on the device, nothing goes through the host.
+ * float or double, byte_stride as above but a multiple of the value size
+ * (and xyz aligned to it). The context must use NBMC_BACKEND_CUDA; other
+ * backends give NBMC_ERROR_BACKEND_UNAVAILABLE. A host pointer, or device
+ * memory of another GPU, gives NBMC_ERROR_INVALID_ARGUMENT; bad positions
+ * NBMC_ERROR_INVALID_PARTICLES as above. The call returns when the copy is
+ * done (the caller may then change its array). The copy is device memory
+ * held by the context (24 bytes per particle) until the next upload or
+ * nbmc_context_destroy. */
+NBMC_API int32_t nbmc_context_set_particles_device_f32(nbmc_context* ctx, const float* xyz,
+                                                       uint64_t count, uint64_t byte_stride);
+NBMC_API int32_t nbmc_context_set_particles_device_f64(nbmc_context* ctx, const double* xyz,
+                                                       uint64_t count, uint64_t byte_stride);
+
+/* Where the meshes of later reconstructions on ctx are put:
+ * NBMC_MEMORY_HOST (default) or NBMC_MEMORY_DEVICE, which leaves them in the
+ * GPU's memory (for a renderer or a GPU post-process; no copy to the host):
+ * CUDA backend only, else NBMC_ERROR_BACKEND_UNAVAILABLE. */
+NBMC_API int32_t nbmc_context_set_mesh_memory(nbmc_context* ctx, int32_t memory);
 
 /* Progress and cancellation. The callback is called during
  * nbmc_context_reconstruct, on the thread that runs the reconstruction (see
@@ -264,6 +291,19 @@ NBMC_API const float* nbmc_mesh_positions(const nbmc_mesh* mesh);
 NBMC_API const float* nbmc_mesh_normals(const nbmc_mesh* mesh);
 NBMC_API const uint32_t* nbmc_mesh_triangles(const nbmc_mesh* mesh);
 NBMC_API void nbmc_mesh_destroy(nbmc_mesh* mesh);
+/* Where the mesh's arrays live: NBMC_MEMORY_HOST, or NBMC_MEMORY_DEVICE (see
+ * nbmc_context_set_mesh_memory), in which case nbmc_mesh_positions, _normals
+ * and _triangles return CUDA device pointers (same layout), valid until
+ * nbmc_mesh_destroy, which frees them (also after nbmc_kokkos_finalize).
+ * NBMC_MEMORY_HOST for NULL. */
+NBMC_API int32_t nbmc_mesh_memory(const nbmc_mesh* mesh);
+/* Copies the mesh's arrays, wherever they live, into host buffers of
+ * 3 * vertex_count floats (positions, normals) and 3 * triangle_count
+ * uint32_t (triangles); any pointer may be NULL to skip that array. normals
+ * is left untouched when the mesh has none. NBMC_ERROR_INVALID_ARGUMENT for
+ * a NULL mesh. */
+NBMC_API int32_t nbmc_mesh_copy_to_host(const nbmc_mesh* mesh, float* positions, float* normals,
+                                        uint32_t* triangles);
 
 /* ---- File I/O ---- */
 /* Particle files and mesh files through nbmc's own readers and writers
@@ -289,7 +329,8 @@ NBMC_API void nbmc_mesh_destroy(nbmc_mesh* mesh);
 NBMC_API int32_t nbmc_context_load_particles(nbmc_context* ctx, const char* path, const char* format,
                                              uint64_t* count_out);
 
-/* Writes mesh to path in format (NULL: by the extension). The file is written
+/* Writes mesh to path in format (NULL: by the extension); a device mesh is
+ * copied to the host first. The file is written
  * under a temporary name in the same folder and renamed into place, so a
  * failed call leaves no partial file and an existing file is replaced only
  * on success. mesh is only read; several threads may write the same mesh at

@@ -340,6 +340,11 @@ void check_domain(const std::vector<double>&, const Params& p) {
   }
 }
 
+void run_on_kokkos_thread(nbmc_context& ctx, const std::function<void()>& fn) {
+  std::lock_guard<std::mutex> lock(g_run_mutex[ctx.backend]);
+  kokkos_thread().run(fn);
+}
+
 void run_backend(nbmc_context& ctx, const Params& p, HostMesh& mesh, RunStats& st) {
   Progress progress;
   if (ctx.progress_fn) {
@@ -349,24 +354,32 @@ void run_backend(nbmc_context& ctx, const Params& p, HostMesh& mesh, RunStats& s
   }
   std::lock_guard<std::mutex> lock(g_run_mutex[ctx.backend]);
   ctx.memory.reset_peak();
-  const double* xyz = ctx.particles.data();
-  const std::size_t n = ctx.particles.size() / 3;
+  ParticleInput in;
+  if (ctx.device_particles.count) {
+    in.xyz = static_cast<const double*>(ctx.device_particles.data.get());
+    in.count = ctx.device_particles.count;
+    in.on_device = true;
+  } else {
+    in.xyz = ctx.particles.data();
+    in.count = ctx.particles.size() / 3;
+  }
+  const bool mesh_on_device = ctx.mesh_memory == NBMC_MEMORY_DEVICE;
   auto job = [&]() {
     switch (ctx.backend) {
-      case NBMC_BACKEND_SERIAL: reconstruct_serial(xyz, n, p, ctx.memory, progress, mesh, st); break;
+      case NBMC_BACKEND_SERIAL: reconstruct_serial(in, p, ctx.memory, progress, mesh, st); break;
       case NBMC_BACKEND_OPENMP: {
 #if defined(KOKKOS_ENABLE_OPENMP)
         const int pool = pool_threads();
         const int hw = int(std::max(1u, std::thread::hardware_concurrency()));
         const int threads = std::min(pool, ctx.num_threads > 0 ? ctx.num_threads : hw);
         if (threads >= pool) {
-          reconstruct_openmp(xyz, n, p, ctx.memory, progress, mesh, st);
+          reconstruct_openmp(in, p, ctx.memory, progress, mesh, st);
         } else {
           std::exception_ptr err;
           Kokkos::OpenMP::partition_master(
               [&](int, int) {
                 try {
-                  reconstruct_openmp(xyz, n, p, ctx.memory, progress, mesh, st);
+                  reconstruct_openmp(in, p, ctx.memory, progress, mesh, st);
                 } catch (...) {
                   err = std::current_exception();
                 }
@@ -377,7 +390,7 @@ void run_backend(nbmc_context& ctx, const Params& p, HostMesh& mesh, RunStats& s
 #endif
         break;
       }
-      case NBMC_BACKEND_CUDA: reconstruct_cuda(xyz, n, p, ctx.memory, progress, mesh, st, ctx.device_id); break;
+      case NBMC_BACKEND_CUDA: reconstruct_cuda(in, p, ctx.memory, progress, mesh_on_device, mesh, st, ctx.device_id); break;
       default: throw Error(NBMC_ERROR_BACKEND_UNAVAILABLE, "backend not available");
     }
   };

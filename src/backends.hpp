@@ -5,6 +5,8 @@
 
 #include "context.hpp"
 
+#include <functional>
+
 namespace nbmc {
 
 const char* version_string();
@@ -26,13 +28,25 @@ Params resolve_params(const nbmc_params& in);
 void check_domain(const std::vector<double>& xyz, const Params& p);
 
 void run_backend(nbmc_context& ctx, const Params& p, HostMesh& mesh, RunStats& st);
+// Runs fn where the context's backend runs its work (nbmc's Kokkos thread,
+// serialised with the reconstructions of that backend).
+void run_on_kokkos_thread(nbmc_context& ctx, const std::function<void()>& fn);
 
 // Explicit instantiations, one file per backend (pipeline_*.cpp).
-void reconstruct_serial(const double* xyz, std::size_t n, const Params& p, MemoryTracker& t, const Progress& pr,
-                        HostMesh& m, RunStats& st);
-void reconstruct_openmp(const double* xyz, std::size_t n, const Params& p, MemoryTracker& t, const Progress& pr,
-                        HostMesh& m, RunStats& st);
-void reconstruct_cuda(const double* xyz, std::size_t n, const Params& p, MemoryTracker& t, const Progress& pr,
-                      HostMesh& m, RunStats& st, int device);
+void reconstruct_serial(const ParticleInput& in, const Params& p, MemoryTracker& t, const Progress& pr, HostMesh& m,
+                        RunStats& st);
+void reconstruct_openmp(const ParticleInput& in, const Params& p, MemoryTracker& t, const Progress& pr, HostMesh& m,
+                        RunStats& st);
+void reconstruct_cuda(const ParticleInput& in, const Params& p, MemoryTracker& t, const Progress& pr,
+                      bool mesh_on_device, HostMesh& m, RunStats& st, int device);
+
+// CUDA helpers (pipeline_cuda.cpp; without CUDA they throw
+// NBMC_ERROR_BACKEND_UNAVAILABLE). Copies count positions of type float
+// (f32) or double from device memory at xyz (byte_stride apart, 0 = packed)
+// into a new packed double array on the device, validating them there.
+DeviceParticles upload_device_particles(const void* xyz, bool f32, std::uint64_t count, std::uint64_t byte_stride,
+                                        const char* fn);
+// Copies the arrays of a device mesh into host buffers (any may be NULL).
+void download_mesh(const HostMesh& m, float* positions, float* normals, std::uint32_t* triangles);
 
 }  // namespace nbmc

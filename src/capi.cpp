@@ -166,6 +166,7 @@ static int32_t set_particles(nbmc_context* ctx, const T* xyz, uint64_t count, ui
   NBMC_CAPI_BEGIN(ctx)
   ctx->particles.clear();
   ctx->particles.shrink_to_fit();
+  ctx->device_particles = nbmc::DeviceParticles();
   if (count == 0) throw Error(NBMC_ERROR_NO_PARTICLES, std::string(fn) + ": count is 0");
   if (!xyz) throw Error(NBMC_ERROR_INVALID_ARGUMENT, std::string(fn) + ": xyz is NULL");
   if (byte_stride == 0) byte_stride = 3 * sizeof(T);
@@ -208,6 +209,64 @@ int32_t nbmc_context_set_particles_f32(nbmc_context* ctx, const float* xyz, uint
 
 int32_t nbmc_context_set_particles_f64(nbmc_context* ctx, const double* xyz, uint64_t count, uint64_t byte_stride) {
   return set_particles(ctx, xyz, count, byte_stride, "nbmc_context_set_particles_f64");
+}
+
+}  // extern "C"
+
+template <class T>
+static int32_t set_particles_device(nbmc_context* ctx, const T* xyz, uint64_t count, uint64_t byte_stride,
+                                    const char* fn) {
+  if (!ctx) return NBMC_ERROR_INVALID_ARGUMENT;
+  NBMC_CAPI_BEGIN(ctx)
+  ctx->particles.clear();
+  ctx->particles.shrink_to_fit();
+  ctx->device_particles = nbmc::DeviceParticles();
+  if (ctx->backend != NBMC_BACKEND_CUDA)
+    throw Error(NBMC_ERROR_BACKEND_UNAVAILABLE, std::string(fn) + ": the context uses the " +
+                                                    nbmc::backend_name(ctx->backend) +
+                                                    " backend; device pointers need the CUDA backend");
+  if (count == 0) throw Error(NBMC_ERROR_NO_PARTICLES, std::string(fn) + ": count is 0");
+  if (!xyz) throw Error(NBMC_ERROR_INVALID_ARGUMENT, std::string(fn) + ": xyz is NULL");
+  if (byte_stride != 0 && byte_stride < 3 * sizeof(T))
+    throw Error(NBMC_ERROR_INVALID_ARGUMENT, std::string(fn) + ": byte_stride " + std::to_string(byte_stride) +
+                                                 " is smaller than one position (" + std::to_string(3 * sizeof(T)) +
+                                                 " bytes)");
+  if (count > uint64_t(UINT32_MAX) - 1)
+    throw Error(NBMC_ERROR_DOMAIN_TOO_LARGE, std::string(fn) + ": at most 4294967294 particles are supported");
+  nbmc::DeviceParticles d;
+  nbmc::run_on_kokkos_thread(*ctx, [&]() {
+    d = nbmc::upload_device_particles(xyz, sizeof(T) == sizeof(float), count, byte_stride, fn);
+  });
+  ctx->device_particles = std::move(d);
+  return NBMC_OK;
+  NBMC_CAPI_END
+}
+
+extern "C" {
+
+int32_t nbmc_context_set_particles_device_f32(nbmc_context* ctx, const float* xyz, uint64_t count,
+                                              uint64_t byte_stride) {
+  return set_particles_device(ctx, xyz, count, byte_stride, "nbmc_context_set_particles_device_f32");
+}
+
+int32_t nbmc_context_set_particles_device_f64(nbmc_context* ctx, const double* xyz, uint64_t count,
+                                              uint64_t byte_stride) {
+  return set_particles_device(ctx, xyz, count, byte_stride, "nbmc_context_set_particles_device_f64");
+}
+
+int32_t nbmc_context_set_mesh_memory(nbmc_context* ctx, int32_t memory) {
+  if (!ctx) return NBMC_ERROR_INVALID_ARGUMENT;
+  NBMC_CAPI_BEGIN(ctx)
+  if (memory != NBMC_MEMORY_HOST && memory != NBMC_MEMORY_DEVICE)
+    throw Error(NBMC_ERROR_INVALID_ARGUMENT,
+                "nbmc_context_set_mesh_memory: memory " + std::to_string(memory) + " is not an NBMC_MEMORY_* value");
+  if (memory == NBMC_MEMORY_DEVICE && ctx->backend != NBMC_BACKEND_CUDA)
+    throw Error(NBMC_ERROR_BACKEND_UNAVAILABLE, std::string("nbmc_context_set_mesh_memory: the context uses the ") +
+                                                    nbmc::backend_name(ctx->backend) +
+                                                    " backend; device meshes need the CUDA backend");
+  ctx->mesh_memory = memory;
+  return NBMC_OK;
+  NBMC_CAPI_END
 }
 
 int32_t nbmc_context_set_progress(nbmc_context* ctx, nbmc_progress_fn fn, void* user) {
@@ -255,7 +314,7 @@ int32_t nbmc_context_reconstruct(nbmc_context* ctx, const nbmc_params* params, n
     throw Error(NBMC_ERROR_INVALID_ARGUMENT, "nbmc_context_reconstruct: params->struct_size is " +
                                                  std::to_string(params->struct_size) +
                                                  "; fill the struct with nbmc_params_init()");
-  if (ctx->particles.empty())
+  if (ctx->particles.empty() && ctx->device_particles.count == 0)
     throw Error(NBMC_ERROR_NO_PARTICLES, "nbmc_context_reconstruct: no particles uploaded");
   const nbmc::Params p = nbmc::resolve_params(*params);
   nbmc::check_domain(ctx->particles, p);
@@ -307,16 +366,39 @@ int32_t nbmc_context_stats(const nbmc_context* ctx, nbmc_stats* s) {
   return NBMC_OK;
 }
 
-uint64_t nbmc_mesh_vertex_count(const nbmc_mesh* m) { return m ? m->mesh.positions.size() / 3 : 0; }
-uint64_t nbmc_mesh_triangle_count(const nbmc_mesh* m) { return m ? m->mesh.triangles.size() / 3 : 0; }
+uint64_t nbmc_mesh_vertex_count(const nbmc_mesh* m) { return m ? m->mesh.vertex_count() : 0; }
+uint64_t nbmc_mesh_triangle_count(const nbmc_mesh* m) { return m ? m->mesh.triangle_count() : 0; }
 const float* nbmc_mesh_positions(const nbmc_mesh* m) {
+  if (m && m->mesh.on_device) return m->mesh.d_positions;
   return m && !m->mesh.positions.empty() ? m->mesh.positions.data() : nullptr;
 }
 const float* nbmc_mesh_normals(const nbmc_mesh* m) {
+  if (m && m->mesh.on_device) return m->mesh.d_normals;
   return m && !m->mesh.normals.empty() ? m->mesh.normals.data() : nullptr;
 }
 const uint32_t* nbmc_mesh_triangles(const nbmc_mesh* m) {
+  if (m && m->mesh.on_device) return m->mesh.d_triangles;
   return m && !m->mesh.triangles.empty() ? m->mesh.triangles.data() : nullptr;
+}
+int32_t nbmc_mesh_memory(const nbmc_mesh* m) { return m && m->mesh.on_device ? NBMC_MEMORY_DEVICE : NBMC_MEMORY_HOST; }
+int32_t nbmc_mesh_copy_to_host(const nbmc_mesh* m, float* positions, float* normals, uint32_t* triangles) {
+  if (!m) return NBMC_ERROR_INVALID_ARGUMENT;
+  try {
+    const nbmc::HostMesh& h = m->mesh;
+    if (h.on_device) {
+      nbmc::download_mesh(h, positions, normals, triangles);
+    } else {
+      if (positions && !h.positions.empty()) std::memcpy(positions, h.positions.data(), h.positions.size() * sizeof(float));
+      if (normals && !h.normals.empty()) std::memcpy(normals, h.normals.data(), h.normals.size() * sizeof(float));
+      if (triangles && !h.triangles.empty())
+        std::memcpy(triangles, h.triangles.data(), h.triangles.size() * sizeof(uint32_t));
+    }
+    return NBMC_OK;
+  } catch (const Error& e) {
+    return e.status;
+  } catch (...) {
+    return NBMC_ERROR_INTERNAL;
+  }
 }
 void nbmc_mesh_destroy(nbmc_mesh* m) { delete m; }
 

@@ -4,6 +4,7 @@
 // crosses the boundary.
 #include "nbmc.h"
 
+#include "backends.hpp"
 #include "context.hpp"
 #include "io/error.hpp"
 #include "io/mesh.hpp"
@@ -67,6 +68,7 @@ int32_t nbmc_context_load_particles(nbmc_context* ctx, const char* path, const c
   return guarded(ctx, fn, [&]() -> int32_t {
     ctx->particles.clear();
     ctx->particles.shrink_to_fit();
+    ctx->device_particles = nbmc::DeviceParticles();
     if (!path) return fail(ctx, NBMC_ERROR_INVALID_ARGUMENT, std::string(fn) + ": path is NULL");
     nbmc::io::ReadOptions o;
     o.format = format ? format : "";
@@ -94,7 +96,15 @@ int32_t nbmc_mesh_write(const nbmc_mesh* mesh, const char* path, const char* for
   if (!path) return fail(nullptr, NBMC_ERROR_INVALID_ARGUMENT, std::string(fn) + ": path is NULL");
   return guarded(nullptr, fn, [&]() -> int32_t {
     nbmc::io::MeshView v;
-    const nbmc::HostMesh& m = mesh->mesh;
+    nbmc::HostMesh copy;  // a device mesh, brought to the host
+    if (mesh->mesh.on_device) {
+      copy.positions.resize(3 * mesh->mesh.vertex_count());
+      copy.normals.resize(mesh->mesh.d_normals ? copy.positions.size() : 0);
+      copy.triangles.resize(3 * mesh->mesh.triangle_count());
+      nbmc::download_mesh(mesh->mesh, copy.positions.data(), copy.normals.empty() ? nullptr : copy.normals.data(),
+                          copy.triangles.data());
+    }
+    const nbmc::HostMesh& m = mesh->mesh.on_device ? copy : mesh->mesh;
     v.vertex_count = m.positions.size() / 3;
     v.triangle_count = m.triangles.size() / 3;
     v.positions = m.positions.empty() ? nullptr : m.positions.data();

@@ -11,6 +11,14 @@
 #include <string>
 #include <vector>
 
+namespace nbmc {
+// Particles uploaded from device memory: packed doubles on the CUDA device.
+struct DeviceParticles {
+  std::shared_ptr<void> data;
+  std::size_t count = 0;
+};
+}  // namespace nbmc
+
 struct nbmc_context {
   int32_t backend = NBMC_BACKEND_SERIAL;
   int32_t num_threads = 0;
@@ -18,6 +26,8 @@ struct nbmc_context {
   uint32_t flags = 0;
   std::string last_error;
   std::vector<double> particles;  // validated, 3 per particle
+  nbmc::DeviceParticles device_particles;  // or these, on the CUDA device
+  int32_t mesh_memory = NBMC_MEMORY_HOST;
   nbmc_progress_fn progress_fn = nullptr;
   void* progress_user = nullptr;
   nbmc::MemoryTracker memory;

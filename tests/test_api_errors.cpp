@@ -9,6 +9,7 @@
 #include <cstring>
 #include <limits>
 #include <string>
+#include <vector>
 
 using namespace nbmc_test;
 
@@ -280,4 +281,44 @@ TEST(Progress, ReportsStagesAndCancels) {
   EXPECT_NE(ctx.error().find("cancel"), std::string::npos);
   ASSERT_EQ(nbmc_context_set_progress(ctx.c, nullptr, nullptr), NBMC_OK);
   expect_usable(ctx);
+}
+
+// Device memory (NBMC_MEMORY_DEVICE, nbmc_context_set_particles_device_*)
+// needs the CUDA backend; on a CPU backend the calls fail cleanly and leave
+// the context usable. Host meshes say where they live and copy out exactly
+// what the getters show. (The CUDA side: tests/gpu/device_pointers.cpp.)
+TEST(DeviceMemory, NeedsTheCudaBackend) {
+  Ctx ctx;
+  float xyz[9] = {0, 0, 0, 1, 0, 0, 0, 1, 0};
+  EXPECT_EQ(nbmc_context_set_particles_device_f32(ctx.c, xyz, 3, 0), NBMC_ERROR_BACKEND_UNAVAILABLE);
+  EXPECT_NE(ctx.error().find("CUDA"), std::string::npos) << ctx.error();
+  double dxyz[9] = {0, 0, 0, 1, 0, 0, 0, 1, 0};
+  EXPECT_EQ(nbmc_context_set_particles_device_f64(ctx.c, dxyz, 3, 0), NBMC_ERROR_BACKEND_UNAVAILABLE);
+  nbmc_mesh* m = nullptr;
+  const nbmc_params p = params(0.1);
+  EXPECT_EQ(nbmc_context_reconstruct(ctx.c, &p, &m), NBMC_ERROR_NO_PARTICLES);  // the failed upload kept nothing
+  EXPECT_EQ(nbmc_context_set_mesh_memory(ctx.c, NBMC_MEMORY_DEVICE), NBMC_ERROR_BACKEND_UNAVAILABLE);
+  EXPECT_EQ(nbmc_context_set_mesh_memory(ctx.c, 7), NBMC_ERROR_INVALID_ARGUMENT);
+  EXPECT_EQ(nbmc_context_set_mesh_memory(ctx.c, NBMC_MEMORY_HOST), NBMC_OK);
+  EXPECT_EQ(nbmc_context_set_mesh_memory(nullptr, NBMC_MEMORY_HOST), NBMC_ERROR_INVALID_ARGUMENT);
+  expect_usable(ctx);
+}
+
+TEST(DeviceMemory, HostMeshCopiesOutWhatTheGettersShow) {
+  Ctx ctx;
+  nbmc_mesh* m = nullptr;
+  ASSERT_EQ(reconstruct_with(ctx, params(0.1), &m), NBMC_OK) << ctx.error();
+  EXPECT_EQ(nbmc_mesh_memory(m), NBMC_MEMORY_HOST);
+  EXPECT_EQ(nbmc_mesh_memory(nullptr), NBMC_MEMORY_HOST);
+  const std::size_t nv = nbmc_mesh_vertex_count(m), nt = nbmc_mesh_triangle_count(m);
+  ASSERT_GT(nt, 0u);
+  std::vector<float> pos(3 * nv, -1.f), nrm(3 * nv, -1.f);
+  std::vector<uint32_t> tri(3 * nt, 0xffffffffu);
+  ASSERT_EQ(nbmc_mesh_copy_to_host(m, pos.data(), nrm.data(), tri.data()), NBMC_OK);
+  EXPECT_EQ(std::memcmp(pos.data(), nbmc_mesh_positions(m), pos.size() * sizeof(float)), 0);
+  EXPECT_EQ(std::memcmp(nrm.data(), nbmc_mesh_normals(m), nrm.size() * sizeof(float)), 0);
+  EXPECT_EQ(std::memcmp(tri.data(), nbmc_mesh_triangles(m), tri.size() * sizeof(uint32_t)), 0);
+  EXPECT_EQ(nbmc_mesh_copy_to_host(m, nullptr, nullptr, nullptr), NBMC_OK);
+  EXPECT_EQ(nbmc_mesh_copy_to_host(nullptr, pos.data(), nullptr, nullptr), NBMC_ERROR_INVALID_ARGUMENT);
+  nbmc_mesh_destroy(m);
 }

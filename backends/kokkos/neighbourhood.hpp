@@ -69,11 +69,44 @@ struct SortRecord {
   std::uint32_t index;
 };
 
+// The order of the handlers: cell key, then x, y, z, then the uploaded index
+// (a strict total order, so the sorted sequence and every sum over it are the
+// same for any input order and any sort algorithm; the device sort in
+// build_neighbourhood_device gives exactly this order too).
 inline bool operator<(const SortRecord& a, const SortRecord& b) {
   if (a.key != b.key) return a.key < b.key;
   if (a.x != b.x) return a.x < b.x;
   if (a.y != b.y) return a.y < b.y;
-  return a.z < b.z;
+  if (a.z != b.z) return a.z < b.z;
+  return a.index < b.index;
+}
+
+// Neighbour-cell coordinate of a relative position. With a bounding box, kept
+// particles may lie up to R outside the grid: they go to the boundary cell.
+// That is exact for the searches, since a vertex whose cell range stops short
+// of the boundary cell is farther than R from anything beyond it.
+KOKKOS_INLINE_FUNCTION std::uint32_t neighbour_cell(double x, double inv, std::int64_t dim) {
+  const double c = x * inv;
+  return std::uint32_t(c <= 0 ? 0.0 : (c >= double(dim - 1) ? double(dim - 1) : c));
+}
+
+// Relative position as stored: float, with -0 made +0 so that equal
+// coordinates compare (and sort by their bits) as equal everywhere.
+KOKKOS_INLINE_FUNCTION float relative_coordinate(double x) { return float(x) + 0.0f; }
+
+// The hash map key -> cell index of the occupied cells.
+template <class ExecSpace>
+void insert_cells(const ExecSpace& space, MemoryTracker& tracker, Neighbourhood<typename ExecSpace::memory_space>& out) {
+  out.cells.allocate(space, tracker, "neighbourhood::cell_map", out.n_cells);
+  auto map = out.cells.map;
+  auto keys = out.cell_keys.view();
+  Kokkos::parallel_for(
+      "nbmc::neighbourhood::map", Kokkos::RangePolicy<ExecSpace>(space, 0, out.n_cells),
+      KOKKOS_LAMBDA(const std::size_t c) {
+        map.insert(keys(c));
+        map.values(map.find_slot(keys(c))) = std::uint32_t(c);
+      });
+  space.fence();
 }
 
 // Builds the neighbourhood from host positions (absolute, double, 3 per particle).
@@ -110,18 +143,10 @@ void build_neighbourhood(const ExecSpace& space, MemoryTracker& tracker, const d
         const double px = xyz[3 * std::size_t(src)] - o0, py = xyz[3 * std::size_t(src) + 1] - o1,
                      pz = xyz[3 * std::size_t(src) + 2] - o2;
         SortRecord s;
-        s.x = float(px);
-        s.y = float(py);
-        s.z = float(pz);
-        // With a bounding box, kept particles may lie up to R outside the
-        // grid: they go to the boundary cell. That is exact for the searches,
-        // since a vertex whose cell range stops short of the boundary cell is
-        // farther than R from anything beyond it.
-        auto cell = [](double x, double inv, std::int64_t dim) {
-          const double c = x * inv;
-          return std::uint32_t(c <= 0 ? 0.0 : (c >= double(dim - 1) ? double(dim - 1) : c));
-        };
-        s.key = morton3(cell(px, inv_s, nd0), cell(py, inv_s, nd1), cell(pz, inv_s, nd2));
+        s.x = relative_coordinate(px);
+        s.y = relative_coordinate(py);
+        s.z = relative_coordinate(pz);
+        s.key = morton3(neighbour_cell(px, inv_s, nd0), neighbour_cell(py, inv_s, nd1), neighbour_cell(pz, inv_s, nd2));
         s.index = src;
         r[i] = s;
       });
@@ -170,17 +195,131 @@ void build_neighbourhood(const ExecSpace& space, MemoryTracker& tracker, const d
     space.fence();
   }
   rec.release();
+  insert_cells(space, tracker, out);
+}
 
-  out.cells.allocate(space, tracker, "neighbourhood::cell_map", out.n_cells);
-  auto map = out.cells.map;
-  auto keys = out.cell_keys.view();
-  Kokkos::parallel_for(
-      "nbmc::neighbourhood::map", Kokkos::RangePolicy<ExecSpace>(space, 0, out.n_cells),
-      KOKKOS_LAMBDA(const std::size_t c) {
-        map.insert(keys(c));
-        map.values(map.find_slot(keys(c))) = std::uint32_t(c);
-      });
+#if defined(KOKKOS_ENABLE_CUDA)
+// Stable radix sort of (key, value) pairs by the key bits [0, end_bit), on
+// the GPU (CUB, pipeline_cuda.cpp). The sorted pairs are written to
+// keys_out/vals_out; keys_in/vals_in are left unspecified.
+void device_sort_pairs(const Kokkos::Cuda& space, MemoryTracker& tracker, std::uint64_t* keys_in,
+                       std::uint64_t* keys_out, std::uint32_t* vals_in, std::uint32_t* vals_out, std::size_t n,
+                       int end_bit);
+#endif
+
+// Unsigned bits of a float that sort in the float's order (no NaN; -0 is
+// made +0 by relative_coordinate).
+KOKKOS_INLINE_FUNCTION std::uint64_t float_order_bits(float f) {
+  union {
+    float f;
+    std::uint32_t u;
+  } b;
+  b.f = f;
+  return (b.u & 0x80000000u) ? std::uint64_t(~b.u) : std::uint64_t(b.u | 0x80000000u);
+}
+
+// The same neighbourhood, built on the device from device positions (absolute,
+// double, 3 per particle; `keep`, if not empty, selects the particles, in
+// increasing order). The handlers are sorted by four stable radix sorts, least
+// significant criterion first (z, y, x, then the cell key), which gives
+// exactly the host's order: key, x, y, z, then index.
+template <class ExecSpace>
+void build_neighbourhood_device(const ExecSpace& space, MemoryTracker& tracker,
+                                const Kokkos::View<const double*, typename ExecSpace::memory_space>& xyz,
+                                const Kokkos::View<const std::uint32_t*, typename ExecSpace::memory_space>& keep,
+                                std::size_t n, const Grid& g, Neighbourhood<typename ExecSpace::memory_space>& out) {
+  using MemSpace = typename ExecSpace::memory_space;
+  using Range = Kokkos::RangePolicy<ExecSpace>;
+  ScopedRegion region("nbmc::neighbourhood");
+  out.n = n;
+  Buffer<float, MemSpace> rel(tracker, "neighbourhood::unsorted_positions", 3 * n);
+  Buffer<std::uint64_t, MemSpace> cell(tracker, "neighbourhood::unsorted_keys", n);
+  Buffer<std::uint64_t, MemSpace> ka(tracker, "neighbourhood::sort_keys", n), kb(tracker, "neighbourhood::sort_keys", n);
+  Buffer<std::uint32_t, MemSpace> va(tracker, "neighbourhood::sort_order", n), vb(tracker, "neighbourhood::sort_order", n);
+  const auto relv = rel.view();
+  const auto cellv = cell.view();
+  const bool has_keep = keep.extent(0) > 0;
+  const double o0 = g.origin[0], o1 = g.origin[1], o2 = g.origin[2];
+  const double inv_s = 1.0 / g.nb_cell;
+  const std::int64_t nd0 = g.nb_dims[0], nd1 = g.nb_dims[1], nd2 = g.nb_dims[2];
+  {
+    const auto order = va.view();
+    Kokkos::parallel_for(
+        "nbmc::neighbourhood::keys", Range(space, 0, n), KOKKOS_LAMBDA(const std::size_t i) {
+          const std::size_t src = has_keep ? std::size_t(keep(i)) : i;
+          const double px = xyz(3 * src) - o0, py = xyz(3 * src + 1) - o1, pz = xyz(3 * src + 2) - o2;
+          relv(i) = relative_coordinate(px);
+          relv(n + i) = relative_coordinate(py);
+          relv(2 * n + i) = relative_coordinate(pz);
+          cellv(i) = morton3(neighbour_cell(px, inv_s, nd0), neighbour_cell(py, inv_s, nd1),
+                             neighbour_cell(pz, inv_s, nd2));
+          order(i) = std::uint32_t(i);
+        });
+  }
+  int key_bits = 1;
+  {
+    const std::int64_t m = std::max(nd0, std::max(nd1, nd2));
+    while ((std::int64_t(1) << key_bits) < m) ++key_bits;
+  }
+  std::uint32_t* order = va.data();
+  std::uint32_t* other = vb.data();
+  std::uint64_t* keys_in = ka.data();
+  std::uint64_t* keys_out = kb.data();
+  for (int pass = 0; pass < 4; ++pass) {  // z, y, x, cell key
+    const int axis = 2 - pass;
+    std::uint32_t* const cur = order;
+    Kokkos::parallel_for(
+        "nbmc::neighbourhood::sort_keys", Range(space, 0, n), KOKKOS_LAMBDA(const std::size_t i) {
+          keys_in[i] = axis >= 0 ? float_order_bits(relv(std::size_t(axis) * n + cur[i])) : cellv(cur[i]);
+        });
+    device_sort_pairs(space, tracker, keys_in, keys_out, order, other, n, axis >= 0 ? 32 : 3 * key_bits);
+    std::swap(order, other);
+  }
+  cell.release();
+
+  out.pos = Buffer<float, MemSpace>(tracker, "neighbourhood::positions", 3 * n);
+  out.perm = Buffer<std::uint32_t, MemSpace>(tracker, "neighbourhood::permutation", n);
+  {
+    const auto pos = out.pos.view();
+    const auto perm = out.perm.view();
+    const std::uint32_t* const sorted = order;
+    Kokkos::parallel_for(
+        "nbmc::neighbourhood::scatter", Range(space, 0, n), KOKKOS_LAMBDA(const std::size_t i) {
+          const std::uint32_t j = sorted[i];
+          pos(i) = relv(j);
+          pos(n + i) = relv(n + j);
+          pos(2 * n + i) = relv(2 * n + j);
+          perm(i) = has_keep ? keep(j) : j;
+        });
+  }
+  // Cells: the runs of equal keys in the sorted sequence.
+  const std::uint64_t* const sk = keys_out;
+  std::uint64_t n_cells = 0;
+  Kokkos::parallel_reduce(
+      "nbmc::neighbourhood::count_cells", Range(space, 0, n),
+      KOKKOS_LAMBDA(const std::size_t i, std::uint64_t& c) { c += (i == 0 || sk[i] != sk[i - 1]) ? 1 : 0; },
+      n_cells);
+  out.n_cells = std::size_t(n_cells);
+  out.cell_keys = Buffer<std::uint64_t, MemSpace>(tracker, "neighbourhood::cell_keys", out.n_cells);
+  out.cell_start = Buffer<std::uint32_t, MemSpace>(tracker, "neighbourhood::cell_start", out.n_cells + 1);
+  {
+    const auto ck = out.cell_keys.view();
+    const auto cs = out.cell_start.view();
+    Kokkos::parallel_scan(
+        "nbmc::neighbourhood::cell_starts", Range(space, 0, n),
+        KOKKOS_LAMBDA(const std::size_t i, std::uint64_t& c, const bool final) {
+          const bool first = i == 0 || sk[i] != sk[i - 1];
+          if (final && first) {
+            ck(c) = sk[i];
+            cs(c) = std::uint32_t(i);
+          }
+          c += first ? 1 : 0;
+        });
+    Kokkos::deep_copy(space, Kokkos::subview(cs, out.n_cells), std::uint32_t(n));
+  }
   space.fence();
+  rel.release();
+  insert_cells(space, tracker, out);
 }
 
 }  // namespace Details

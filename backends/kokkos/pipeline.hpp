@@ -15,16 +15,40 @@
 
 #include <cmath>
 #include <limits>
+#include <memory>
 #include <sstream>
 #include <vector>
 
 namespace nbmc {
 
-// The mesh as the C API hands it out.
+// The mesh as the C API hands it out: in host vectors, or (CUDA backend,
+// NBMC_MEMORY_DEVICE) in one device allocation owned by `device`.
 struct HostMesh {
   std::vector<float> positions, normals;
   std::vector<std::uint32_t> triangles;
+  bool on_device = false;
+  std::shared_ptr<void> device;
+  float* d_positions = nullptr;
+  float* d_normals = nullptr;
+  std::uint32_t* d_triangles = nullptr;
+  std::uint64_t d_vertices = 0, d_triangles_count = 0;
+  std::uint64_t vertex_count() const { return on_device ? d_vertices : positions.size() / 3; }
+  std::uint64_t triangle_count() const { return on_device ? d_triangles_count : triangles.size() / 3; }
 };
+
+// The particles of a reconstruction: absolute positions, 3 doubles each, in
+// host memory or (on_device) in the memory of the CUDA execution space.
+struct ParticleInput {
+  const double* xyz = nullptr;
+  std::size_t count = 0;
+  bool on_device = false;
+};
+
+#if defined(KOKKOS_ENABLE_CUDA)
+// Device memory outside Kokkos' bookkeeping (pipeline_cuda.cpp): for meshes
+// handed to the caller, which may outlive the Kokkos runtime.
+std::shared_ptr<void> cuda_allocate(std::size_t bytes, const char* what);
+#endif
 
 struct RunStats {
   std::uint64_t particles = 0, surface_particles = 0, occupied_cells = 0, band_vertices = 0, band_blocks = 0,
@@ -40,9 +64,14 @@ struct RunStats {
 namespace Details {
 
 template <class ExecSpace>
-void reconstruct(const ExecSpace& space, const double* xyz, std::size_t count, const Params& p,
-                 MemoryTracker& tracker, const Progress& progress, HostMesh& mesh, RunStats& st) {
+void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& p, MemoryTracker& tracker,
+                 const Progress& progress, bool mesh_on_device, HostMesh& mesh, RunStats& st) {
   using MemSpace = typename ExecSpace::memory_space;
+  constexpr bool host_memory = Kokkos::SpaceAccessibility<Kokkos::HostSpace, MemSpace>::accessible;
+  const double* const xyz = in.xyz;
+  const std::size_t count = in.count;
+  if (host_memory && (in.on_device || mesh_on_device))
+    throw Error(7, "device memory needs the CUDA backend");
   ScopedRegion region("nbmc::reconstruct");
   Kokkos::Timer total, timer;
   auto lap = [&](int stage) {
@@ -59,7 +88,68 @@ void reconstruct(const ExecSpace& space, const double* xyz, std::size_t count, c
   double lo[3] = {std::numeric_limits<double>::max(), std::numeric_limits<double>::max(),
                   std::numeric_limits<double>::max()};
   double hi[3] = {-lo[0], -lo[1], -lo[2]};
-  if (p.use_bbox) {
+  // Device path: the positions on the device (copied there if they are on
+  // the host), the bounds and the bounding-box selection computed there.
+  Buffer<double, MemSpace> staged;
+  Kokkos::View<const double*, MemSpace> dxyz;
+  Buffer<std::uint32_t, MemSpace> dkeep;
+  std::size_t n_used = count;
+  if constexpr (!host_memory) {
+    using Range = Kokkos::RangePolicy<ExecSpace>;
+    if (in.on_device) {
+      dxyz = Kokkos::View<const double*, MemSpace, Kokkos::MemoryTraits<Kokkos::Unmanaged>>(xyz, 3 * count);
+    } else {
+      staged = Buffer<double, MemSpace>(tracker, "particles::device_copy", 3 * count);
+      Kokkos::deep_copy(space, staged.view(),
+                        Kokkos::View<const double*, Kokkos::HostSpace, Kokkos::MemoryTraits<Kokkos::Unmanaged>>(
+                            xyz, 3 * count));
+      dxyz = staged.view();
+    }
+    const Kokkos::View<const double*, MemSpace> dx = dxyz;
+    if (p.use_bbox) {
+      const double R = p.influence_radius;
+      const double b0 = p.bbox_min[0] - R, b1 = p.bbox_min[1] - R, b2 = p.bbox_min[2] - R;
+      const double e0 = p.bbox_max[0] + R, e1 = p.bbox_max[1] + R, e2 = p.bbox_max[2] + R;
+      std::uint64_t kept = 0;
+      Kokkos::parallel_reduce(
+          "nbmc::upload::count_in_box", Range(space, 0, count),
+          KOKKOS_LAMBDA(const std::size_t i, std::uint64_t& c) {
+            const double x = dx(3 * i), y = dx(3 * i + 1), z = dx(3 * i + 2);
+            c += (x >= b0 && x <= e0 && y >= b1 && y <= e1 && z >= b2 && z <= e2) ? 1 : 0;
+          },
+          kept);
+      if (kept == 0) throw Error(3, "no particle lies within the bounding box (extended by the influence radius)");
+      dkeep = Buffer<std::uint32_t, MemSpace>(tracker, "particles::kept", kept);
+      const auto kv = dkeep.view();
+      Kokkos::parallel_scan(
+          "nbmc::upload::select_in_box", Range(space, 0, count),
+          KOKKOS_LAMBDA(const std::size_t i, std::uint64_t& c, const bool final) {
+            const double x = dx(3 * i), y = dx(3 * i + 1), z = dx(3 * i + 2);
+            const bool inside = x >= b0 && x <= e0 && y >= b1 && y <= e1 && z >= b2 && z <= e2;
+            if (final && inside) kv(c) = std::uint32_t(i);
+            c += inside ? 1 : 0;
+          });
+      n_used = std::size_t(kept);
+      for (int a = 0; a < 3; ++a) {
+        lo[a] = p.bbox_min[a];
+        hi[a] = p.bbox_max[a];
+      }
+    } else {
+      for (int a = 0; a < 3; ++a) {
+        Kokkos::MinMaxScalar<double> mm;
+        Kokkos::parallel_reduce(
+            "nbmc::upload::bounds", Range(space, 0, count),
+            KOKKOS_LAMBDA(const std::size_t i, Kokkos::MinMaxScalar<double>& v) {
+              const double x = dx(3 * i + a);
+              if (x < v.min_val) v.min_val = x;
+              if (x > v.max_val) v.max_val = x;
+            },
+            Kokkos::MinMax<double>(mm));
+        lo[a] = mm.min_val;
+        hi[a] = mm.max_val;
+      }
+    }
+  } else if (p.use_bbox) {
     const double R = p.influence_radius;
     for (std::size_t i = 0; i < count; ++i) {
       bool in = true;
@@ -82,8 +172,9 @@ void reconstruct(const ExecSpace& space, const double* xyz, std::size_t count, c
         hi[a] = x > hi[a] ? x : hi[a];
       }
   }
+  if (host_memory && !keep.empty()) n_used = keep.size();
   const Grid g = make_grid(lo, hi, p);
-  st.particles = keep.empty() ? count : keep.size();
+  st.particles = n_used;
   st.grid_vertices = g.vertex_count();
   for (int a = 0; a < 3; ++a) {
     st.dims[a] = std::uint64_t(g.dims[a]);
@@ -96,7 +187,11 @@ void reconstruct(const ExecSpace& space, const double* xyz, std::size_t count, c
   // the baselines the dense grid. The band is estimated again below.
   {
     const std::uint64_t n = st.particles;
-    std::uint64_t need = n * (sizeof(SortRecord) + 3 * sizeof(float) + sizeof(std::uint32_t) + 1) + n / 2 * 24;
+    // host: sort records; device: unsorted positions, keys and two key/order
+    // pairs for the radix sort; then the sorted positions, the permutation,
+    // the surface flags and the cells.
+    const std::uint64_t sort_bytes = host_memory ? sizeof(SortRecord) : 3 * sizeof(float) + 8 + 2 * (8 + 4);
+    std::uint64_t need = n * (sort_bytes + 3 * sizeof(float) + sizeof(std::uint32_t) + 1) + n / 2 * 24;
     if (p.field != 0) {
       const std::uint64_t nv = g.vertex_count();
       need += nv * 14;  // field value, cell info, vertex numbering, bitmap
@@ -107,7 +202,15 @@ void reconstruct(const ExecSpace& space, const double* xyz, std::size_t count, c
 
   // ---------------------------------------------------------- neighbourhood
   Neighbourhood<MemSpace> nbh;
-  build_neighbourhood(space, tracker, xyz, count, keep, g, nbh);
+  if constexpr (host_memory) {
+    build_neighbourhood(space, tracker, xyz, count, keep, g, nbh);
+  } else {
+    build_neighbourhood_device(space, tracker, dxyz, Kokkos::View<const std::uint32_t*, MemSpace>(dkeep.view()),
+                               n_used, g, nbh);
+    dkeep.release();
+    staged.release();
+    dxyz = Kokkos::View<const double*, MemSpace>();
+  }
   const NeighbourView<MemSpace> nb = view_of(nbh, g);
   st.occupied_cells = nbh.n_cells;
   lap(1);
@@ -207,9 +310,11 @@ void reconstruct(const ExecSpace& space, const double* xyz, std::size_t count, c
   const std::uint64_t out_bytes =
       r.vertices * 3 * sizeof(float) * (p.normals ? 2 : 1) + r.triangles * 3 * sizeof(std::uint32_t);
   tracker.require(out_bytes, "the mesh");
-  mesh.positions.resize(3 * r.vertices);
-  mesh.normals.resize(p.normals ? 3 * r.vertices : 0);
-  mesh.triangles.resize(3 * r.triangles);
+  if (!mesh_on_device) {
+    mesh.positions.resize(3 * r.vertices);
+    mesh.normals.resize(p.normals ? 3 * r.vertices : 0);
+    mesh.triangles.resize(3 * r.triangles);
+  }
   // Counted while nbmc builds it; released on every exit (a cancel in the
   // last stages too), since the mesh then belongs to the caller or is freed.
   struct Counted {
@@ -230,6 +335,30 @@ void reconstruct(const ExecSpace& space, const double* xyz, std::size_t count, c
                       Kokkos::View<const std::uint64_t*, MemSpace>(tri_offset.view()),
                       Kokkos::View<std::uint32_t*, MemSpace>(htri));
     lap(5);
+  } else if (mesh_on_device) {
+#if defined(KOKKOS_ENABLE_CUDA)
+    // One allocation the caller owns: positions, normals, triangles.
+    const std::size_t np = 3 * std::size_t(r.vertices), nn = p.normals ? np : 0, nt = 3 * std::size_t(r.triangles);
+    const std::size_t bytes = (np + nn) * sizeof(float) + nt * sizeof(std::uint32_t);
+    mesh.device = cuda_allocate(bytes, "the mesh");
+    mesh.on_device = true;
+    float* base = static_cast<float*>(mesh.device.get());
+    mesh.d_positions = np ? base : nullptr;
+    mesh.d_normals = nn ? base + np : nullptr;
+    mesh.d_triangles = nt ? reinterpret_cast<std::uint32_t*>(base + np + nn) : nullptr;
+    mesh.d_vertices = r.vertices;
+    mesh.d_triangles_count = r.triangles;
+    Kokkos::View<float*, MemSpace, Unmanaged> dpos(mesh.d_positions, np), dnrm(mesh.d_normals, nn);
+    Kokkos::View<std::uint32_t*, MemSpace, Unmanaged> dtri(mesh.d_triangles, nt);
+    compute_vertices(space, bv, n_words, g, cphi, cinfo, cvoff, Kokkos::View<float*, MemSpace>(dpos),
+                     Kokkos::View<float*, MemSpace>(dnrm), p.normals);
+    compute_triangles(space, bv, n_words, tables, cinfo, cvoff,
+                      Kokkos::View<const std::uint64_t*, MemSpace>(tri_offset.view()),
+                      Kokkos::View<std::uint32_t*, MemSpace>(dtri));
+    lap(5);
+#else
+    throw Error(7, "device memory needs the CUDA backend");
+#endif
   } else {
     Buffer<float, MemSpace> dpos(tracker, "mesh::positions", hpos.extent(0));
     Buffer<float, MemSpace> dnrm(tracker, "mesh::normals", hnrm.extent(0));

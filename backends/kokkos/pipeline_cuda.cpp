@@ -1,17 +1,178 @@
 // SPDX-License-Identifier: MIT
-// Explicit instantiation of the pipeline for the CUDA execution space.
+// The pipeline instantiated for the CUDA execution space, and what only the
+// CUDA build has: the device radix sort (CUB, shipped with the CUDA toolkit),
+// uploads from device pointers, meshes left in device memory.
 #include "../../src/backends.hpp"
 #include "pipeline.hpp"
 
+#if defined(KOKKOS_ENABLE_CUDA)
+#include <cub/device/device_radix_sort.cuh>
+#include <cuda_runtime.h>
+#endif
+
+#include <limits>
+#include <sstream>
+#include <string>
+
 namespace nbmc {
 
-void reconstruct_cuda(const double* xyz, std::size_t n, const Params& p, MemoryTracker& t, const Progress& pr,
-                      HostMesh& m, RunStats& st, int device) {
+#if defined(KOKKOS_ENABLE_CUDA)
+namespace {
+
+[[noreturn]] void cuda_fail(cudaError_t e, const std::string& what) {
+  cudaGetLastError();  // clear a sticky allocation error
+  const int status = e == cudaErrorMemoryAllocation ? 6 /*OUT_OF_MEMORY*/ : 9 /*INTERNAL*/;
+  throw Error(status, what + ": " + cudaGetErrorString(e));
+}
+
+void cuda_check(cudaError_t e, const std::string& what) {
+  if (e != cudaSuccess) cuda_fail(e, what);
+}
+
+// A device pointer the caller gave us: device or managed memory of the
+// current device, or a clear error.
+void check_device_pointer(const void* p, const char* fn) {
+  cudaPointerAttributes a;
+  const cudaError_t e = cudaPointerGetAttributes(&a, p);
+  if (e != cudaSuccess) {
+    cudaGetLastError();
+    throw Error(1, std::string(fn) + ": xyz is not a CUDA pointer (" + cudaGetErrorString(e) + ")");
+  }
+  if (a.type != cudaMemoryTypeDevice && a.type != cudaMemoryTypeManaged)
+    throw Error(1, std::string(fn) + ": xyz is host memory; use nbmc_context_set_particles_f32/f64 for host arrays");
+  int dev = 0;
+  cuda_check(cudaGetDevice(&dev), fn);
+  if (a.type == cudaMemoryTypeDevice && a.device != dev) {
+    std::ostringstream s;
+    s << fn << ": xyz lives on CUDA device " << a.device << ", the context runs on device " << dev;
+    throw Error(1, s.str());
+  }
+}
+
+}  // namespace
+
+namespace Details {
+
+void device_sort_pairs(const Kokkos::Cuda& space, MemoryTracker& tracker, std::uint64_t* keys_in,
+                       std::uint64_t* keys_out, std::uint32_t* vals_in, std::uint32_t* vals_out, std::size_t n,
+                       int end_bit) {
+  if (n > std::size_t(std::numeric_limits<int>::max()))
+    throw Error(5, "the device sort handles at most 2^31 - 1 particles");
+  const cudaStream_t stream = space.cuda_stream();
+  std::size_t temp_bytes = 0;
+  cuda_check(cub::DeviceRadixSort::SortPairs(nullptr, temp_bytes, keys_in, keys_out, vals_in, vals_out, int(n), 0,
+                                             end_bit, stream),
+             "radix sort (size query)");
+  Buffer<unsigned char, Kokkos::CudaSpace> temp(tracker, "neighbourhood::sort_temp", temp_bytes);
+  cuda_check(cub::DeviceRadixSort::SortPairs(temp.data(), temp_bytes, keys_in, keys_out, vals_in, vals_out, int(n),
+                                             0, end_bit, stream),
+             "radix sort");
+  space.fence();
+}
+
+}  // namespace Details
+
+std::shared_ptr<void> cuda_allocate(std::size_t bytes, const char* what) {
+  if (bytes == 0) return std::shared_ptr<void>();
+  void* p = nullptr;
+  const cudaError_t e = cudaMalloc(&p, bytes);
+  if (e != cudaSuccess) {
+    cudaGetLastError();
+    std::ostringstream s;
+    s << "could not allocate " << bytes / 1048576.0 << " MiB of device memory for " << what << " ("
+      << cudaGetErrorString(e) << ")";
+    throw Error(e == cudaErrorMemoryAllocation ? 6 : 9, s.str());
+  }
+  return std::shared_ptr<void>(p, [](void* q) { cudaFree(q); });
+}
+
+#endif  // KOKKOS_ENABLE_CUDA
+
+void reconstruct_cuda(const ParticleInput& in, const Params& p, MemoryTracker& t, const Progress& pr,
+                      bool mesh_on_device, HostMesh& m, RunStats& st, int device) {
 #if defined(KOKKOS_ENABLE_CUDA)
   (void)device;  // Kokkos 3.4 binds one device at initialisation
-  Details::reconstruct(Kokkos::Cuda(), xyz, n, p, t, pr, m, st);
+  Details::reconstruct(Kokkos::Cuda(), in, p, t, pr, mesh_on_device, m, st);
 #else
-  (void)xyz; (void)n; (void)p; (void)t; (void)pr; (void)m; (void)st; (void)device;
+  (void)in; (void)p; (void)t; (void)pr; (void)mesh_on_device; (void)m; (void)st; (void)device;
+  throw Error(7, "the CUDA backend is not compiled in");
+#endif
+}
+
+DeviceParticles upload_device_particles(const void* xyz, bool f32, std::uint64_t count, std::uint64_t byte_stride,
+                                        const char* fn) {
+#if defined(KOKKOS_ENABLE_CUDA)
+  const std::uint64_t size = f32 ? sizeof(float) : sizeof(double);
+  if (byte_stride == 0) byte_stride = 3 * size;
+  if (byte_stride % size != 0 || reinterpret_cast<std::uintptr_t>(xyz) % size != 0) {
+    std::ostringstream s;
+    s << fn << ": on the device, xyz and byte_stride (" << byte_stride << ") must be multiples of " << size
+      << " bytes (aligned values)";
+    throw Error(1, s.str());
+  }
+  check_device_pointer(xyz, fn);
+  DeviceParticles out;
+  out.data = cuda_allocate(std::size_t(count) * 3 * sizeof(double), "the particles");
+  out.count = std::size_t(count);
+  double* dst = static_cast<double*>(out.data.get());
+  const unsigned char* src = static_cast<const unsigned char*>(xyz);
+  const std::uint64_t stride = byte_stride;
+  const Kokkos::Cuda space;
+  using Range = Kokkos::RangePolicy<Kokkos::Cuda>;
+  std::uint64_t bad = 0;
+  Kokkos::parallel_reduce(
+      "nbmc::upload::device_particles", Range(space, 0, count),
+      KOKKOS_LAMBDA(const std::size_t i, std::uint64_t& nbad) {
+        const unsigned char* q = src + i * stride;
+        for (int a = 0; a < 3; ++a) {
+          const double v = f32 ? double(reinterpret_cast<const float*>(q)[a]) : reinterpret_cast<const double*>(q)[a];
+          // NaN fails both comparisons; Inf is beyond 1e15
+          if (!(v >= -1e15 && v <= 1e15)) ++nbad;
+          dst[3 * i + a] = v;
+        }
+      },
+      bad);
+  {
+    const cudaError_t e = cudaGetLastError();
+    if (e != cudaSuccess) cuda_fail(e, std::string(fn) + ": reading the device positions");
+  }
+  if (bad) {
+    std::uint64_t first = 0;
+    Kokkos::parallel_reduce(
+        "nbmc::upload::first_bad_particle", Range(space, 0, count),
+        KOKKOS_LAMBDA(const std::size_t i, std::uint64_t& f) {
+          bool ok = true;
+          for (int a = 0; a < 3; ++a) {
+            const double v = dst[3 * i + a];
+            ok = ok && v >= -1e15 && v <= 1e15;
+          }
+          if (!ok && i < f) f = i;
+        },
+        Kokkos::Min<std::uint64_t>(first));
+    std::ostringstream s;
+    s << fn << ": " << bad << " coordinate(s) are NaN, infinite or beyond 1e15 in magnitude (first at particle "
+      << first << ")";
+    throw Error(2, s.str());
+  }
+  return out;
+#else
+  (void)xyz; (void)f32; (void)count; (void)byte_stride;
+  throw Error(7, std::string(fn) + ": the CUDA backend is not compiled in");
+#endif
+}
+
+void download_mesh(const HostMesh& m, float* positions, float* normals, std::uint32_t* triangles) {
+#if defined(KOKKOS_ENABLE_CUDA)
+  const std::size_t nv = std::size_t(m.d_vertices) * 3, nt = std::size_t(m.d_triangles_count) * 3;
+  if (positions && m.d_positions)
+    cuda_check(cudaMemcpy(positions, m.d_positions, nv * sizeof(float), cudaMemcpyDeviceToHost), "mesh positions");
+  if (normals && m.d_normals)
+    cuda_check(cudaMemcpy(normals, m.d_normals, nv * sizeof(float), cudaMemcpyDeviceToHost), "mesh normals");
+  if (triangles && m.d_triangles)
+    cuda_check(cudaMemcpy(triangles, m.d_triangles, nt * sizeof(std::uint32_t), cudaMemcpyDeviceToHost),
+               "mesh triangles");
+#else
+  (void)m; (void)positions; (void)normals; (void)triangles;
   throw Error(7, "the CUDA backend is not compiled in");
 #endif
 }

@@ -5,17 +5,17 @@
 
 namespace nbmc {
 
-void reconstruct_serial(const double* xyz, std::size_t n, const Params& p, MemoryTracker& t, const Progress& pr,
-                        HostMesh& m, RunStats& st) {
-  Details::reconstruct(Kokkos::Serial(), xyz, n, p, t, pr, m, st);
+void reconstruct_serial(const ParticleInput& in, const Params& p, MemoryTracker& t, const Progress& pr, HostMesh& m,
+                        RunStats& st) {
+  Details::reconstruct(Kokkos::Serial(), in, p, t, pr, false, m, st);
 }
 
-void reconstruct_openmp(const double* xyz, std::size_t n, const Params& p, MemoryTracker& t, const Progress& pr,
-                        HostMesh& m, RunStats& st) {
+void reconstruct_openmp(const ParticleInput& in, const Params& p, MemoryTracker& t, const Progress& pr, HostMesh& m,
+                        RunStats& st) {
 #if defined(KOKKOS_ENABLE_OPENMP)
-  Details::reconstruct(Kokkos::OpenMP(), xyz, n, p, t, pr, m, st);
+  Details::reconstruct(Kokkos::OpenMP(), in, p, t, pr, false, m, st);
 #else
-  (void)xyz; (void)n; (void)p; (void)t; (void)pr; (void)m; (void)st;
+  (void)in; (void)p; (void)t; (void)pr; (void)m; (void)st;
   throw Error(7, "the OpenMP backend is not compiled in");
 #endif
 }

@@ -1,0 +1,183 @@
+// SPDX-License-Identifier: MIT
+// Device pointers through the C API (CUDA backend, run on a GPU machine):
+//  - particles uploaded from cudaMalloc'd float (strided) and double arrays
+//    give the same mesh as the same values uploaded from the host;
+//  - a mesh left in device memory (NBMC_MEMORY_DEVICE) has device pointers,
+//    and copied to the host it equals the host mesh bit for bit; it can be
+//    written to a file and outlives its context;
+//  - errors: a host pointer, a misaligned stride, NaN on the device, the
+//    device calls on a CPU backend.
+//   nbmc_cuda_device_pointers [DATA_DIR]
+#include "nbmc_test.hpp"
+
+#include <cuda_runtime.h>
+
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <fstream>
+#include <string>
+#include <vector>
+
+using namespace nbmc_test;
+
+namespace {
+int failures = 0;
+
+void check(bool ok, const std::string& what) {
+  std::printf("%s %s\n", ok ? "ok  " : "FAIL", what.c_str());
+  if (!ok) ++failures;
+}
+
+struct Ctx {
+  nbmc_context* c = nullptr;
+  explicit Ctx(int32_t backend) {
+    nbmc_context_desc d;
+    nbmc_context_desc_init(&d);
+    d.backend = backend;
+    if (nbmc_context_create(&d, &c) != NBMC_OK) c = nullptr;
+  }
+  ~Ctx() { nbmc_context_destroy(c); }
+};
+
+Mesh host_copy(const nbmc_mesh* m) {
+  Mesh h;
+  h.positions.resize(3 * nbmc_mesh_vertex_count(m));
+  h.normals.resize(nbmc_mesh_normals(m) ? h.positions.size() : 0);
+  h.triangles.resize(3 * nbmc_mesh_triangle_count(m));
+  if (nbmc_mesh_copy_to_host(m, h.positions.data(), h.normals.empty() ? nullptr : h.normals.data(),
+                             h.triangles.data()) != NBMC_OK)
+    h = Mesh();
+  return h;
+}
+
+bool same(const Mesh& a, const Mesh& b) {
+  return a.triangles == b.triangles && a.positions.size() == b.positions.size() &&
+         std::memcmp(a.positions.data(), b.positions.data(), a.positions.size() * sizeof(float)) == 0 &&
+         a.normals.size() == b.normals.size() &&
+         std::memcmp(a.normals.data(), b.normals.data(), a.normals.size() * sizeof(float)) == 0;
+}
+
+bool is_device_pointer(const void* p) {
+  cudaPointerAttributes a;
+  return p && cudaPointerGetAttributes(&a, p) == cudaSuccess && a.type == cudaMemoryTypeDevice;
+}
+
+void run(const char* name, const Points& pts, double spacing, double cell) {
+  nbmc_params prm = params(spacing);
+  prm.cell_size = cell;
+  const std::size_t n = pts.size() / 3;
+  // Host reference on the CUDA backend, from floats (what the device upload gets).
+  std::vector<float> f(pts.begin(), pts.end());
+  Ctx host(NBMC_BACKEND_CUDA);
+  nbmc_mesh* ref_mesh = nullptr;
+  if (nbmc_context_set_particles_f32(host.c, f.data(), n, 0) != NBMC_OK ||
+      nbmc_context_reconstruct(host.c, &prm, &ref_mesh) != NBMC_OK) {
+    check(false, std::string(name) + ": host upload on CUDA: " + nbmc_context_last_error(host.c));
+    return;
+  }
+  const Mesh ref = host_copy(ref_mesh);
+  nbmc_mesh_destroy(ref_mesh);
+
+  // Device float array with a stride of 5 floats (x, y, z, and two other fields).
+  std::vector<float> strided(5 * n, -7.f);
+  for (std::size_t i = 0; i < n; ++i)
+    for (int a = 0; a < 3; ++a) strided[5 * i + a] = f[3 * i + a];
+  float* d_f = nullptr;
+  double* d_d = nullptr;
+  cudaMalloc(&d_f, strided.size() * sizeof(float));
+  cudaMalloc(&d_d, pts.size() * sizeof(double));
+  cudaMemcpy(d_f, strided.data(), strided.size() * sizeof(float), cudaMemcpyHostToDevice);
+  std::vector<double> dd(f.begin(), f.end());  // the same values as doubles
+  cudaMemcpy(d_d, dd.data(), dd.size() * sizeof(double), cudaMemcpyHostToDevice);
+
+  nbmc_mesh* mesh_f = nullptr;
+  nbmc_mesh* mesh_d = nullptr;
+  nbmc_mesh* mesh_dev = nullptr;
+  {
+    Ctx dev(NBMC_BACKEND_CUDA);
+    int32_t s = nbmc_context_set_particles_device_f32(dev.c, d_f, n, 5 * sizeof(float));
+    if (s == NBMC_OK) s = nbmc_context_reconstruct(dev.c, &prm, &mesh_f);
+    check(s == NBMC_OK && nbmc_mesh_memory(mesh_f) == NBMC_MEMORY_HOST && same(host_copy(mesh_f), ref),
+          std::string(name) + ": device f32 (stride 20 B) upload gives the host-upload mesh (" +
+              std::to_string(ref.triangle_count()) + " triangles) " + (s ? nbmc_context_last_error(dev.c) : ""));
+    s = nbmc_context_set_particles_device_f64(dev.c, d_d, n, 0);
+    if (s == NBMC_OK) s = nbmc_context_reconstruct(dev.c, &prm, &mesh_d);
+    check(s == NBMC_OK && same(host_copy(mesh_d), ref), std::string(name) + ": device f64 upload, same mesh");
+    // The mesh left on the device.
+    s = nbmc_context_set_mesh_memory(dev.c, NBMC_MEMORY_DEVICE);
+    if (s == NBMC_OK) s = nbmc_context_reconstruct(dev.c, &prm, &mesh_dev);
+    check(s == NBMC_OK && nbmc_mesh_memory(mesh_dev) == NBMC_MEMORY_DEVICE &&
+              nbmc_mesh_vertex_count(mesh_dev) == ref.vertex_count() &&
+              nbmc_mesh_triangle_count(mesh_dev) == ref.triangle_count() &&
+              (ref.triangle_count() == 0 ||
+               (is_device_pointer(nbmc_mesh_positions(mesh_dev)) && is_device_pointer(nbmc_mesh_triangles(mesh_dev)) &&
+                is_device_pointer(nbmc_mesh_normals(mesh_dev)))),
+          std::string(name) + ": NBMC_MEMORY_DEVICE mesh: device pointers, same counts");
+    nbmc_stats st;
+    nbmc_stats_init(&st);
+    nbmc_context_stats(dev.c, &st);
+    std::printf("     device-resident run: total %.4f s (upload %.4f, neighbourhood %.4f, output %.4f)\n",
+                st.total_seconds, st.stage_seconds[NBMC_STAGE_UPLOAD], st.stage_seconds[NBMC_STAGE_NEIGHBOURHOOD],
+                st.stage_seconds[NBMC_STAGE_OUTPUT]);
+  }  // the context is gone; the device mesh stays valid
+  check(same(host_copy(mesh_dev), ref), std::string(name) + ": device mesh copied to the host after its context "
+                                                              "is destroyed equals the host mesh");
+  const std::string path = std::string("/tmp/nbmc_device_mesh_") + std::to_string(n) + ".ply";
+  check(nbmc_mesh_write(mesh_dev, path.c_str(), nullptr) == NBMC_OK && std::ifstream(path).good(),
+        std::string(name) + ": a device mesh can be written (" + path + ")");
+  std::remove(path.c_str());
+  nbmc_mesh_destroy(mesh_f);
+  nbmc_mesh_destroy(mesh_d);
+  nbmc_mesh_destroy(mesh_dev);
+  cudaFree(d_f);
+  cudaFree(d_d);
+}
+
+void errors() {
+  Ctx dev(NBMC_BACKEND_CUDA);
+  std::vector<float> host(30, 0.f);
+  check(nbmc_context_set_particles_device_f32(dev.c, host.data(), 10, 0) == NBMC_ERROR_INVALID_ARGUMENT,
+        std::string("host pointer to the device upload: ") + nbmc_context_last_error(dev.c));
+  float* d = nullptr;
+  cudaMalloc(&d, 64 * sizeof(float));
+  std::vector<float> v(64, 0.5f);
+  v[3 * 7 + 1] = std::nanf("");
+  cudaMemcpy(d, v.data(), v.size() * sizeof(float), cudaMemcpyHostToDevice);
+  check(nbmc_context_set_particles_device_f32(dev.c, d, 20, 0) == NBMC_ERROR_INVALID_PARTICLES &&
+            std::string(nbmc_context_last_error(dev.c)).find("particle 7") != std::string::npos,
+        std::string("NaN on the device: ") + nbmc_context_last_error(dev.c));
+  nbmc_params prm = params(0.1);
+  nbmc_mesh* m = nullptr;
+  check(nbmc_context_reconstruct(dev.c, &prm, &m) == NBMC_ERROR_NO_PARTICLES && !m,
+        "after a failed device upload the context holds no particles");
+  check(nbmc_context_set_particles_device_f32(dev.c, d, 10, 13) == NBMC_ERROR_INVALID_ARGUMENT,
+        std::string("a stride that is not a multiple of 4: ") + nbmc_context_last_error(dev.c));
+  Ctx cpu(NBMC_BACKEND_OPENMP);
+  check(nbmc_context_set_particles_device_f32(cpu.c, d, 10, 0) == NBMC_ERROR_BACKEND_UNAVAILABLE,
+        std::string("device upload on OpenMP: ") + nbmc_context_last_error(cpu.c));
+  check(nbmc_context_set_mesh_memory(cpu.c, NBMC_MEMORY_DEVICE) == NBMC_ERROR_BACKEND_UNAVAILABLE,
+        std::string("device mesh on OpenMP: ") + nbmc_context_last_error(cpu.c));
+  cudaFree(d);
+}
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (!nbmc_backend_available(NBMC_BACKEND_CUDA)) {
+    std::printf("FAIL: the CUDA backend is not available\n");
+    return 2;
+  }
+  errors();
+  run("sphere", sphere(0, 0, 0, 1.0, 0.1), 0.1, 0.5);
+  const double lo[3] = {-0.8, -0.5, -0.4}, hi[3] = {0.8, 0.5, 0.4};
+  run("box", box(lo, hi, 0.1), 0.1, 1.0);
+  const std::string dir = argc > 1 ? argv[1] : "../shared/data";
+  const std::string big = dir + "/xyz/cbd1654k_t040_1654104.xyz";
+  if (std::ifstream(big).good()) {
+    run("cbd1654k, cell r", read_xyz(big), 0.00484, 1.0);
+  } else {
+    std::printf("skip %s (not found)\n", big.c_str());
+  }
+  std::printf("%s: %d failure(s)\n", failures ? "FAILED" : "PASSED", failures);
+  return failures ? 1 : 0;
+}
