@@ -98,9 +98,10 @@ void run(const char* name, const Points& pts, double spacing, double cell) {
     Ctx dev(NBMC_BACKEND_CUDA);
     int32_t s = nbmc_context_set_particles_device_f32(dev.c, d_f, n, 5 * sizeof(float));
     if (s == NBMC_OK) s = nbmc_context_reconstruct(dev.c, &prm, &mesh_f);
+    const std::string err = s ? nbmc_context_last_error(dev.c) : "";
     check(s == NBMC_OK && nbmc_mesh_memory(mesh_f) == NBMC_MEMORY_HOST && same(host_copy(mesh_f), ref),
           std::string(name) + ": device f32 (stride 20 B) upload gives the host-upload mesh (" +
-              std::to_string(ref.triangle_count()) + " triangles) " + (s ? nbmc_context_last_error(dev.c) : ""));
+              std::to_string(ref.triangle_count()) + " triangles) " + err);
     s = nbmc_context_set_particles_device_f64(dev.c, d_d, n, 0);
     if (s == NBMC_OK) s = nbmc_context_reconstruct(dev.c, &prm, &mesh_d);
     check(s == NBMC_OK && same(host_copy(mesh_d), ref), std::string(name) + ": device f64 upload, same mesh");
@@ -136,28 +137,29 @@ void run(const char* name, const Points& pts, double spacing, double cell) {
 
 void errors() {
   Ctx dev(NBMC_BACKEND_CUDA);
+  auto said = [](const Ctx& c) { return std::string(nbmc_context_last_error(c.c)); };
   std::vector<float> host(30, 0.f);
-  check(nbmc_context_set_particles_device_f32(dev.c, host.data(), 10, 0) == NBMC_ERROR_INVALID_ARGUMENT,
-        std::string("host pointer to the device upload: ") + nbmc_context_last_error(dev.c));
+  int32_t s = nbmc_context_set_particles_device_f32(dev.c, host.data(), 10, 0);
+  check(s == NBMC_ERROR_INVALID_ARGUMENT, "host pointer to the device upload: " + said(dev));
   float* d = nullptr;
   cudaMalloc(&d, 64 * sizeof(float));
   std::vector<float> v(64, 0.5f);
   v[3 * 7 + 1] = std::nanf("");
   cudaMemcpy(d, v.data(), v.size() * sizeof(float), cudaMemcpyHostToDevice);
-  check(nbmc_context_set_particles_device_f32(dev.c, d, 20, 0) == NBMC_ERROR_INVALID_PARTICLES &&
-            std::string(nbmc_context_last_error(dev.c)).find("particle 7") != std::string::npos,
-        std::string("NaN on the device: ") + nbmc_context_last_error(dev.c));
+  s = nbmc_context_set_particles_device_f32(dev.c, d, 20, 0);
+  check(s == NBMC_ERROR_INVALID_PARTICLES && said(dev).find("particle 7") != std::string::npos,
+        "NaN on the device: " + said(dev));
   nbmc_params prm = params(0.1);
   nbmc_mesh* m = nullptr;
-  check(nbmc_context_reconstruct(dev.c, &prm, &m) == NBMC_ERROR_NO_PARTICLES && !m,
-        "after a failed device upload the context holds no particles");
-  check(nbmc_context_set_particles_device_f32(dev.c, d, 10, 13) == NBMC_ERROR_INVALID_ARGUMENT,
-        std::string("a stride that is not a multiple of 4: ") + nbmc_context_last_error(dev.c));
+  s = nbmc_context_reconstruct(dev.c, &prm, &m);
+  check(s == NBMC_ERROR_NO_PARTICLES && !m, "after a failed device upload the context holds no particles: " + said(dev));
+  s = nbmc_context_set_particles_device_f32(dev.c, d, 10, 13);
+  check(s == NBMC_ERROR_INVALID_ARGUMENT, "a stride that is not a multiple of 4: " + said(dev));
   Ctx cpu(NBMC_BACKEND_OPENMP);
-  check(nbmc_context_set_particles_device_f32(cpu.c, d, 10, 0) == NBMC_ERROR_BACKEND_UNAVAILABLE,
-        std::string("device upload on OpenMP: ") + nbmc_context_last_error(cpu.c));
-  check(nbmc_context_set_mesh_memory(cpu.c, NBMC_MEMORY_DEVICE) == NBMC_ERROR_BACKEND_UNAVAILABLE,
-        std::string("device mesh on OpenMP: ") + nbmc_context_last_error(cpu.c));
+  s = nbmc_context_set_particles_device_f32(cpu.c, d, 10, 0);
+  check(s == NBMC_ERROR_BACKEND_UNAVAILABLE, "device upload on OpenMP: " + said(cpu));
+  s = nbmc_context_set_mesh_memory(cpu.c, NBMC_MEMORY_DEVICE);
+  check(s == NBMC_ERROR_BACKEND_UNAVAILABLE, "device mesh on OpenMP: " + said(cpu));
   cudaFree(d);
 }
 }  // namespace
