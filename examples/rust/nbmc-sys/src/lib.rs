@@ -50,6 +50,11 @@ pub const NBMC_FIELD_SCATTER: i32 = 2;
 /// Context flag: initialise Kokkos on the calling thread (see nbmc.h).
 pub const NBMC_CONTEXT_KOKKOS_ON_CALLING_THREAD: u32 = 1;
 
+/// Where arrays handed to or returned by nbmc live: ordinary host memory (default).
+pub const NBMC_MEMORY_HOST: i32 = 0;
+/// CUDA memory of the context's GPU (CUDA backend only).
+pub const NBMC_MEMORY_DEVICE: i32 = 1;
+
 pub const NBMC_UNIT_SPACING: i32 = 0;
 pub const NBMC_UNIT_ABSOLUTE: i32 = 1;
 
@@ -161,6 +166,20 @@ extern "C" {
         -> i32;
     pub fn nbmc_context_set_particles_f64(ctx: *mut nbmc_context, xyz: *const f64, count: u64, byte_stride: u64)
         -> i32;
+    // `xyz` is CUDA device memory of the context's GPU (CUDA backend only).
+    pub fn nbmc_context_set_particles_device_f32(
+        ctx: *mut nbmc_context,
+        xyz: *const f32,
+        count: u64,
+        byte_stride: u64,
+    ) -> i32;
+    pub fn nbmc_context_set_particles_device_f64(
+        ctx: *mut nbmc_context,
+        xyz: *const f64,
+        count: u64,
+        byte_stride: u64,
+    ) -> i32;
+    pub fn nbmc_context_set_mesh_memory(ctx: *mut nbmc_context, memory: i32) -> i32;
     pub fn nbmc_context_set_progress(ctx: *mut nbmc_context, fn_: nbmc_progress_fn, user: *mut c_void) -> i32;
     pub fn nbmc_context_set_memory_budget(ctx: *mut nbmc_context, bytes: u64) -> i32;
 
@@ -183,6 +202,14 @@ extern "C" {
     pub fn nbmc_mesh_normals(mesh: *const nbmc_mesh) -> *const f32;
     pub fn nbmc_mesh_triangles(mesh: *const nbmc_mesh) -> *const u32;
     pub fn nbmc_mesh_destroy(mesh: *mut nbmc_mesh);
+    // NBMC_MEMORY_DEVICE: the three getters above return CUDA device pointers.
+    pub fn nbmc_mesh_memory(mesh: *const nbmc_mesh) -> i32;
+    pub fn nbmc_mesh_copy_to_host(
+        mesh: *const nbmc_mesh,
+        positions: *mut f32,
+        normals: *mut f32,
+        triangles: *mut u32,
+    ) -> i32;
 
     // file I/O
     pub fn nbmc_context_load_particles(

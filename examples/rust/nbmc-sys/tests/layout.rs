@@ -59,6 +59,8 @@ fn rust_constants() -> BTreeMap<&'static str, i128> {
         NBMC_FIELD_DENSE,
         NBMC_FIELD_SCATTER,
         NBMC_CONTEXT_KOKKOS_ON_CALLING_THREAD,
+        NBMC_MEMORY_HOST,
+        NBMC_MEMORY_DEVICE,
         NBMC_UNIT_SPACING,
         NBMC_UNIT_ABSOLUTE,
         NBMC_STAGE_UPLOAD,

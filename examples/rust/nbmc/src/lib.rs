@@ -22,6 +22,20 @@
 //! objects on drop. A `Context` is [`Send`] but not [`Sync`]: it can move to
 //! another thread but never be used by two at once. A `Mesh` is `Send` and
 //! `Sync` (its getters are read-only).
+//!
+//! # GPU memory
+//!
+//! With the CUDA backend, particles can come straight from CUDA memory
+//! ([`Context::set_particles_device_f32`], `unsafe`: the caller vouches for
+//! the device pointer) and meshes can stay on the GPU
+//! ([`Context::set_mesh_memory`]`(`[`Memory::Device`]`)`). A device mesh's
+//! arrays are never handed out as slices (that would let safe code read
+//! device memory from the host): for such a mesh [`Mesh::positions`] and
+//! [`Mesh::triangles`] are empty and [`Mesh::normals`] is `None`. Use
+//! [`Mesh::memory`] to tell, [`Mesh::copy_to_host`] (works for every mesh)
+//! to get the data, or [`Mesh::device_arrays`] for the raw device pointers.
+//! Other backends answer the device calls with
+//! [`Error::BACKEND_UNAVAILABLE`].
 use nbmc_sys as sys;
 use std::any::Any;
 use std::ffi::{c_void, CStr, CString};
@@ -207,6 +221,16 @@ int_enum!(
         Spacing = sys::NBMC_UNIT_SPACING,
         /// The units of the particle positions.
         Absolute = sys::NBMC_UNIT_ABSOLUTE,
+    }
+);
+
+int_enum!(
+    /// Where a mesh's arrays live (`NBMC_MEMORY_*`).
+    Memory {
+        /// Ordinary host memory (the default).
+        Host = sys::NBMC_MEMORY_HOST,
+        /// CUDA memory of the context's GPU (CUDA backend only).
+        Device = sys::NBMC_MEMORY_DEVICE,
     }
 );
 
@@ -546,6 +570,54 @@ impl Context {
         self.check(s)
     }
 
+    /// Uploads (copies) `count` f32 positions from CUDA device memory: particle
+    /// i's x, y, z are three f32 at byte offset `i * byte_stride` from `xyz`
+    /// (0 = packed; otherwise a multiple of 4). The copy and the validation
+    /// run on the GPU; the call returns when the copy is done, so the caller
+    /// may then change its array. Replaces earlier particles.
+    ///
+    /// Errors: [`Error::BACKEND_UNAVAILABLE`] unless the context uses the
+    /// CUDA backend (nothing is read then); [`Error::INVALID_ARGUMENT`] for a
+    /// host pointer, memory of another GPU, NULL or a bad stride;
+    /// [`Error::INVALID_PARTICLES`] / [`Error::NO_PARTICLES`] as for host
+    /// uploads. On failure the context keeps no particles.
+    ///
+    /// # Safety
+    /// `xyz` must be CUDA device (or managed) memory of the context's GPU
+    /// (cudaMalloc'd, e.g. from cust or cudarc), aligned to 4 bytes, in which
+    /// those `count` strided triples are allocated and stay allocated and
+    /// unchanged for the duration of the call (no kernel of the caller may
+    /// write them meanwhile). nbmc recognises host pointers, but it cannot
+    /// check the extent of a device allocation.
+    pub unsafe fn set_particles_device_f32(&mut self, xyz: *const f32, count: usize, byte_stride: usize) -> Result<()> {
+        let s = unsafe {
+            sys::nbmc_context_set_particles_device_f32(self.raw.as_ptr(), xyz, count as u64, byte_stride as u64)
+        };
+        self.check(s)
+    }
+
+    /// Double-precision version of [`Context::set_particles_device_f32`]
+    /// (stride a multiple of 8).
+    ///
+    /// # Safety
+    /// As for [`Context::set_particles_device_f32`], with f64 values aligned
+    /// to 8 bytes.
+    pub unsafe fn set_particles_device_f64(&mut self, xyz: *const f64, count: usize, byte_stride: usize) -> Result<()> {
+        let s = unsafe {
+            sys::nbmc_context_set_particles_device_f64(self.raw.as_ptr(), xyz, count as u64, byte_stride as u64)
+        };
+        self.check(s)
+    }
+
+    /// Where the meshes of later reconstructions on this context are put:
+    /// [`Memory::Host`] (the default) or [`Memory::Device`], which leaves them
+    /// in the GPU's memory (see [`Mesh::memory`]); `Device` needs the CUDA
+    /// backend, else [`Error::BACKEND_UNAVAILABLE`].
+    pub fn set_mesh_memory(&mut self, memory: Memory) -> Result<()> {
+        let s = unsafe { sys::nbmc_context_set_mesh_memory(self.raw.as_ptr(), memory.raw()) };
+        self.check(s)
+    }
+
     /// Reads the particle positions of a file with nbmc's readers and uploads
     /// them (same validation as the set_particles functions). `format` is a
     /// format name ("xyz", "ply", "vtk", "bgeo", "h5part", ...; see
@@ -676,9 +748,32 @@ impl fmt::Debug for Context {
 // --------------------------------------------------------------------- mesh
 
 /// A triangle mesh. Owns its memory (independent of the context); the slices
-/// borrow it without copying.
+/// borrow it without copying. A mesh in device memory ([`Memory::Device`])
+/// hands out no slices: see [`Mesh::copy_to_host`] and [`Mesh::device_arrays`].
 pub struct Mesh {
     raw: NonNull<sys::nbmc_mesh>,
+}
+
+/// A mesh's arrays copied to the host by [`Mesh::copy_to_host`].
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct HostMesh {
+    pub positions: Vec<[f32; 3]>,
+    /// None when the reconstruction computed no normals.
+    pub normals: Option<Vec<[f32; 3]>>,
+    pub triangles: Vec<[u32; 3]>,
+}
+
+/// Raw pointers to the arrays of a device mesh (same layout as the slices:
+/// 3 values per vertex or triangle), valid while the [`Mesh`] lives; freed
+/// when it is dropped. CUDA device pointers: never dereference them on the
+/// host. Null for an empty mesh; `normals` is null when none were computed.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct DeviceArrays {
+    pub positions: *const f32,
+    pub normals: *const f32,
+    pub triangles: *const u32,
+    pub vertex_count: usize,
+    pub triangle_count: usize,
 }
 
 // SAFETY: a mesh is immutable after creation; nbmc.h allows concurrent getters
@@ -695,14 +790,40 @@ impl Mesh {
         unsafe { sys::nbmc_mesh_triangle_count(self.raw.as_ptr()) as usize }
     }
 
-    /// Vertex positions.
+    /// Where the mesh's arrays live ([`Context::set_mesh_memory`]). A value
+    /// this binding does not know counts as [`Memory::Device`] (not host
+    /// memory: no slices are handed out).
+    pub fn memory(&self) -> Memory {
+        let m = unsafe { sys::nbmc_mesh_memory(self.raw.as_ptr()) };
+        Memory::from_raw(m).unwrap_or(Memory::Device)
+    }
+
+    fn on_host(&self) -> bool {
+        self.memory() == Memory::Host
+    }
+
+    /// Whether the reconstruction computed normals (host or device mesh).
+    pub fn has_normals(&self) -> bool {
+        !unsafe { sys::nbmc_mesh_normals(self.raw.as_ptr()) }.is_null()
+    }
+
+    /// Vertex positions. Empty for a mesh in device memory (see
+    /// [`Mesh::memory`]; use [`Mesh::copy_to_host`] there).
     pub fn positions(&self) -> &[[f32; 3]] {
-        // SAFETY: 3 * vertex_count floats, alive until nbmc_mesh_destroy (drop).
+        if !self.on_host() {
+            return &[];
+        }
+        // SAFETY: host memory: 3 * vertex_count floats, alive until
+        // nbmc_mesh_destroy (drop).
         unsafe { slice3(sys::nbmc_mesh_positions(self.raw.as_ptr()), self.vertex_count()) }
     }
 
-    /// Unit normals pointing out of the fluid; None when not computed.
+    /// Unit normals pointing out of the fluid; None when not computed, and
+    /// for a mesh in device memory ([`Mesh::has_normals`] tells the two apart).
     pub fn normals(&self) -> Option<&[[f32; 3]]> {
+        if !self.on_host() {
+            return None;
+        }
         let p = unsafe { sys::nbmc_mesh_normals(self.raw.as_ptr()) };
         if p.is_null() {
             None
@@ -711,14 +832,103 @@ impl Mesh {
         }
     }
 
-    /// Vertex indices, counter-clockwise seen from outside the fluid.
+    /// Vertex indices, counter-clockwise seen from outside the fluid. Empty
+    /// for a mesh in device memory.
     pub fn triangles(&self) -> &[[u32; 3]] {
+        if !self.on_host() {
+            return &[];
+        }
         unsafe { slice3(sys::nbmc_mesh_triangles(self.raw.as_ptr()), self.triangle_count()) }
     }
 
+    /// The arrays copied to the host, wherever they live (for a host mesh,
+    /// the same values as the slices).
+    pub fn copy_to_host(&self) -> Result<HostMesh> {
+        let (nv, nt) = (self.vertex_count(), self.triangle_count());
+        let mut h = HostMesh {
+            positions: vec![[0.0; 3]; nv],
+            normals: self.has_normals().then(|| vec![[0.0; 3]; nv]),
+            triangles: vec![[0; 3]; nt],
+        };
+        self.copy_to_host_into(
+            Some(h.positions.as_mut_slice()),
+            h.normals.as_deref_mut(),
+            Some(h.triangles.as_mut_slice()),
+        )?;
+        Ok(h)
+    }
+
+    /// Copies the arrays into buffers the caller owns (e.g. reused from frame
+    /// to frame); None skips an array. Each given buffer must have exactly
+    /// [`Mesh::vertex_count`] (positions, normals) or
+    /// [`Mesh::triangle_count`] (triangles) elements, else
+    /// [`Error::INVALID_ARGUMENT`] and nothing is copied. `normals` is left
+    /// untouched when the mesh has none.
+    pub fn copy_to_host_into(
+        &self,
+        positions: Option<&mut [[f32; 3]]>,
+        normals: Option<&mut [[f32; 3]]>,
+        triangles: Option<&mut [[u32; 3]]>,
+    ) -> Result<()> {
+        let (nv, nt) = (self.vertex_count(), self.triangle_count());
+        let check_len = |what: &str, len: usize, want: usize| {
+            if len == want {
+                Ok(())
+            } else {
+                Err(Error::new(
+                    sys::NBMC_ERROR_INVALID_ARGUMENT,
+                    format!("copy_to_host_into: {what} has {len} elements, the mesh {want}"),
+                ))
+            }
+        };
+        if let Some(p) = &positions {
+            check_len("positions", p.len(), nv)?;
+        }
+        if let Some(n) = &normals {
+            check_len("normals", n.len(), nv)?;
+        }
+        if let Some(t) = &triangles {
+            check_len("triangles", t.len(), nt)?;
+        }
+        // Empty buffers go as NULL (nothing to copy).
+        fn out<T>(b: Option<&mut [[T; 3]]>) -> *mut T {
+            match b {
+                Some(b) if !b.is_empty() => b.as_mut_ptr().cast(),
+                _ => ptr::null_mut(),
+            }
+        }
+        // SAFETY: every non-null pointer has room for the mesh's 3 * count values.
+        let s = unsafe { sys::nbmc_mesh_copy_to_host(self.raw.as_ptr(), out(positions), out(normals), out(triangles)) };
+        if s == sys::NBMC_OK {
+            Ok(())
+        } else {
+            Err(Error::new(s, format!("nbmc_mesh_copy_to_host failed ({})", status_string(s))))
+        }
+    }
+
+    /// The raw CUDA device pointers of a mesh in device memory; None for a
+    /// host mesh (use the slices). They are valid while `self` lives.
+    pub fn device_arrays(&self) -> Option<DeviceArrays> {
+        if self.on_host() {
+            return None;
+        }
+        let m = self.raw.as_ptr();
+        // Reading the pointer values is safe; dereferencing them on the host is not.
+        Some(unsafe {
+            DeviceArrays {
+                positions: sys::nbmc_mesh_positions(m),
+                normals: sys::nbmc_mesh_normals(m),
+                triangles: sys::nbmc_mesh_triangles(m),
+                vertex_count: self.vertex_count(),
+                triangle_count: self.triangle_count(),
+            }
+        })
+    }
+
     /// Writes the mesh with nbmc's writers ("ply", "obj", "vtk", "vtu",
-    /// "glb"; None: by the extension). The file is written under a temporary
-    /// name and renamed into place, so a failure leaves no partial file.
+    /// "glb"; None: by the extension); a device mesh is copied to the host
+    /// first. The file is written under a temporary name and renamed into
+    /// place, so a failure leaves no partial file.
     pub fn write(&self, path: impl AsRef<Path>, format: Option<&str>) -> Result<()> {
         let p = path_cstring(path.as_ref())?;
         let f = format_cstring(format)?;
@@ -761,6 +971,7 @@ impl fmt::Debug for Mesh {
         f.debug_struct("Mesh")
             .field("vertices", &self.vertex_count())
             .field("triangles", &self.triangle_count())
+            .field("memory", &self.memory())
             .finish()
     }
 }

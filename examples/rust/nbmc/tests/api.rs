@@ -8,7 +8,7 @@
 //! runs each test on a thread of its own.
 //!
 //!   cargo test --test api [-- FILTER]
-use nbmc::{Backend, Context, ContextOptions, Error, LengthUnit, Mesh, Params, Stage};
+use nbmc::{Backend, Context, ContextOptions, Error, LengthUnit, Memory, Mesh, Params, Stage};
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Arc;
@@ -281,6 +281,101 @@ fn file_io_round_trip() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
+/// The device-memory calls need the CUDA backend: a CPU context answers them
+/// with BACKEND_UNAVAILABLE before reading the pointer, keeps no particles and
+/// stays usable.
+fn device_memory_needs_the_cuda_backend() {
+    assert_eq!((Memory::Host.raw(), Memory::Device.raw()), (0, 1));
+    assert_eq!(Memory::from_raw(1), Some(Memory::Device));
+    assert_eq!(Memory::from_raw(7), None);
+    for backend in [Backend::Serial, Backend::OpenMp] {
+        if !backend.is_available() {
+            continue;
+        }
+        let mut ctx = Context::with_options(ContextOptions { backend, ..Default::default() }).unwrap();
+        let xyz = [0.0f32, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0, 0.0];
+        // SAFETY: a host array; a CPU context rejects the call without reading it.
+        let e = unsafe { ctx.set_particles_device_f32(xyz.as_ptr(), 3, 0) }.unwrap_err();
+        assert_eq!(e.code, Error::BACKEND_UNAVAILABLE, "{e}");
+        assert!(e.message.contains("CUDA"), "{e}");
+        let xyz64 = [0.0f64, 0.0, 0.0, 1.0, 0.0, 0.0];
+        let e = unsafe { ctx.set_particles_device_f64(xyz64.as_ptr(), 2, 24) }.unwrap_err();
+        assert_eq!(e.code, Error::BACKEND_UNAVAILABLE, "{e}");
+        let e = ctx.set_mesh_memory(Memory::Device).unwrap_err();
+        assert_eq!(e.code, Error::BACKEND_UNAVAILABLE, "{e}");
+        ctx.set_mesh_memory(Memory::Host).unwrap();
+        // The failed device upload left no particles behind.
+        assert_eq!(ctx.reconstruct(&Params::new(SPACING)).unwrap_err().code, Error::NO_PARTICLES);
+        // Still usable: a host upload reconstructs into a host mesh.
+        ctx.set_particles_f32(&sample()[..500]).unwrap();
+        let m = ctx.reconstruct(&Params::new(SPACING)).unwrap();
+        assert_eq!(m.memory(), Memory::Host);
+        assert!(m.triangle_count() > 0);
+    }
+}
+
+/// A host mesh copies out exactly what its slices show; copy_to_host_into
+/// checks the buffer lengths.
+fn host_mesh_copy_to_host_equals_its_slices() {
+    let mut ctx = Context::new().unwrap();
+    ctx.set_particles_f32(&sample()).unwrap();
+    let mesh = ctx.reconstruct(&Params::new(SPACING)).unwrap();
+    assert_eq!(mesh.memory(), Memory::Host);
+    assert!(mesh.device_arrays().is_none());
+    assert!(mesh.has_normals());
+    let h = mesh.copy_to_host().unwrap();
+    assert!(!h.triangles.is_empty());
+    assert_eq!(h.positions, mesh.positions());
+    assert_eq!(h.normals.as_deref(), mesh.normals());
+    assert_eq!(h.triangles, mesh.triangles());
+
+    // Into reused buffers, some arrays skipped.
+    let mut tri = vec![[u32::MAX; 3]; mesh.triangle_count()];
+    mesh.copy_to_host_into(None, None, Some(&mut tri)).unwrap();
+    assert_eq!(tri, mesh.triangles());
+    mesh.copy_to_host_into(None, None, None).unwrap();
+    let mut short = vec![[0.0f32; 3]; mesh.vertex_count() - 1];
+    let e = mesh.copy_to_host_into(Some(&mut short), None, None).unwrap_err();
+    assert_eq!(e.code, Error::INVALID_ARGUMENT, "{e}");
+    assert!(short.iter().all(|p| *p == [0.0; 3]), "nothing is copied on a length error");
+
+    // Without normals: None, and a normals buffer is left untouched.
+    let mut p = Params::new(SPACING);
+    p.compute_normals = false;
+    let bare = ctx.reconstruct(&p).unwrap();
+    assert!(!bare.has_normals());
+    let h = bare.copy_to_host().unwrap();
+    assert!(h.normals.is_none());
+    assert_eq!(h.positions, bare.positions());
+    let mut nrm = vec![[7.0f32; 3]; bare.vertex_count()];
+    bare.copy_to_host_into(None, Some(&mut nrm), None).unwrap();
+    assert!(nrm.iter().all(|n| *n == [7.0; 3]));
+}
+
+/// With a CUDA device: a mesh left in device memory hands out no slices, its
+/// raw pointers are device pointers, and copied to the host it equals the
+/// host mesh. Skipped (passes) without the CUDA backend.
+fn device_mesh_without_slices_when_cuda_is_available() {
+    if !Backend::Cuda.is_available() {
+        println!("  (skipped: the CUDA backend is not available)");
+        return;
+    }
+    let mut ctx = Context::with_options(ContextOptions { backend: Backend::Cuda, ..Default::default() }).unwrap();
+    ctx.set_particles_f32(&sample()).unwrap();
+    let host = ctx.reconstruct(&Params::new(SPACING)).unwrap();
+    ctx.set_mesh_memory(Memory::Device).unwrap();
+    let dev = ctx.reconstruct(&Params::new(SPACING)).unwrap();
+    drop(ctx); // a device mesh outlives its context too
+    assert_eq!(dev.memory(), Memory::Device);
+    assert_eq!((dev.vertex_count(), dev.triangle_count()), (host.vertex_count(), host.triangle_count()));
+    assert!(dev.positions().is_empty() && dev.triangles().is_empty() && dev.normals().is_none());
+    assert!(dev.has_normals());
+    let d = dev.device_arrays().expect("device pointers");
+    assert!(!d.positions.is_null() && !d.normals.is_null() && !d.triangles.is_null());
+    assert_eq!((d.vertex_count, d.triangle_count), (dev.vertex_count(), dev.triangle_count()));
+    assert_eq!(dev.copy_to_host().unwrap(), host.copy_to_host().unwrap());
+}
+
 fn names_and_version() {
     assert_eq!(nbmc::version() / 10000, nbmc::NBMC_VERSION_MAJOR);
     assert!(nbmc::version_string().starts_with("0.1."));
@@ -317,6 +412,9 @@ fn main() -> std::process::ExitCode {
         ("progress_reports_stages_and_can_cancel", progress_reports_stages_and_can_cancel),
         ("a_panic_in_the_progress_callback_does_not_cross_c", a_panic_in_the_progress_callback_does_not_cross_c),
         ("file_io_round_trip", file_io_round_trip),
+        ("device_memory_needs_the_cuda_backend", device_memory_needs_the_cuda_backend),
+        ("host_mesh_copy_to_host_equals_its_slices", host_mesh_copy_to_host_equals_its_slices),
+        ("device_mesh_without_slices_when_cuda_is_available", device_mesh_without_slices_when_cuda_is_available),
         ("names_and_version", names_and_version),
         ("auto_traits", auto_traits),
     ];
