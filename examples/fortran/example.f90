@@ -20,6 +20,8 @@ program example
 
   ! state(1:3, i) position, state(4:6, i) velocity: uploaded with a stride.
   real(c_double), allocatable :: state(:, :), rest_height(:)
+  real(c_float), allocatable :: vcopy(:, :)
+  integer(c_int32_t), allocatable :: tcopy(:, :)
   real(c_double) :: cx, cz, x, z, c, s
   type(nbmc_context) :: ctx
   type(nbmc_mesh) :: mesh
@@ -118,6 +120,25 @@ program example
     write (error_unit, '(a, a, a, a)') 'error: nbmc_mesh_write failed: ', nbmc_status_string(status), ': ', &
          nbmc_last_error()
     error stop 1
+  end if
+
+  ! Where the mesh lives, and a copy into Fortran arrays: what a GPU solver
+  ! with NBMC_MEMORY_DEVICE meshes would use (see nbmc.f90); here the mesh is
+  ! in host memory and the copy equals the arrays the pointers show.
+  if (nbmc_mesh_memory(mesh) /= NBMC_MEMORY_HOST) error stop 'expected a mesh in host memory'
+  allocate (vcopy(3, nbmc_mesh_vertex_count(mesh)), tcopy(3, nbmc_mesh_triangle_count(mesh)))
+  status = nbmc_mesh_copy_to_host(mesh, positions=vcopy, triangles=tcopy)
+  call check(status, 'nbmc_mesh_copy_to_host')
+  if (maxval(abs(vcopy - nbmc_mesh_positions(mesh))) > 0 .or. any(tcopy /= nbmc_mesh_triangles(mesh))) &
+       error stop 'nbmc_mesh_copy_to_host differs from the mesh'
+  ! Device memory needs the CUDA backend; elsewhere the call fails cleanly.
+  if (backend /= NBMC_BACKEND_CUDA) then
+    status = nbmc_context_set_mesh_memory(ctx, NBMC_MEMORY_DEVICE)
+    if (status /= NBMC_ERROR_BACKEND_UNAVAILABLE) then
+      write (error_unit, '(a, i0)') 'error: expected NBMC_ERROR_BACKEND_UNAVAILABLE, got ', status
+      error stop 1
+    end if
+    write (output_unit, '(a, a)') 'expected failure: ', nbmc_context_last_error(ctx)
   end if
 
   ! ----------------------------------------------------------------- clean-up

@@ -28,6 +28,31 @@
 !
 ! C's uint32_t and uint64_t map to integer(c_int32_t) and integer(c_int64_t):
 ! the values nbmc produces stay below 2**31 and 2**63.
+!
+! GPU solvers (CUDA backend only; other backends return
+! NBMC_ERROR_BACKEND_UNAVAILABLE). Device arrays travel as type(c_ptr):
+!
+!   ! OpenACC: inside host_data use_device, c_loc gives the device address
+!   !$acc host_data use_device(pos)
+!   status = nbmc_context_set_particles_device_f64(ctx, c_loc(pos), &
+!                                                  size(pos, 2, kind=c_int64_t), 0_c_int64_t)
+!   !$acc end host_data
+!
+!   ! CUDA Fortran: real(c_double), device :: pos_d(3, n)
+!   status = nbmc_context_set_particles_device_f64(ctx, transfer(c_devloc(pos_d), c_null_ptr), n64, 0_c_int64_t)
+!
+! The call returns when nbmc has its own copy. byte_stride is in bytes as for
+! host uploads (pos_d(6, n) with x, y, z first: 6 * 8). With
+! status = nbmc_context_set_mesh_memory(ctx, NBMC_MEMORY_DEVICE) later meshes
+! stay on the GPU: nbmc_mesh_memory(mesh) is then NBMC_MEMORY_DEVICE, the
+! Fortran-pointer getters nbmc_mesh_positions/_normals/_triangles return
+! unassociated pointers (host code must not touch device memory), and
+! nbmc_mesh_c_arrays gives the device addresses (CUDA Fortran: turn them into
+! type(c_devptr) with transfer and call c_f_pointer for a device pointer
+! array; OpenACC: deviceptr in a routine that takes them as arguments).
+! nbmc_mesh_copy_to_host copies any mesh into Fortran arrays and
+! nbmc_mesh_write writes a device mesh too; nbmc_mesh_close frees the device
+! arrays.
 module nbmc
   use, intrinsic :: iso_c_binding
   implicit none
@@ -71,6 +96,10 @@ module nbmc
   integer(c_int32_t), parameter, public :: NBMC_UNIT_SPACING  = 0
   integer(c_int32_t), parameter, public :: NBMC_UNIT_ABSOLUTE = 1
   integer(c_int32_t), parameter, public :: NBMC_CONTEXT_KOKKOS_ON_CALLING_THREAD = 1  ! flag bit (uint32_t)
+
+  ! Where arrays handed to or returned by nbmc live.
+  integer(c_int32_t), parameter, public :: NBMC_MEMORY_HOST   = 0  ! host memory (default)
+  integer(c_int32_t), parameter, public :: NBMC_MEMORY_DEVICE = 1  ! CUDA memory of the context's GPU
 
   integer(c_int32_t), parameter, public :: NBMC_STAGE_UPLOAD            = 0
   integer(c_int32_t), parameter, public :: NBMC_STAGE_NEIGHBOURHOOD     = 1
@@ -166,12 +195,15 @@ module nbmc
   public :: nbmc_context_desc_init, nbmc_context_create, nbmc_context_close
   public :: nbmc_context_last_error, nbmc_context_backend
   public :: nbmc_context_set_particles, nbmc_context_set_particles_f32, nbmc_context_set_particles_f64
+  public :: nbmc_context_set_particles_device_f32, nbmc_context_set_particles_device_f64
+  public :: nbmc_context_set_mesh_memory
   public :: nbmc_context_set_progress
   public :: nbmc_context_set_memory_budget
   public :: nbmc_params_init, nbmc_context_reconstruct
   public :: nbmc_stats_init, nbmc_context_stats
   public :: nbmc_mesh_vertex_count, nbmc_mesh_triangle_count
   public :: nbmc_mesh_positions, nbmc_mesh_normals, nbmc_mesh_triangles, nbmc_mesh_close
+  public :: nbmc_mesh_memory, nbmc_mesh_copy_to_host, nbmc_mesh_c_arrays
   public :: nbmc_context_load_particles, nbmc_mesh_write, nbmc_last_error
   public :: nbmc_kokkos_finalize
   public :: nbmc_abi_ok
@@ -281,6 +313,32 @@ module nbmc
       integer(c_int32_t) :: status
     end function c_context_set_particles_f64
 
+    ! xyz: CUDA device memory (type(c_ptr) holding a device address).
+    function c_context_set_particles_device_f32(ctx, xyz, count, byte_stride) &
+         bind(c, name="nbmc_context_set_particles_device_f32") result(status)
+      import :: c_ptr, c_int32_t, c_int64_t
+      type(c_ptr), value :: ctx
+      type(c_ptr), value :: xyz
+      integer(c_int64_t), value :: count, byte_stride  ! uint64_t
+      integer(c_int32_t) :: status
+    end function c_context_set_particles_device_f32
+
+    function c_context_set_particles_device_f64(ctx, xyz, count, byte_stride) &
+         bind(c, name="nbmc_context_set_particles_device_f64") result(status)
+      import :: c_ptr, c_int32_t, c_int64_t
+      type(c_ptr), value :: ctx
+      type(c_ptr), value :: xyz
+      integer(c_int64_t), value :: count, byte_stride  ! uint64_t
+      integer(c_int32_t) :: status
+    end function c_context_set_particles_device_f64
+
+    function c_context_set_mesh_memory(ctx, memory) bind(c, name="nbmc_context_set_mesh_memory") result(status)
+      import :: c_ptr, c_int32_t
+      type(c_ptr), value :: ctx
+      integer(c_int32_t), value :: memory
+      integer(c_int32_t) :: status
+    end function c_context_set_mesh_memory
+
     function c_context_set_progress(ctx, fn, user) bind(c, name="nbmc_context_set_progress") result(status)
       import :: c_ptr, c_funptr, c_int32_t
       type(c_ptr), value :: ctx
@@ -355,6 +413,20 @@ module nbmc
       import :: c_ptr
       type(c_ptr), value :: mesh
     end subroutine c_mesh_destroy
+
+    function c_mesh_memory(mesh) bind(c, name="nbmc_mesh_memory") result(memory)
+      import :: c_ptr, c_int32_t
+      type(c_ptr), value :: mesh
+      integer(c_int32_t) :: memory
+    end function c_mesh_memory
+
+    function c_mesh_copy_to_host(mesh, positions, normals, triangles) &
+         bind(c, name="nbmc_mesh_copy_to_host") result(status)
+      import :: c_ptr, c_int32_t
+      type(c_ptr), value :: mesh
+      type(c_ptr), value :: positions, normals, triangles  ! host buffers or NULL
+      integer(c_int32_t) :: status
+    end function c_mesh_copy_to_host
 
     function c_context_load_particles(ctx, path, format, count_out) &
          bind(c, name="nbmc_context_load_particles") result(status)
@@ -532,6 +604,39 @@ contains
     end if
   end function nbmc_context_set_particles_f64
 
+  !> Uploads (copies) count positions from CUDA device memory of the
+  !> context's GPU: xyz is a device address (see the header of this file for
+  !> OpenACC and CUDA Fortran), particle i at byte offset i * byte_stride
+  !> (0 = packed; else a multiple of 4). CUDA backend only, else
+  !> NBMC_ERROR_BACKEND_UNAVAILABLE; a host address gives
+  !> NBMC_ERROR_INVALID_ARGUMENT. On failure the context keeps no particles.
+  function nbmc_context_set_particles_device_f32(ctx, xyz, count, byte_stride) result(status)
+    type(nbmc_context), intent(inout) :: ctx
+    type(c_ptr), intent(in) :: xyz
+    integer(c_int64_t), intent(in) :: count, byte_stride
+    integer(c_int32_t) :: status
+    status = c_context_set_particles_device_f32(ctx%ptr, xyz, count, byte_stride)
+  end function nbmc_context_set_particles_device_f32
+
+  !> The same for real(c_double) positions (byte_stride a multiple of 8).
+  function nbmc_context_set_particles_device_f64(ctx, xyz, count, byte_stride) result(status)
+    type(nbmc_context), intent(inout) :: ctx
+    type(c_ptr), intent(in) :: xyz
+    integer(c_int64_t), intent(in) :: count, byte_stride
+    integer(c_int32_t) :: status
+    status = c_context_set_particles_device_f64(ctx%ptr, xyz, count, byte_stride)
+  end function nbmc_context_set_particles_device_f64
+
+  !> Where the meshes of later reconstructions go: NBMC_MEMORY_HOST (default)
+  !> or NBMC_MEMORY_DEVICE (CUDA backend only, else
+  !> NBMC_ERROR_BACKEND_UNAVAILABLE).
+  function nbmc_context_set_mesh_memory(ctx, memory) result(status)
+    type(nbmc_context), intent(inout) :: ctx
+    integer(c_int32_t), intent(in) :: memory
+    integer(c_int32_t) :: status
+    status = c_context_set_mesh_memory(ctx%ptr, memory)
+  end function nbmc_context_set_mesh_memory
+
   !> Registers fn (c_funloc of a procedure with the nbmc_progress_fn
   !> interface) with user data; c_null_funptr removes it.
   function nbmc_context_set_progress(ctx, fn, user) result(status)
@@ -604,37 +709,96 @@ contains
   end function nbmc_mesh_triangle_count
 
   !> Vertex positions pos(3, nv), pointing into the mesh (no copy); not
-  !> associated for an empty mesh.
+  !> associated for an empty mesh and for a mesh in device memory
+  !> (nbmc_mesh_memory; use nbmc_mesh_copy_to_host or nbmc_mesh_c_arrays).
   function nbmc_mesh_positions(mesh) result(pos)
     type(nbmc_mesh), intent(in) :: mesh
     real(c_float), pointer :: pos(:, :)
     type(c_ptr) :: p
     nullify(pos)
+    if (c_mesh_memory(mesh%ptr) /= NBMC_MEMORY_HOST) return
     p = c_mesh_positions(mesh%ptr)
     if (c_associated(p)) call c_f_pointer(p, pos, [3_c_int64_t, c_mesh_vertex_count(mesh%ptr)])
   end function nbmc_mesh_positions
 
   !> Unit normals nrm(3, nv) pointing out of the fluid; not associated when
-  !> the reconstruction had compute_normals = 0.
+  !> the reconstruction had compute_normals = 0, and for a device mesh.
   function nbmc_mesh_normals(mesh) result(nrm)
     type(nbmc_mesh), intent(in) :: mesh
     real(c_float), pointer :: nrm(:, :)
     type(c_ptr) :: p
     nullify(nrm)
+    if (c_mesh_memory(mesh%ptr) /= NBMC_MEMORY_HOST) return
     p = c_mesh_normals(mesh%ptr)
     if (c_associated(p)) call c_f_pointer(p, nrm, [3_c_int64_t, c_mesh_vertex_count(mesh%ptr)])
   end function nbmc_mesh_normals
 
   !> Triangles tri(3, nt) of 0-based vertex indices (add 1 for Fortran
-  !> arrays), counter-clockwise seen from outside the fluid.
+  !> arrays), counter-clockwise seen from outside the fluid; not associated
+  !> for an empty mesh and for a device mesh.
   function nbmc_mesh_triangles(mesh) result(tri)
     type(nbmc_mesh), intent(in) :: mesh
     integer(c_int32_t), pointer :: tri(:, :)
     type(c_ptr) :: p
     nullify(tri)
+    if (c_mesh_memory(mesh%ptr) /= NBMC_MEMORY_HOST) return
     p = c_mesh_triangles(mesh%ptr)
     if (c_associated(p)) call c_f_pointer(p, tri, [3_c_int64_t, c_mesh_triangle_count(mesh%ptr)])
   end function nbmc_mesh_triangles
+
+  !> Where the mesh's arrays live: NBMC_MEMORY_HOST or NBMC_MEMORY_DEVICE
+  !> (NBMC_MEMORY_HOST for a null handle).
+  integer(c_int32_t) function nbmc_mesh_memory(mesh)
+    type(nbmc_mesh), intent(in) :: mesh
+    nbmc_mesh_memory = c_mesh_memory(mesh%ptr)
+  end function nbmc_mesh_memory
+
+  !> Copies the mesh's arrays, host or device, into Fortran arrays
+  !> positions(3, nv), normals(3, nv) and triangles(3, nt) (0-based indices);
+  !> each is optional. An array of another size gives
+  !> NBMC_ERROR_INVALID_ARGUMENT and nothing is copied; normals is left
+  !> untouched when the mesh has none; a null mesh gives
+  !> NBMC_ERROR_INVALID_ARGUMENT.
+  function nbmc_mesh_copy_to_host(mesh, positions, normals, triangles) result(status)
+    type(nbmc_mesh), intent(in) :: mesh
+    real(c_float), intent(inout), contiguous, target, optional :: positions(:, :), normals(:, :)
+    integer(c_int32_t), intent(inout), contiguous, target, optional :: triangles(:, :)
+    integer(c_int32_t) :: status
+    type(c_ptr) :: p, n, t
+    integer(c_int64_t) :: nv, nt
+    nv = c_mesh_vertex_count(mesh%ptr)
+    nt = c_mesh_triangle_count(mesh%ptr)
+    p = c_null_ptr
+    n = c_null_ptr
+    t = c_null_ptr
+    status = NBMC_ERROR_INVALID_ARGUMENT
+    if (present(positions)) then
+      if (size(positions, kind=c_int64_t) /= 3 * nv) return
+      if (nv > 0) p = c_loc(positions)
+    end if
+    if (present(normals)) then
+      if (size(normals, kind=c_int64_t) /= 3 * nv) return
+      if (nv > 0) n = c_loc(normals)
+    end if
+    if (present(triangles)) then
+      if (size(triangles, kind=c_int64_t) /= 3 * nt) return
+      if (nt > 0) t = c_loc(triangles)
+    end if
+    status = c_mesh_copy_to_host(mesh%ptr, p, n, t)
+  end function nbmc_mesh_copy_to_host
+
+  !> The C getters' addresses of the mesh's arrays, wherever they live:
+  !> device addresses when nbmc_mesh_memory(mesh) is NBMC_MEMORY_DEVICE (for
+  !> CUDA Fortran / OpenACC code; never dereference them on the host), host
+  !> addresses otherwise. c_null_ptr for an empty mesh; normals is
+  !> c_null_ptr without normals. Valid until nbmc_mesh_close(mesh).
+  subroutine nbmc_mesh_c_arrays(mesh, positions, normals, triangles)
+    type(nbmc_mesh), intent(in) :: mesh
+    type(c_ptr), intent(out), optional :: positions, normals, triangles
+    if (present(positions)) positions = c_mesh_positions(mesh%ptr)
+    if (present(normals)) normals = c_mesh_normals(mesh%ptr)
+    if (present(triangles)) triangles = c_mesh_triangles(mesh%ptr)
+  end subroutine nbmc_mesh_c_arrays
 
   !> Frees the mesh and nulls the handle; pointers obtained from it dangle.
   subroutine nbmc_mesh_close(mesh)
@@ -668,8 +832,8 @@ contains
   end function nbmc_context_load_particles
 
   !> Writes the mesh with nbmc's writers ('ply', 'obj', 'vtk', 'vtu', 'glb';
-  !> absent or '' = by the extension). The message of a failure is
-  !> nbmc_last_error().
+  !> absent or '' = by the extension); a device mesh is copied to the host
+  !> first. The message of a failure is nbmc_last_error().
   function nbmc_mesh_write(mesh, path, format) result(status)
     type(nbmc_mesh), intent(in) :: mesh
     character(len=*), intent(in) :: path
