@@ -106,6 +106,11 @@ int main(void) {
   CHECK(mesh == NULL); /* set to NULL on failure */
   CHECK(nbmc_context_stats(NULL, &stats) == NBMC_ERROR_INVALID_ARGUMENT);
   CHECK(nbmc_context_create(NULL, NULL) == NBMC_ERROR_INVALID_ARGUMENT);
+  CHECK(nbmc_context_set_particles_device_f32(NULL, one, 1, 0) == NBMC_ERROR_INVALID_ARGUMENT);
+  CHECK(nbmc_context_set_particles_device_f64(NULL, NULL, 1, 0) == NBMC_ERROR_INVALID_ARGUMENT);
+  CHECK(nbmc_context_set_mesh_memory(NULL, NBMC_MEMORY_HOST) == NBMC_ERROR_INVALID_ARGUMENT);
+  CHECK(nbmc_mesh_memory(NULL) == NBMC_MEMORY_HOST);
+  CHECK(nbmc_mesh_copy_to_host(NULL, NULL, NULL, NULL) == NBMC_ERROR_INVALID_ARGUMENT);
 
   /* Misuse of create: exact codes, a message, *out set to NULL. */
   ctx = (nbmc_context*)&desc;
@@ -161,6 +166,14 @@ int main(void) {
     params.t_low = 0.4;
     CHECK(nbmc_context_set_progress(ctx, never_called, NULL) == NBMC_OK);
     CHECK(nbmc_context_set_progress(ctx, NULL, NULL) == NBMC_OK);
+    /* Device memory: NBMC_MEMORY_* only, and only the CUDA backend takes device pointers. */
+    CHECK(nbmc_context_set_mesh_memory(ctx, 7) == NBMC_ERROR_INVALID_ARGUMENT);
+    CHECK(nbmc_context_set_mesh_memory(ctx, NBMC_MEMORY_HOST) == NBMC_OK);
+    if (backend != NBMC_BACKEND_CUDA) {
+      CHECK(nbmc_context_set_mesh_memory(ctx, NBMC_MEMORY_DEVICE) == NBMC_ERROR_BACKEND_UNAVAILABLE);
+      CHECK(nbmc_context_set_particles_device_f32(ctx, bad, 2, 0) == NBMC_ERROR_BACKEND_UNAVAILABLE);
+      CHECK(nbmc_context_last_error(ctx)[0] != '\0');
+    }
     CHECK(nbmc_kokkos_finalize() == NBMC_ERROR_INVALID_ARGUMENT); /* a context is alive */
     nbmc_context_destroy(ctx);
   }

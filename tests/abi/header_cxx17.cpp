@@ -9,6 +9,7 @@
 #include <cstring>
 #include <memory>
 #include <type_traits>
+#include <vector>
 
 static_assert(NBMC_VERSION == NBMC_VERSION_MAJOR * 10000 + NBMC_VERSION_MINOR * 100 + NBMC_VERSION_PATCH);
 static_assert(NBMC_STAGE_COUNT <= NBMC_STAGE_SLOTS);
@@ -21,6 +22,15 @@ static_assert(std::is_same_v<decltype(nbmc_context_desc::struct_size), uint32_t>
 static_assert(std::is_same_v<decltype(&nbmc_context_create), int32_t (*)(const nbmc_context_desc*, nbmc_context**)>);
 static_assert(std::is_same_v<decltype(&nbmc_mesh_triangles), const uint32_t* (*)(const nbmc_mesh*)>);
 static_assert(std::is_same_v<nbmc_progress_fn, int32_t (*)(void*, int32_t, double)>);
+static_assert(std::is_same_v<decltype(&nbmc_context_set_particles_device_f32),
+                             int32_t (*)(nbmc_context*, const float*, uint64_t, uint64_t)>);
+static_assert(std::is_same_v<decltype(&nbmc_context_set_particles_device_f64),
+                             int32_t (*)(nbmc_context*, const double*, uint64_t, uint64_t)>);
+static_assert(std::is_same_v<decltype(&nbmc_context_set_mesh_memory), int32_t (*)(nbmc_context*, int32_t)>);
+static_assert(std::is_same_v<decltype(&nbmc_mesh_memory), int32_t (*)(const nbmc_mesh*)>);
+static_assert(std::is_same_v<decltype(&nbmc_mesh_copy_to_host),
+                             int32_t (*)(const nbmc_mesh*, float*, float*, uint32_t*)>);
+static_assert(NBMC_MEMORY_HOST == 0 && NBMC_MEMORY_DEVICE == 1);
 
 namespace {
 struct ContextDeleter {
@@ -88,6 +98,11 @@ int main() {
   bool in_range = tri != nullptr;
   for (uint64_t i = 0; in_range && i < 3 * nt; ++i) in_range = tri[i] < nv;
   CHECK(in_range);
+  // A host mesh copies out exactly what the getters show.
+  CHECK(nbmc_mesh_memory(mesh.get()) == NBMC_MEMORY_HOST);
+  std::vector<uint32_t> tri_copy(3 * nt);
+  CHECK(nbmc_mesh_copy_to_host(mesh.get(), nullptr, nullptr, tri_copy.data()) == NBMC_OK);
+  CHECK(tri != nullptr && std::memcmp(tri_copy.data(), tri, tri_copy.size() * sizeof(uint32_t)) == 0);
   mesh.reset();
 
   if (failures) {
