@@ -7,6 +7,10 @@
 #
 #   scripts/gpu_check.sh [DATA_DIR] [OUT_DIR]
 #
+# NBMC_GPU_CHECK_STEPS picks steps (default: all of "build equivalence
+# pointers sanitizers ncu bench"), e.g. two calls on one machine:
+# "build equivalence pointers sanitizers", then "bench".
+#
 # DATA_DIR holds xyz/*.xyz (default ../shared/data); logs go to OUT_DIR
 # (default out/gpu). Needs nvcc, cmake, ninja and a C++17 compiler; the
 # Kokkos source comes from scripts/setup.sh's cache (NBMC_CACHE), which a
@@ -19,27 +23,38 @@ mkdir -p "$OUT"
 export PATH=/usr/local/cuda/bin:$PATH
 B=${NBMC_CUDA_BUILD_DIR:-$ROOT/build-cuda}
 status=0
+STEPS=" ${NBMC_GPU_CHECK_STEPS:-build equivalence pointers sanitizers ncu bench} "
+want() { [[ "$STEPS" == *" $1 "* ]]; }
 step() { echo; echo "== $*"; }
 
-step "build (Kokkos CUDA + nbmc CUDA variant)"
-t0=$(date +%s)
-NBMC_CUDA_CMAKE_ARGS="-DNBMC_BUILD_TESTS=OFF -DNBMC_BUILD_CLI=OFF ${NBMC_CUDA_CMAKE_ARGS:-}" \
-  NBMC_JOBS=${NBMC_JOBS:-$(nproc)} "$ROOT/scripts/setup.sh" --cuda-only >"$OUT/build.log" 2>&1 ||
-  { tail -50 "$OUT/build.log"; exit 1; }
-echo "built in $(( $(date +%s) - t0 )) s"
+if want build; then
+  step "build (Kokkos CUDA + nbmc CUDA variant)"
+  t0=$(date +%s)
+  NBMC_CUDA_CMAKE_ARGS="-DNBMC_BUILD_TESTS=OFF -DNBMC_BUILD_CLI=OFF ${NBMC_CUDA_CMAKE_ARGS:-}" \
+    NBMC_JOBS=${NBMC_JOBS:-$(nproc)} "$ROOT/scripts/setup.sh" --cuda-only >"$OUT/build.log" 2>&1 ||
+    { tail -50 "$OUT/build.log"; exit 1; }
+  echo "built in $(( $(date +%s) - t0 )) s"
+fi
 nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader | tee "$OUT/device.txt"
 
-step "CPU (OpenMP) vs GPU (CUDA) equivalence"
-"$B/tests/gpu/nbmc_cuda_equivalence" "$DATA" 2>&1 | tee "$OUT/equivalence.txt" || status=1
+if want equivalence; then
+  step "CPU (OpenMP) vs GPU (CUDA) equivalence"
+  "$B/tests/gpu/nbmc_cuda_equivalence" "$DATA" 2>&1 | tee "$OUT/equivalence.txt" || status=1
+fi
+
+if want pointers; then
+  step "device pointers in the C API"
+  "$B/tests/gpu/nbmc_cuda_device_pointers" "$DATA" 2>&1 | tee "$OUT/device-pointers.txt" || status=1
+fi
 
 SMALL="$DATA/xyz/splashsurf_doubledambreak_f26_4732.xyz"
-for tool in memcheck racecheck; do
+want sanitizers && for tool in memcheck racecheck; do
   step "compute-sanitizer --tool $tool (4,732 particles, cell r)"
   compute-sanitizer --tool $tool --error-exitcode 3 "$B/bench/nbmc_bench" "$SMALL" --spacing 0.05 \
     --cell-size 1 --backend cuda 2>&1 | tail -5 | tee "$OUT/sanitizer-$tool.txt" || status=1
 done
 
-if command -v ncu >/dev/null && [ "${NBMC_GPU_CHECK_NCU:-1}" = 1 ]; then
+if want ncu && command -v ncu >/dev/null; then
   step "ncu: the team-tiled gather (NBMC_GPU_GATHER=team) against the direct one, 46k frame, cell r"
   for k in team direct; do
     NBMC_GPU_GATHER=$k timeout 180 ncu --section SpeedOfLight --section Occupancy --section LaunchStats \
@@ -51,8 +66,8 @@ if command -v ncu >/dev/null && [ "${NBMC_GPU_CHECK_NCU:-1}" = 1 ]; then
 fi
 
 BIG="$DATA/xyz/cbd1654k_t040_1654104.xyz"
-step "benchmarks: $BIG"
-for cell in 1 0.5; do
+want bench && step "benchmarks: $BIG"
+want bench && for cell in 1 0.5; do
   "$B/bench/nbmc_bench" "$BIG" --spacing 0.00484 --cell-size $cell --backend cuda --repeat 5 2>&1 | tee -a "$OUT/bench.txt"
   "$B/bench/nbmc_bench" "$BIG" --spacing 0.00484 --cell-size $cell --backend openmp --threads "$(nproc)" --repeat 3 2>&1 | tee -a "$OUT/bench.txt"
 done
