@@ -322,7 +322,7 @@ Params resolve_params(const nbmc_params& in) {
   return p;
 }
 
-void check_domain(const std::vector<double>&, const Params& p) {
+void check_domain(const Params& p) {
   // Band vertices around one surface particle; beyond this the cell size is
   // absurdly small for the band (and the grid would not be indexable anyway).
   const double per_axis = 2 * p.band_width / p.cell_size + 1;

@@ -25,7 +25,7 @@ int max_threads();
 // Validates the user's parameters and converts them to absolute units.
 Params resolve_params(const nbmc_params& in);
 // Rejects parameter/particle combinations whose grid could not be indexed.
-void check_domain(const std::vector<double>& xyz, const Params& p);
+void check_domain(const Params& p);
 
 void run_backend(nbmc_context& ctx, const Params& p, HostMesh& mesh, RunStats& st);
 // Runs fn where the context's backend runs its work (nbmc's Kokkos thread,

@@ -7,6 +7,12 @@
 #include "backends.hpp"
 #include "context.hpp"
 
+#include <algorithm>
+#if defined(_OPENMP)
+#include <omp.h>
+#else
+[[maybe_unused]] static int omp_get_max_threads() { return 1; }
+#endif
 #include <cmath>
 #include <cstring>
 #include <new>
@@ -176,18 +182,27 @@ static int32_t set_particles(nbmc_context* ctx, const T* xyz, uint64_t count, ui
                                                  " bytes)");
   if (count > uint64_t(UINT32_MAX) - 1)
     throw Error(NBMC_ERROR_DOMAIN_TOO_LARGE, std::string(fn) + ": at most 4294967294 particles are supported");
-  std::vector<double> p(3 * count);
+  nbmc::ParticleVector p(3 * count);
   const unsigned char* base = reinterpret_cast<const unsigned char*>(xyz);
-  std::uint64_t bad = 0, first_bad = 0;
-  for (uint64_t i = 0; i < count; ++i) {
+  std::uint64_t bad = 0, first_bad = UINT64_MAX;
+  const std::int64_t n = std::int64_t(count);
+  double* out = p.data();
+  // Parallel over the particles (1.65 M took 70 ms on one thread): a count
+  // and the smallest bad index, which do not depend on the thread count.
+  // Threads as the context's (a serial context: one; 0: the OpenMP default).
+  const int threads = ctx->backend == NBMC_BACKEND_SERIAL ? 1 : std::max(0, int(ctx->num_threads));
+  (void)threads;
+#pragma omp parallel for schedule(static) reduction(+ : bad) reduction(min : first_bad) \
+    if (n > 100000 && threads != 1) num_threads(threads > 0 ? threads : omp_get_max_threads())
+  for (std::int64_t i = 0; i < n; ++i) {
     T v[3];
-    std::memcpy(v, base + i * byte_stride, sizeof v);
+    std::memcpy(v, base + std::uint64_t(i) * byte_stride, sizeof v);
     for (int a = 0; a < 3; ++a) {
       if (!std::isfinite(v[a]) || std::fabs(double(v[a])) > 1e15) {
-        if (!bad) first_bad = i;
         ++bad;
+        first_bad = std::min(first_bad, std::uint64_t(i));
       }
-      p[3 * i + a] = double(v[a]);
+      out[3 * i + a] = double(v[a]);
     }
   }
   if (bad) {
@@ -317,7 +332,7 @@ int32_t nbmc_context_reconstruct(nbmc_context* ctx, const nbmc_params* params, n
   if (ctx->particles.empty() && ctx->device_particles.count == 0)
     throw Error(NBMC_ERROR_NO_PARTICLES, "nbmc_context_reconstruct: no particles uploaded");
   const nbmc::Params p = nbmc::resolve_params(*params);
-  nbmc::check_domain(ctx->particles, p);
+  nbmc::check_domain(p);
   auto m = std::make_unique<nbmc_mesh>();
   nbmc::RunStats st;
   nbmc::run_backend(*ctx, p, m->mesh, st);

@@ -8,10 +8,34 @@
 #include "../backends/kokkos/pipeline.hpp"
 
 #include <memory>
+#include <new>
+#include <utility>
 #include <string>
 #include <vector>
 
 namespace nbmc {
+// Leaves new elements uninitialised: the upload writes every one of them (in
+// parallel, so the pages are also first touched by the threads that fill them).
+template <class T>
+struct NoInitAllocator : std::allocator<T> {
+  template <class U>
+  struct rebind {
+    using other = NoInitAllocator<U>;
+  };
+  NoInitAllocator() = default;
+  template <class U>
+  NoInitAllocator(const NoInitAllocator<U>&) noexcept {}
+  template <class U>
+  void construct(U* p) noexcept {
+    ::new (static_cast<void*>(p)) U;
+  }
+  template <class U, class... A>
+  void construct(U* p, A&&... a) {
+    ::new (static_cast<void*>(p)) U(std::forward<A>(a)...);
+  }
+};
+using ParticleVector = std::vector<double, NoInitAllocator<double>>;
+
 // Particles uploaded from device memory: packed doubles on the CUDA device.
 struct DeviceParticles {
   std::shared_ptr<void> data;
@@ -25,7 +49,7 @@ struct nbmc_context {
   int32_t device_id = 0;
   uint32_t flags = 0;
   std::string last_error;
-  std::vector<double> particles;  // validated, 3 per particle
+  nbmc::ParticleVector particles;  // validated, 3 per particle
   nbmc::DeviceParticles device_particles;  // or these, on the CUDA device
   int32_t mesh_memory = NBMC_MEMORY_HOST;
   nbmc_progress_fn progress_fn = nullptr;

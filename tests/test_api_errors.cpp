@@ -322,3 +322,25 @@ TEST(DeviceMemory, HostMeshCopiesOutWhatTheGettersShow) {
   EXPECT_EQ(nbmc_mesh_copy_to_host(nullptr, pos.data(), nullptr, nullptr), NBMC_ERROR_INVALID_ARGUMENT);
   nbmc_mesh_destroy(m);
 }
+
+// Large uploads are validated in parallel; the message still names the first
+// bad particle and counts every bad coordinate, whatever the thread count.
+TEST(BadInput, ParallelValidationNamesTheFirstBadParticle) {
+  for (int threads : {1, 2, 3}) {
+    nbmc_context_desc d;
+    nbmc_context_desc_init(&d);
+    d.backend = NBMC_BACKEND_OPENMP;
+    d.num_threads = threads;
+    nbmc_context* c = nullptr;
+    ASSERT_EQ(nbmc_context_create(&d, &c), NBMC_OK);
+    std::vector<float> xyz(3 * 300000, 1.0f);
+    xyz[3 * 250001 + 2] = std::numeric_limits<float>::infinity();
+    xyz[3 * 123457 + 0] = std::numeric_limits<float>::quiet_NaN();
+    xyz[3 * 123457 + 1] = 2e15f;
+    EXPECT_EQ(nbmc_context_set_particles_f32(c, xyz.data(), 300000, 0), NBMC_ERROR_INVALID_PARTICLES);
+    const std::string msg = nbmc_context_last_error(c);
+    EXPECT_NE(msg.find("3 coordinate(s)"), std::string::npos) << msg;
+    EXPECT_NE(msg.find("first at particle 123457"), std::string::npos) << msg;
+    nbmc_context_destroy(c);
+  }
+}
