@@ -249,6 +249,15 @@ struct HashMapStorage {
   }
 };
 
+#if defined(KOKKOS_ENABLE_CUDA)
+// Stable radix sort of (key, value) pairs by the key bits [0, end_bit), on
+// the GPU (CUB, pipeline_cuda.cpp). The sorted pairs are written to
+// keys_out/vals_out; keys_in/vals_in are left unspecified.
+void device_sort_pairs(const Kokkos::Cuda& space, MemoryTracker& tracker, std::uint64_t* keys_in,
+                       std::uint64_t* keys_out, std::uint32_t* vals_in, std::uint32_t* vals_out, std::size_t n,
+                       int end_bit);
+#endif
+
 // Exclusive scan of counts into offsets (which may be the same view); returns the total.
 template <class ExecSpace, class CountView, class OffsetView>
 std::uint64_t exclusive_scan(const ExecSpace& space, const std::string& label, const CountView& counts,

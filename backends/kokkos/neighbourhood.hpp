@@ -198,15 +198,6 @@ void build_neighbourhood(const ExecSpace& space, MemoryTracker& tracker, const d
   insert_cells(space, tracker, out);
 }
 
-#if defined(KOKKOS_ENABLE_CUDA)
-// Stable radix sort of (key, value) pairs by the key bits [0, end_bit), on
-// the GPU (CUB, pipeline_cuda.cpp). The sorted pairs are written to
-// keys_out/vals_out; keys_in/vals_in are left unspecified.
-void device_sort_pairs(const Kokkos::Cuda& space, MemoryTracker& tracker, std::uint64_t* keys_in,
-                       std::uint64_t* keys_out, std::uint32_t* vals_in, std::uint32_t* vals_out, std::size_t n,
-                       int end_bit);
-#endif
-
 // Unsigned bits of a float that sort in the float's order (no NaN; -0 is
 // made +0 by relative_coordinate).
 KOKKOS_INLINE_FUNCTION std::uint64_t float_order_bits(float f) {
