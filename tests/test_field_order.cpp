@@ -1,0 +1,402 @@
+// SPDX-License-Identifier: MIT
+// The host backends must sum in the order the GPU does, so that CPU and GPU
+// give the same mesh bit for bit (the CUDA build compiles without FMA
+// contraction). The GPU evaluates each band vertex on its own
+// (gather_words_direct -> eval_vertex_direct): the neighbour cells of
+// cell_span(x, x, R) in z, y, x order, skipping cells whose box is R or
+// farther, the particles of a cell in their sorted order, one plain float sum
+// per accumulator. The surface-particle test sums, per particle i, over the
+// cells around its cell in z, y, x order and their particles in order.
+//
+// These tests build the pipeline's stages on the host (Serial and OpenMP)
+// and check, bit for bit, every band vertex's value from gather_field (the
+// host tile path) and every surface flag against plain serial references
+// written here, which follow that order literally.
+#include <gtest/gtest.h>
+
+#include "common.hpp"
+#include "field_ssp07.hpp"
+#include "field_zb05.hpp"
+#include "grid.hpp"
+#include "narrow_band.hpp"
+#include "neighbourhood.hpp"
+#include "scalar_field.hpp"
+#include "surface_particles.hpp"
+
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <fstream>
+#include <random>
+#include <sstream>
+#include <string>
+#include <vector>
+
+// The library's definition is not exported; the stages only report progress.
+void nbmc::Progress::operator()(int, double) const {}
+
+namespace {
+
+using namespace nbmc;
+using namespace nbmc::Details;
+using Host = Kokkos::HostSpace;
+using Points = std::vector<double>;
+
+class KokkosEnv : public ::testing::Environment {
+ public:
+  void SetUp() override {
+    Kokkos::InitArguments args;
+    args.num_threads = 3;  // an odd split of the work on any machine
+    Kokkos::initialize(args);
+  }
+  void TearDown() override { Kokkos::finalize(); }
+};
+const ::testing::Environment* const kokkos_env = ::testing::AddGlobalTestEnvironment(new KokkosEnv);
+
+std::uint32_t bits(float f) {
+  std::uint32_t u;
+  std::memcpy(&u, &f, 4);
+  return u;
+}
+
+// ------------------------------------------------------------ particle sets
+Points random_cloud(double r, std::size_t n, unsigned seed) {
+  std::mt19937 rng(seed);
+  const double side = r * std::cbrt(double(n));  // about one particle per r^3
+  std::uniform_real_distribution<double> u(0.0, side);
+  Points p;
+  for (std::size_t i = 0; i < 3 * n; ++i) p.push_back(u(rng) + 0.3);
+  return p;
+}
+
+Points jittered_ball(double cx, double cy, double cz, double radius, double r, double jitter, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(-jitter * r, jitter * r);
+  Points p;
+  const int m = int(std::ceil(radius / r));
+  for (int k = -m; k <= m; ++k)
+    for (int j = -m; j <= m; ++j)
+      for (int i = -m; i <= m; ++i) {
+        const double x = i * r, y = j * r, z = k * r;
+        if (x * x + y * y + z * z > radius * radius) continue;
+        p.insert(p.end(), {cx + x + u(rng), cy + y + u(rng), cz + z + u(rng)});
+      }
+  return p;
+}
+
+// A ball plus a clump of `crowd` particles within 0.2 r of a point on its
+// surface: far beyond any tile's particle budget, and beyond kCrowdedCell.
+Points crowded(double r, std::size_t crowd) {
+  Points p = jittered_ball(0, 0, 0, 12 * r, r, 0.2, 7);
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> u(-0.2 * r, 0.2 * r);
+  for (std::size_t i = 0; i < crowd; ++i) p.insert(p.end(), {12 * r + u(rng), u(rng), u(rng)});
+  return p;
+}
+
+Points read_xyz(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  std::vector<float> v;
+  if (!f) return {};
+  f.seekg(0, std::ios::end);
+  v.resize(std::size_t(f.tellg()) / 4);
+  f.seekg(0);
+  f.read(reinterpret_cast<char*>(v.data()), std::streamsize(v.size() * 4));
+  return Points(v.begin(), v.end());
+}
+
+Params make_params(double r, double cell, int method) {
+  Params p;  // the C API's defaults (src/capi.cpp), in absolute units
+  p.spacing = r;
+  p.cell_size = cell * r;
+  p.influence_radius = 4 * r;
+  p.band_width = 2 * r;
+  p.surface_radius = 2 * r;
+  p.iso_radius = r;
+  p.method = method;
+  return p;
+}
+
+// ------------------------------------------------------ serial references
+// Surface flags of the particles of neighbour cell `cell`, as
+// surface_particles_of_cell defines them, with every sum in plain order.
+std::size_t reference_surface(const NeighbourView<Host>& nb, const std::vector<std::uint64_t>& keys, std::size_t cell,
+                              int range, float h, float scale, float threshold, int min_neighbours,
+                              std::vector<std::uint8_t>& flags, std::vector<float>& grad) {
+  const std::uint32_t first = nb.cell_start(cell), last = nb.cell_start(cell + 1);
+  if (last - first > kCrowdedCell) {
+    for (std::uint32_t i = first; i < last; ++i) flags[i] = 1;
+    return last - first;
+  }
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> ranges;
+  bool face_empty = false;
+  const std::int64_t cx = std::int64_t(compact3(keys[cell])), cy = std::int64_t(compact3(keys[cell] >> 1)),
+                     cz = std::int64_t(compact3(keys[cell] >> 2));
+  for (std::int64_t z = cz - range; z <= cz + range; ++z)
+    for (std::int64_t y = cy - range; y <= cy + range; ++y)
+      for (std::int64_t x = cx - range; x <= cx + range; ++x) {
+        if (x < 0 || y < 0 || z < 0 || x >= nb.nb_dims[0] || y >= nb.nb_dims[1] || z >= nb.nb_dims[2]) continue;
+        std::uint32_t b, e;
+        if (nb.cell_range(x, y, z, b, e))
+          ranges.emplace_back(b, e);
+        else if (std::abs(x - cx) + std::abs(y - cy) + std::abs(z - cz) == 1)
+          face_empty = true;
+      }
+  if (cx == 0 || cy == 0 || cz == 0 || cx + 1 >= nb.nb_dims[0] || cy + 1 >= nb.nb_dims[1] || cz + 1 >= nb.nb_dims[2])
+    face_empty = true;
+  const float* X = nb.pos.data();
+  const float* Y = X + nb.n;
+  const float* Z = Y + nb.n;
+  const float h2 = h * h;
+  std::size_t surface = 0;
+  for (std::uint32_t i = first; i < last; ++i) {
+    float gx = 0, gy = 0, gz = 0;
+    int count = 0;
+    for (const auto& be : ranges)
+      for (std::uint32_t j = be.first; j < be.second; ++j) {
+        const float dx = X[i] - X[j], dy = Y[i] - Y[j], dz = Z[i] - Z[j];
+        const float d2 = dx * dx + dy * dy + dz * dz;
+        const float q = d2 < h2 ? h2 - d2 : 0.f;
+        const float w = q * q;
+        gx += w * dx;
+        gy += w * dy;
+        gz += w * dz;
+        count += d2 < h2 ? 1 : 0;
+      }
+    grad[i] = std::sqrt(gx * gx + gy * gy + gz * gz) * scale;
+    const bool s = count - 1 < min_neighbours || grad[i] > threshold;
+    flags[i] = s ? 1 : 0;
+    surface += s ? 1 : 0;
+  }
+  if (surface == 0 && face_empty) {
+    for (std::uint32_t i = first; i < last; ++i) flags[i] = 1;
+    surface = last - first;
+  }
+  return surface;
+}
+
+// The field at x in the GPU's order (gather_words_direct / eval_vertex_direct).
+template <class Method>
+float reference_field(const NeighbourView<Host>& nb, const float x[3], float S, const FieldConstants& fc,
+                      std::uint64_t& evals) {
+  float acc[Method::N];
+  for (float& a : acc) a = 0.f;
+  std::int64_t lo[3], hi[3];
+  for (int a = 0; a < 3; ++a) {
+    lo[a] = std::int64_t(std::floor((x[a] - fc.R) * nb.inv_nb_cell));
+    hi[a] = std::int64_t(std::floor((x[a] + fc.R) * nb.inv_nb_cell));
+    if (lo[a] < 0) lo[a] = 0;
+    if (hi[a] > nb.nb_dims[a] - 1) hi[a] = nb.nb_dims[a] - 1;
+  }
+  const float R2 = fc.R * fc.R;
+  const float* X = nb.pos.data();
+  const float* Y = X + nb.n;
+  const float* Z = Y + nb.n;
+  for (std::int64_t cz = lo[2]; cz <= hi[2]; ++cz)
+    for (std::int64_t cy = lo[1]; cy <= hi[1]; ++cy)
+      for (std::int64_t cx = lo[0]; cx <= hi[0]; ++cx) {
+        std::uint32_t b, e;
+        if (!nb.cell_range(cx, cy, cz, b, e)) continue;
+        const float clo[3] = {float(cx) * S, float(cy) * S, float(cz) * S};
+        float d2 = 0;
+        for (int a = 0; a < 3; ++a) {
+          const float below = clo[a] - x[a], above = x[a] - (clo[a] + S);
+          const float d = below > 0 ? below : (above > 0 ? above : 0.f);
+          d2 += d * d;
+        }
+        if (d2 >= R2) continue;
+        for (std::uint32_t j = b; j < e; ++j) {
+          const float dx = X[j] - x[0], dy = Y[j] - x[1], dz = Z[j] - x[2];
+          const float s2 = (dx * dx + dy * dy + dz * dz) * fc.inv_R2;
+          evals += s2 < 1.f ? 1 : 0;
+          Method::add(acc, dx, dy, dz, s2 < 1.f ? 1.f - s2 : 0.f);
+        }
+      }
+  return Method::value(acc, fc);
+}
+
+// ------------------------------------------------------------ the check
+struct Outcome {
+  std::size_t particles = 0, surface = 0, band_vertices = 0, flag_mismatches = 0, field_mismatches = 0,
+              direct_mismatches = 0;
+  std::uint64_t evals = 0, ref_evals = 0;
+  std::string first;  // the first mismatch, described
+};
+
+template <class Method, class Exec>
+Outcome run(const Exec& space, const Points& xyz, const Params& p, bool dense) {
+  Outcome out;
+  MemoryTracker tracker;
+  const std::size_t n = xyz.size() / 3;
+  out.particles = n;
+  double lo[3] = {1e300, 1e300, 1e300}, hi[3] = {-1e300, -1e300, -1e300};
+  for (std::size_t i = 0; i < n; ++i)
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = std::min(lo[a], xyz[3 * i + a]);
+      hi[a] = std::max(hi[a], xyz[3 * i + a]);
+    }
+  const Grid g = make_grid(lo, hi, p);
+  Neighbourhood<Host> nbh;
+  build_neighbourhood(space, tracker, xyz.data(), n, {}, g, nbh);
+  const NeighbourView<Host> nb = view_of(nbh, g);
+
+  // Surface particles against the serial reference: with the parameters
+  // given, then with the colour threshold set to the reference gradient of
+  // one particle after another (and no neighbour criterion), so that a
+  // gradient summed in another order flips that particle's flag.
+  Kokkos::View<std::uint8_t*, Host> flags("flags", n), flags2("flags2", n);
+  const Kokkos::View<const std::uint64_t*, Host> keys(nbh.cell_keys.view());
+  out.surface = mark_surface_particles(space, nb, keys, nbh.n_cells, p, g, flags);
+  {
+    const float h = float(p.surface_radius);
+    const int range = int(std::ceil(p.surface_radius / g.nb_cell));
+    const float scale =
+        float(p.spacing * p.spacing * p.spacing * 945.0 / (32.0 * 3.14159265358979 * std::pow(p.surface_radius, 9)) *
+              p.surface_radius);
+    const std::vector<std::uint64_t> hkeys(keys.data(), keys.data() + nbh.n_cells);
+    auto compare = [&](const Params& q, const Kokkos::View<std::uint8_t*, Host>& got, std::size_t got_count,
+                       std::vector<float>& grad) {
+      std::vector<std::uint8_t> ref(n, 2);
+      std::size_t ref_count = 0;
+      for (std::size_t c = 0; c < nbh.n_cells; ++c)
+        ref_count += reference_surface(nb, hkeys, c, range, h, scale, float(q.color_threshold), q.neighbour_threshold,
+                                       ref, grad);
+      std::size_t bad = ref_count != got_count;
+      for (std::size_t i = 0; i < n; ++i) bad += got(i) != ref[i];
+      return bad;
+    };
+    std::vector<float> grad(n, 0.f), unused(n);
+    out.flag_mismatches += compare(p, flags, out.surface, grad);
+    std::vector<float> probes;
+    for (std::size_t i = 0; i < n; i += std::max<std::size_t>(1, n / 12))
+      if (grad[i] > 0) probes.push_back(grad[i]);
+    for (const float t : probes) {
+      Params q = p;
+      q.color_threshold = double(t);
+      q.neighbour_threshold = 0;
+      const std::size_t count = mark_surface_particles(space, nb, keys, nbh.n_cells, q, g, flags2);
+      out.flag_mismatches += compare(q, flags2, count, unused);
+    }
+  }
+
+  // The band, and the field on it.
+  Band<Host> band;
+  if (dense)
+    build_dense_band(space, tracker, g, band);
+  else
+    build_narrow_band(space, tracker, g, p, Kokkos::View<const float*, Host>(nbh.pos.view()),
+                      Kokkos::View<const std::uint8_t*, Host>(flags), n, band);
+  out.band_vertices = band.n_vertices;
+  const FieldConstants fc = field_constants(p.influence_radius, p.iso_radius, p.t_low, p.t_high);
+  Kokkos::View<float*, Host> phi("phi", band.n_vertices);
+  const BandView<Host> bv = view_of(band, g);
+  out.evals = gather_field<Method>(space, nb, bv, band.n_blocks * 8, g, fc, phi, Progress{});
+
+  const float c = float(g.cell), S = float(g.nb_cell);
+  std::uint64_t direct_evals = 0;
+  for (std::size_t w = 0; w < band.n_blocks * 8; ++w)
+    bv.for_each_vertex(w, [&](const int bit, const std::int64_t index) {
+      std::int64_t i, j, k;
+      bv.vertex(w, bit, i, j, k);
+      const float x[3] = {float(i) * c, float(j) * c, float(k) * c};
+      const float ref = reference_field<Method>(nb, x, S, fc, out.ref_evals);
+      const float direct = eval_vertex_direct<Method>(nb, x, S, fc, direct_evals);
+      out.direct_mismatches += bits(direct) != bits(ref);
+      if (bits(phi(index)) != bits(ref)) {
+        if (!out.field_mismatches) {
+          std::ostringstream s;
+          s.precision(9);
+          s << "vertex (" << i << ", " << j << ", " << k << "): gather_field " << phi(index) << ", serial " << ref;
+          out.first = s.str();
+        }
+        ++out.field_mismatches;
+      }
+    });
+  if (direct_evals != out.ref_evals) ++out.direct_mismatches;
+  return out;
+}
+
+template <class Method>
+void check(const char* name, const Points& xyz, double r, double cell, bool dense = false,
+           std::size_t min_surface = 1) {
+  const Params p = make_params(r, cell, std::is_same<Method, FieldZB05>::value ? 1 : 0);
+  for (int backend = 0; backend < 2; ++backend) {
+    const Outcome o = backend == 0 ? run<Method>(Kokkos::Serial(), xyz, p, dense)
+#if defined(KOKKOS_ENABLE_OPENMP)
+                                   : run<Method>(Kokkos::OpenMP(), xyz, p, dense);
+#else
+                                   : run<Method>(Kokkos::Serial(), xyz, p, dense);
+#endif
+    const std::string what = std::string(name) + " (" + Method::name + ", cell " + std::to_string(cell) + "r, " +
+                             (backend == 0 ? "Serial" : "OpenMP") + ")";
+    ASSERT_GT(o.band_vertices, 0u) << what;
+    EXPECT_GE(o.surface, min_surface) << what;
+    EXPECT_EQ(o.flag_mismatches, 0u) << what << ": surface flags differ from the serial reference";
+    EXPECT_EQ(o.field_mismatches, 0u) << what << ": " << o.field_mismatches << " of " << o.band_vertices
+                                      << " field values differ from the serial per-vertex order; first: " << o.first;
+    EXPECT_EQ(o.direct_mismatches, 0u) << what << ": eval_vertex_direct does not sum in plain serial order";
+    EXPECT_EQ(o.evals, o.ref_evals) << what << ": contributing-particle count";
+  }
+}
+
+const double kR = 0.05;
+
+}  // namespace
+
+TEST(FieldOrder, RandomCloud) {
+  const Points p = random_cloud(kR, 6000, 1);
+  for (double cell : {1.0, 0.5}) {
+    check<FieldSSP07>("random cloud", p, kR, cell);
+    check<FieldZB05>("random cloud", p, kR, cell);
+  }
+}
+
+TEST(FieldOrder, JitteredLatticeBall) {
+  const Points p = jittered_ball(0.1, -0.2, 0.3, 0.5, kR, 0.25, 3);
+  for (double cell : {1.0, 0.5, 0.7}) {
+    check<FieldSSP07>("jittered ball", p, kR, cell);
+    check<FieldZB05>("jittered ball", p, kR, cell);
+  }
+}
+
+TEST(FieldOrder, LatticeBall) {
+  // Particles on a lattice commensurate with the grid: many cell-box and
+  // particle distances equal R up to rounding, where the visit decisions
+  // must match the GPU's exactly.
+  const Points p = jittered_ball(0, 0, 0, 0.45, kR, 0.0, 1);
+  for (double cell : {1.0, 0.5, 0.8}) {
+    check<FieldSSP07>("lattice ball", p, kR, cell);
+    check<FieldZB05>("lattice ball", p, kR, cell);
+  }
+}
+
+TEST(FieldOrder, DenseGridWithEmptyVertices) {
+  // Every grid vertex, most of them with no particle within R.
+  const Points p = jittered_ball(0, 0, 0, 0.3, kR, 0.25, 5);
+  check<FieldSSP07>("dense grid", p, kR, 1.0, true);
+  check<FieldZB05>("dense grid", p, kR, 1.0, true);
+}
+
+TEST(FieldOrder, CrowdedTile) {
+  // 12,000 particles in one neighbour cell: the tile path's per-tile
+  // particle buffer overflows (per-vertex fallback), the surface test marks
+  // the crowded cell wholesale.
+  const Points p = crowded(kR, 12000);
+  check<FieldSSP07>("crowded tile", p, kR, 1.0);
+  check<FieldZB05>("crowded tile", p, kR, 0.5);
+}
+
+TEST(FieldOrder, CoarseCells) {
+  // Cells larger than R: a tile's neighbour cells do not fit the cell list
+  // (collect_cells fails), every vertex is evaluated on its own.
+  const Points p = jittered_ball(0, 0, 0, 0.6, kR, 0.25, 9);
+  check<FieldSSP07>("coarse cells", p, kR, 6.0);
+  check<FieldZB05>("coarse cells", p, kR, 6.0);
+}
+
+TEST(FieldOrder, RealFrame) {
+  const std::string f = std::string(NBMC_DATA_DIR) + "/xyz/cbd46k_t050_46250.xyz";
+  const Points p = read_xyz(f);
+  if (p.empty()) GTEST_SKIP() << f << " not present";
+  check<FieldSSP07>("cbd46k", p, 0.0156, 1.0, false, 1000);
+}
