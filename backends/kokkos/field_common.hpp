@@ -8,24 +8,44 @@
 //   static void add(float* a, dx, dy, dz, k)      // contribution of one particle, d = x_j - x,
 //                                                 // k = max(0, 1 - |d|^2/R^2) (0: no contribution)
 //   static uint32_t accumulate(a, X, Y, Z, b, e, x0, x1, x2, inv_R2)
-//                                                 // the same for particles [b, e), vectorised
+//                                                 // the same for particles [b, e), in order
 //   static float value(const float* a, const FieldConstants&)  // phi(x); negative inside
 // so the gather (narrow band, dense) and the scatter drivers are written once.
+//
+// Summation order: every backend adds a vertex's contributions one at a time,
+// in the order of eval_vertex_direct (cells in z, y, x order, particles in
+// their sorted order), with the same float operations in the same order, so
+// that CPU and GPU give bit-identical values (the library is compiled without
+// FMA contraction). `add` and `accumulate` must stay the same expression tree.
+// The host vectorises across vertices (or particles i), never across the
+// terms of one sum.
 #pragma once
 
 #include <Kokkos_Core.hpp>
 
-// Vectorisation of the particle loops on the host (explicit reduction order,
-// fixed per build, so results stay deterministic).
-#if defined(_OPENMP) && !defined(__CUDA_ARCH__)
-#define NBMC_PRAGMA(x) _Pragma(#x)
-#define NBMC_SIMD_REDUCTION(...) NBMC_PRAGMA(omp simd reduction(+ : __VA_ARGS__))
-#else
-#define NBMC_SIMD_REDUCTION(...)
-#endif
+#include <cstdint>
+#include <cstring>
 
 namespace nbmc {
 namespace Details {
+
+#if !defined(__CUDA_ARCH__)
+// Host SIMD vectors (GCC/Clang vector extensions), one lane per vertex or
+// particle; lane-wise IEEE operations, so every lane computes exactly what the
+// scalar code computes.
+constexpr int kHostLanes = 4;
+typedef float HostVecF __attribute__((vector_size(4 * kHostLanes)));
+typedef std::int32_t HostVecI __attribute__((vector_size(4 * kHostLanes)));
+
+static_assert(kHostLanes == 4, "host_splat and host_any are written for 4 lanes");
+inline HostVecF host_splat(float v) { return HostVecF{v, v, v, v}; }
+// Whether any lane of a comparison mask is set.
+inline bool host_any(HostVecI m) {
+  std::uint64_t u[2];
+  std::memcpy(u, &m, sizeof m);
+  return (u[0] | u[1]) != 0;
+}
+#endif
 
 struct FieldConstants {
   float R = 0;           // influence radius

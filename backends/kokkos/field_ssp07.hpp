@@ -56,7 +56,9 @@ struct FieldSSP07 {
     a[10] += dy * gx; a[11] += dy * gy; a[12] += dy * gz;
     a[13] += dz * gx; a[14] += dz * gy; a[15] += dz * gz;
   }
-  // Adds particles [b, e) (SoA coordinates) at vertex x; returns how many contribute.
+  // Adds particles [b, e) (SoA coordinates) at vertex x, one after the other (the
+  // order of the sums is part of the result: see field_common.hpp); returns how
+  // many contribute. Same operations as add().
   KOKKOS_INLINE_FUNCTION static std::uint32_t accumulate(float* a, const float* X, const float* Y, const float* Z,
                                                          std::uint32_t b, std::uint32_t e, float x0, float x1,
                                                          float x2, float inv_R2) {
@@ -64,7 +66,6 @@ struct FieldSSP07 {
     float m00 = a[7], m01 = a[8], m02 = a[9], m10 = a[10], m11 = a[11], m12 = a[12], m20 = a[13], m21 = a[14],
           m22 = a[15];
     std::uint32_t count = 0;
-    NBMC_SIMD_REDUCTION(w0, d0, d1, d2, g0, g1, g2, m00, m01, m02, m10, m11, m12, m20, m21, m22, count)
     for (std::uint32_t j = b; j < e; ++j) {
       const float dx = X[j] - x0, dy = Y[j] - x1, dz = Z[j] - x2;
       const float s2 = (dx * dx + dy * dy + dz * dz) * inv_R2;

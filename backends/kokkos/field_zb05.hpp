@@ -24,13 +24,14 @@ struct FieldZB05 {
     a[2] += w * dy;
     a[3] += w * dz;
   }
-  // Adds particles [b, e) (SoA coordinates) at vertex x; returns how many contribute.
+  // Adds particles [b, e) (SoA coordinates) at vertex x, one after the other (the
+  // order of the sums is part of the result: see field_common.hpp); returns how
+  // many contribute. Same operations as add().
   KOKKOS_INLINE_FUNCTION static std::uint32_t accumulate(float* a, const float* X, const float* Y, const float* Z,
                                                          std::uint32_t b, std::uint32_t e, float x0, float x1,
                                                          float x2, float inv_R2) {
     float a0 = a[0], a1 = a[1], a2 = a[2], a3 = a[3];
     std::uint32_t count = 0;
-    NBMC_SIMD_REDUCTION(a0, a1, a2, a3, count)
     for (std::uint32_t j = b; j < e; ++j) {
       const float dx = X[j] - x0, dy = Y[j] - x1, dz = Z[j] - x2;
       const float s2 = (dx * dx + dy * dy + dz * dz) * inv_R2;

@@ -17,6 +17,7 @@
 
 #include <cmath>
 #include <cstdlib>
+#include <limits>
 #include <string>
 
 namespace nbmc {
@@ -35,33 +36,6 @@ inline int device_gather_kind() {
     return e && std::string(e) == "team" ? 0 : 1;
   }();
   return kind;
-}
-
-struct CellRange {
-  std::uint32_t begin, end;
-  float lo[3];  // lower corner of the cell (relative coordinates)
-};
-
-// Occupied neighbour cells whose coordinates lie in [lo, hi]; false if more
-// than kMaxTileCells cells would have to be examined.
-template <class MemSpace>
-KOKKOS_INLINE_FUNCTION bool collect_cells(const NeighbourView<MemSpace>& nb, const std::int64_t lo[3],
-                                          const std::int64_t hi[3], float S, CellRange* cells, int& n) {
-  n = 0;
-  if ((hi[0] - lo[0] + 1) * (hi[1] - lo[1] + 1) * (hi[2] - lo[2] + 1) > kMaxTileCells) return false;
-  for (std::int64_t z = lo[2]; z <= hi[2]; ++z)
-    for (std::int64_t y = lo[1]; y <= hi[1]; ++y)
-      for (std::int64_t x = lo[0]; x <= hi[0]; ++x) {
-        std::uint32_t b, e;
-        if (!nb.cell_range(x, y, z, b, e)) continue;
-        CellRange& c = cells[n++];
-        c.begin = b;
-        c.end = e;
-        c.lo[0] = float(x) * S;
-        c.lo[1] = float(y) * S;
-        c.lo[2] = float(z) * S;
-      }
-  return true;
 }
 
 // Neighbour-cell range covering [xmin - R, xmax + R] on every axis.
@@ -87,117 +61,131 @@ KOKKOS_INLINE_FUNCTION float box_distance2(const float lo[3], float S, const flo
   return dist2;
 }
 
-// Field value at x from the particles of `cells`; adds the number of
-// contributing particles to `evals`.
-template <class Method, class MemSpace>
-KOKKOS_INLINE_FUNCTION float eval_vertex(const NeighbourView<MemSpace>& nb, const CellRange* cells, int n_cells,
-                                         const float x[3], float S, const FieldConstants& fc, std::uint64_t& evals) {
-  float acc[Method::N];
-  for (int q = 0; q < Method::N; ++q) acc[q] = 0.f;
-  const float R2 = fc.R * fc.R, inv_R2 = fc.inv_R2;
-  const float x0 = x[0], x1 = x[1], x2 = x[2];
-  const float* X = nb.pos.data();
-  const float* Y = X + nb.n;
-  const float* Z = Y + nb.n;
-  std::uint32_t count = 0;
-  for (int c = 0; c < n_cells; ++c) {
-    const CellRange& cr = cells[c];
-    if (box_distance2(cr.lo, S, x) >= R2) continue;
-    count += Method::accumulate(acc, X, Y, Z, cr.begin, cr.end, x0, x1, x2, inv_R2);
-  }
-  evals += count;
-  return Method::value(acc, fc);
-}
-
-// Host tile evaluation: the particles of all cells within R of the tile are
-// copied once into a contiguous buffer, each cell padded to a multiple of 4
-// with far-away sentinels (kernel weight exactly 0). Every vertex of the tile
-// then skips the cells farther than R and accumulates the others four
-// particles at a time in SIMD registers, with one horizontal sum at the end.
-// The order of the sums is fixed by the buffer, so results are deterministic.
-constexpr std::uint32_t kTileParticles = 8192;
-constexpr int kTileCellsHost = 1024;
-struct TileScratch {
-  alignas(16) float x[kTileParticles];
-  alignas(16) float y[kTileParticles];
-  alignas(16) float z[kTileParticles];
-  std::uint32_t begin[kTileCellsHost], end[kTileCellsHost];
-  float lo[kTileCellsHost][3];
-};
-
+// Host tile evaluation, bit for bit the per-vertex order of
+// eval_vertex_direct (the GPU's), vectorised across vertices instead of
+// across particles. The occupied neighbour cells of the tile's span are
+// looked up once. The tile's vertices go in groups of kHostLanes lanes; for
+// each group and each cell (in the span's z, y, x order, which restricted to
+// one vertex's own span is that vertex's order), a lane takes part exactly
+// when its vertex visits the cell: the cell lies in the vertex's own
+// cell_span and box_distance2 < R^2, from the same float expressions. Every
+// particle of a cell some lane visits is broadcast and added lane-wise with
+// the operations of Method::accumulate; lanes that do not visit the cell add
+// an exact 0 (k = 0), which leaves their sums unchanged (an accumulator is
+// never -0: it starts at +0 and a sum is -0 only when both terms are).
+// Returns false if the span has more than kMaxTileCells cells.
 #if !defined(__CUDA_ARCH__)
-typedef float nbmc_v4f __attribute__((vector_size(16)));
-typedef int nbmc_v4i __attribute__((vector_size(16)));
+struct TileScratch {
+  std::uint32_t begin[kMaxTileCells], end[kMaxTileCells];
+  std::uint16_t off[kMaxTileCells][3];  // cell coordinates minus the span's lower corner
+  // Per axis and cell coordinate of the span (axis a at base[a] + offset), the
+  // term d * d of box_distance2 for each lane's vertex, +inf where the cell
+  // is outside the vertex's own cell_span (the span's sides add up to at
+  // most kMaxTileCells + 2 when their product is at most kMaxTileCells).
+  HostVecF gap2[kMaxTileCells + 2];
+};
 #endif
 
+// Bits of a band word (bit = x + 4y + 16z) in the order the host groups
+// them: 2x2 squares in x and y, so that a group's vertices visit nearly the
+// same cells.
+KOKKOS_INLINE_FUNCTION int tile_order(int o) {
+  const int z = o >> 4, yq = (o >> 3) & 1, xq = (o >> 2) & 1, y = (o >> 1) & 1, x = o & 1;
+  return (2 * xq + x) + 4 * (2 * yq + y) + 16 * z;
+}
+
 template <class Method, class MemSpace>
-KOKKOS_INLINE_FUNCTION bool eval_tile_host(const NeighbourView<MemSpace>& nb, const CellRange* cells, int n_cells,
-                                           const float tmin[3], const float tmax[3], float S, const FieldConstants& fc,
+KOKKOS_INLINE_FUNCTION bool eval_tile_host(const NeighbourView<MemSpace>& nb, const std::int64_t lo[3],
+                                           const std::int64_t hi[3], float S, const FieldConstants& fc,
                                            std::uint64_t word, std::uint64_t full, std::size_t w,
                                            const BandView<MemSpace>& band, float c,
                                            const Kokkos::View<float*, MemSpace>& phi, std::uint64_t& evals) {
 #if defined(__CUDA_ARCH__)
-  (void)nb; (void)cells; (void)n_cells; (void)tmin; (void)tmax; (void)S; (void)fc; (void)word; (void)full;
-  (void)w; (void)band; (void)c; (void)phi; (void)evals;
+  (void)nb; (void)lo; (void)hi; (void)S; (void)fc; (void)word; (void)full; (void)w; (void)band; (void)c; (void)phi;
+  (void)evals;
   return false;  // device code uses gather_words_direct / gather_words_team
 #else
+  constexpr int L = kHostLanes;
+  const std::int64_t span[3] = {hi[0] - lo[0] + 1, hi[1] - lo[1] + 1, hi[2] - lo[2] + 1};
+  if (span[0] * span[1] * span[2] > kMaxTileCells) return false;
   static thread_local TileScratch scratch;
   TileScratch& t = scratch;  // one TLS lookup per tile, not per access
+  int n_cells = 0;
+  for (std::int64_t z = lo[2]; z <= hi[2]; ++z)
+    for (std::int64_t y = lo[1]; y <= hi[1]; ++y)
+      for (std::int64_t x = lo[0]; x <= hi[0]; ++x) {
+        std::uint32_t b, e;
+        if (!nb.cell_range(x, y, z, b, e)) continue;
+        t.begin[n_cells] = b;
+        t.end[n_cells] = e;
+        t.off[n_cells][0] = std::uint16_t(x - lo[0]);
+        t.off[n_cells][1] = std::uint16_t(y - lo[1]);
+        t.off[n_cells][2] = std::uint16_t(z - lo[2]);
+        ++n_cells;
+      }
+  const int base[3] = {0, int(span[0]), int(span[0] + span[1])};
   const float R2 = fc.R * fc.R;
-  std::uint32_t n = 0;
-  int kept = 0;
+  const float inf = std::numeric_limits<float>::infinity();
+  const HostVecF one = host_splat(1.f), inv_R2 = host_splat(fc.inv_R2), R2v = host_splat(R2);
+  const HostVecF zero = host_splat(0.f);
+  const HostVecI izero = (HostVecI)zero;
   const float* X = nb.pos.data();
-  for (int q = 0; q < n_cells; ++q) {
-    const CellRange& cr = cells[q];
-    float d2 = 0;  // distance between the cell box and the tile box
-    for (int a = 0; a < 3; ++a) {
-      const float gap = cr.lo[a] > tmax[a] ? cr.lo[a] - tmax[a] : (tmin[a] > cr.lo[a] + S ? tmin[a] - cr.lo[a] - S : 0.f);
-      d2 += gap * gap;
+  const float* Y = X + nb.n;
+  const float* Z = Y + nb.n;
+  int bits[64], n_bits = 0;
+  for (int o = 0; o < 64; ++o)
+    if ((word >> tile_order(o)) & 1) bits[n_bits++] = tile_order(o);
+  for (int g0 = 0; g0 < n_bits; g0 += L) {
+    const int m = n_bits - g0 < L ? n_bits - g0 : L;  // lanes in use; the others repeat lane 0, all masked
+    HostVecF vx, vy, vz;
+    for (int l = 0; l < L; ++l) {
+      std::int64_t i, j, k;
+      band.vertex(w, bits[g0 + (l < m ? l : 0)], i, j, k);
+      const float x[3] = {float(i) * c, float(j) * c, float(k) * c};
+      vx[l] = x[0];
+      vy[l] = x[1];
+      vz[l] = x[2];
+      std::int64_t vlo[3], vhi[3];
+      cell_span(nb, x, x, fc.R, vlo, vhi);
+      for (int a = 0; a < 3; ++a)
+        for (std::int64_t o = 0; o < span[a]; ++o) {
+          const std::int64_t cc = lo[a] + o;
+          float d2 = inf;
+          if (l < m && cc >= vlo[a] && cc <= vhi[a]) {
+            const float clo = float(cc) * S;  // as in eval_vertex_direct and box_distance2
+            const float below = clo - x[a], above = x[a] - (clo + S);
+            const float d = below > 0 ? below : (above > 0 ? above : 0.f);
+            d2 = d * d;
+          }
+          t.gap2[base[a] + o][l] = d2;
+        }
     }
-    if (d2 >= R2) continue;
-    const std::uint32_t count = cr.end - cr.begin, padded = (count + 3u) & ~3u;
-    if (n + padded > kTileParticles || kept >= kTileCellsHost) return false;
-    for (std::uint32_t j = 0; j < count; ++j) {
-      t.x[n + j] = X[cr.begin + j];
-      t.y[n + j] = X[nb.n + cr.begin + j];
-      t.z[n + j] = X[2 * nb.n + cr.begin + j];
-    }
-    for (std::uint32_t j = count; j < padded; ++j) t.x[n + j] = t.y[n + j] = t.z[n + j] = 1e18f;
-    t.begin[kept] = n;
-    t.end[kept] = n + padded;
-    for (int a = 0; a < 3; ++a) t.lo[kept][a] = cr.lo[a];
-    ++kept;
-    n += padded;
-  }
-  const nbmc_v4f one = {1.f, 1.f, 1.f, 1.f}, zero = {0.f, 0.f, 0.f, 0.f};
-  const nbmc_v4f inv_R2 = one * fc.inv_R2;
-  while (word) {
-    const int bit = ctz64(word);
-    word &= word - 1;
-    std::int64_t i, j, k;
-    band.vertex(w, bit, i, j, k);
-    const float x[3] = {float(i) * c, float(j) * c, float(k) * c};
-    const nbmc_v4f vx = one * x[0], vy = one * x[1], vz = one * x[2];
-    nbmc_v4f acc[Method::N];
+    HostVecF acc[Method::N];
     for (int q = 0; q < Method::N; ++q) acc[q] = zero;
-    nbmc_v4i count = {0, 0, 0, 0};
-    for (int q = 0; q < kept; ++q) {
-      if (box_distance2(t.lo[q], S, x) >= R2) continue;
-      for (std::uint32_t p = t.begin[q]; p < t.end[q]; p += 4) {
-        const nbmc_v4f dx = *reinterpret_cast<const nbmc_v4f*>(t.x + p) - vx;
-        const nbmc_v4f dy = *reinterpret_cast<const nbmc_v4f*>(t.y + p) - vy;
-        const nbmc_v4f dz = *reinterpret_cast<const nbmc_v4f*>(t.z + p) - vz;
-        const nbmc_v4f s2 = (dx * dx + dy * dy + dz * dz) * inv_R2;
-        const nbmc_v4i inside = s2 < one;  // -1 where the particle contributes
-        const nbmc_v4f kk = (nbmc_v4f)((nbmc_v4i)(one - s2) & inside);
+    HostVecI count = izero;
+    for (int q = 0; q < n_cells; ++q) {
+      // box_distance2: ((0 + d0^2) + d1^2) + d2^2, and 0 + d0^2 == d0^2
+      const HostVecF d2 = (t.gap2[t.off[q][0]] + t.gap2[base[1] + t.off[q][1]]) + t.gap2[base[2] + t.off[q][2]];
+      const HostVecI visit = d2 < R2v;
+      if (!host_any(visit)) continue;
+      for (std::uint32_t p = t.begin[q]; p < t.end[q]; ++p) {
+        const HostVecF dx = host_splat(X[p]) - vx;
+        const HostVecF dy = host_splat(Y[p]) - vy;
+        const HostVecF dz = host_splat(Z[p]) - vz;
+        const HostVecF s2 = (dx * dx + dy * dy + dz * dz) * inv_R2;
+        const HostVecI inside = (s2 < one) & visit;  // -1 where the particle contributes
+        const HostVecF k = (HostVecF)((HostVecI)(one - s2) & inside);
         count -= inside;
-        Method::add(acc, dx, dy, dz, kk);
+        Method::add(acc, dx, dy, dz, k);
       }
     }
-    float a[Method::N];
-    for (int q = 0; q < Method::N; ++q) a[q] = (acc[q][0] + acc[q][1]) + (acc[q][2] + acc[q][3]);
-    evals += std::uint64_t(count[0] + count[1] + count[2] + count[3]);
-    phi(band.word_offset(w) + popcount64(full & ((std::uint64_t(1) << bit) - 1))) = Method::value(a, fc);
+    for (int l = 0; l < m; ++l) {
+      float a[Method::N];
+      for (int q = 0; q < Method::N; ++q) a[q] = acc[q][l];
+      evals += std::uint64_t(count[l]);
+      const int bit = bits[g0 + l];
+      phi(band.word_offset(w) + popcount64(full & ((std::uint64_t(1) << bit) - 1))) = Method::value(a, fc);
+    }
   }
   return true;
 #endif
@@ -248,8 +236,8 @@ KOKKOS_INLINE_FUNCTION std::uint64_t carry_over(const BandView<MemSpace>& band, 
   return full & ~oword;
 }
 
-// Host gather: one work item per band word (4x4x4 tile), tile particles copied
-// once into a contiguous buffer, vectorised loop per vertex.
+// Host gather: one work item per band word (4x4x4 tile), vectorised across
+// the tile's vertices (eval_tile_host); the same values as eval_vertex_direct.
 template <class Method, class ExecSpace>
 std::uint64_t gather_words_host(const ExecSpace& space, const NeighbourView<typename ExecSpace::memory_space>& nb,
                                 const BandView<typename ExecSpace::memory_space>& band, std::size_t w0,
@@ -268,16 +256,14 @@ std::uint64_t gather_words_host(const ExecSpace& space, const NeighbourView<type
         band.vertex(w, 0, i0, j0, k0);
         std::uint64_t word = has_old ? carry_over(band, ob, phi, old_phi, w, i0, j0, k0, 0, 1) : full;
         if (!word) return;
-        CellRange cells[kMaxTileCells];
-        int n_cells = 0;
+        // The tile's span contains every vertex's own span (the float
+        // operations of cell_span are monotone in x).
         const float tmin[3] = {float(i0) * c, float(j0) * c, float(k0) * c};
         const float tmax[3] = {float(i0 + 3) * c, float(j0 + 3) * c, float(k0 + 3) * c};
         std::int64_t lo[3], hi[3];
         cell_span(nb, tmin, tmax, fc.R, lo, hi);
-        if (collect_cells(nb, lo, hi, S, cells, n_cells) &&
-            eval_tile_host<Method>(nb, cells, n_cells, tmin, tmax, S, fc, word, full, w, band, c, phi, acc_evals))
-          return;
-        while (word) {  // very coarse cells or a crowded tile: per vertex
+        if (eval_tile_host<Method>(nb, lo, hi, S, fc, word, full, w, band, c, phi, acc_evals)) return;
+        while (word) {  // very coarse cells: per vertex
           const int bit = ctz64(word);
           word &= word - 1;
           std::int64_t i, j, k;

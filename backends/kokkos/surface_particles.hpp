@@ -9,6 +9,7 @@
 #pragma once
 
 #include "common.hpp"
+#include "field_common.hpp"
 #include "grid.hpp"
 #include "neighbourhood.hpp"
 
@@ -22,7 +23,10 @@ namespace Details {
 constexpr std::uint32_t kCrowdedCell = 2048;
 
 // Marks the particles of occupied neighbour cell `cell`: the neighbour cells
-// within `range` are looked up once for all particles of the cell.
+// within `range` are looked up once for all particles of the cell. Each
+// particle's colour gradient is summed in one order on every backend: the
+// cells in z, y, x order, their particles in sorted order (the host computes
+// kHostLanes particles i at a time, one lane each, with the same operations).
 template <class MemSpace>
 KOKKOS_INLINE_FUNCTION std::size_t surface_particles_of_cell(const NeighbourView<MemSpace>& nb,
                                                              const Kokkos::View<const std::uint64_t*, MemSpace>& keys,
@@ -65,14 +69,20 @@ KOKKOS_INLINE_FUNCTION std::size_t surface_particles_of_cell(const NeighbourView
   const float* Z = Y + nb.n;
   const float h2 = h * h;
   std::size_t surface = 0;
-  for (std::uint32_t i = nb.cell_start(cell); i < nb.cell_start(cell + 1); ++i) {
+  auto mark = [&](std::uint32_t i, float gx, float gy, float gz, int count) {
+    const int neighbours = count - 1;  // i itself is counted
+    const float grad_h = Kokkos::Experimental::sqrt(gx * gx + gy * gy + gz * gz) * scale;
+    const bool is_surface = neighbours < min_neighbours || grad_h > threshold;
+    flags(i) = is_surface ? 1 : 0;
+    surface += is_surface ? 1 : 0;
+  };
+#if defined(__CUDA_ARCH__)
+  for (std::uint32_t i = first; i < last; ++i) {
     const float xi = X[i], yi = Y[i], zi = Z[i];
     float gx = 0, gy = 0, gz = 0;
     int count = 0;
-    for (int c = 0; c < n_cells; ++c) {
-      const std::uint32_t b = begin[c], e = end[c];
-      NBMC_SIMD_REDUCTION(gx, gy, gz, count)
-      for (std::uint32_t j = b; j < e; ++j) {
+    for (int c = 0; c < n_cells; ++c)
+      for (std::uint32_t j = begin[c]; j < end[c]; ++j) {
         const float dx = xi - X[j], dy = yi - Y[j], dz = zi - Z[j];
         const float d2 = dx * dx + dy * dy + dz * dz;
         const float q = d2 < h2 ? h2 - d2 : 0.f;
@@ -82,20 +92,45 @@ KOKKOS_INLINE_FUNCTION std::size_t surface_particles_of_cell(const NeighbourView
         gz += w * dz;
         count += d2 < h2 ? 1 : 0;
       }
-    }
-    const int neighbours = count - 1;  // i itself is counted
-    const float grad_h = Kokkos::Experimental::sqrt(gx * gx + gy * gy + gz * gz) * scale;
-    const bool is_surface = neighbours < min_neighbours || grad_h > threshold;
-    flags(i) = is_surface ? 1 : 0;
-    surface += is_surface ? 1 : 0;
+    mark(i, gx, gy, gz, count);
   }
+#else
+  // The loop above, for kHostLanes particles i at once (the last lanes of the
+  // last group repeat particle last - 1, and are not used).
+  constexpr int L = kHostLanes;
+  const HostVecF vh2 = host_splat(h2), zero = host_splat(0.f);
+  for (std::uint32_t i0 = first; i0 < last; i0 += L) {
+    HostVecF xi, yi, zi;
+    for (int l = 0; l < L; ++l) {
+      const std::uint32_t i = i0 + std::uint32_t(l) < last ? i0 + std::uint32_t(l) : last - 1;
+      xi[l] = X[i];
+      yi[l] = Y[i];
+      zi[l] = Z[i];
+    }
+    HostVecF gx = zero, gy = zero, gz = zero;
+    HostVecI count = (HostVecI)zero;
+    for (int c = 0; c < n_cells; ++c)
+      for (std::uint32_t j = begin[c]; j < end[c]; ++j) {
+        const HostVecF dx = xi - host_splat(X[j]), dy = yi - host_splat(Y[j]), dz = zi - host_splat(Z[j]);
+        const HostVecF d2 = dx * dx + dy * dy + dz * dz;
+        const HostVecI in = d2 < vh2;
+        const HostVecF q = (HostVecF)((HostVecI)(vh2 - d2) & in);
+        const HostVecF w = q * q;
+        gx += w * dx;
+        gy += w * dy;
+        gz += w * dz;
+        count -= in;
+      }
+    for (int l = 0; l < L && i0 + std::uint32_t(l) < last; ++l) mark(i0 + std::uint32_t(l), gx[l], gy[l], gz[l], count[l]);
+  }
+#endif
   // Safety net for clumps the two criteria miss (coincident or compressed
   // particles: many neighbours, no colour gradient): a cell next to an empty
   // cell that holds no surface particle is all surface. Cells on a normal
   // free surface already hold surface particles, so the band is unchanged there.
   if (surface == 0 && face_empty) {
-    for (std::uint32_t i = nb.cell_start(cell); i < nb.cell_start(cell + 1); ++i) flags(i) = 1;
-    surface = nb.cell_start(cell + 1) - nb.cell_start(cell);
+    for (std::uint32_t i = first; i < last; ++i) flags(i) = 1;
+    surface = last - first;
   }
   return surface;
 }
