@@ -102,15 +102,11 @@ McResult classify_cells(const ExecSpace& space, const BandView<typename ExecSpac
                         const Kokkos::View<std::uint64_t*, typename ExecSpace::memory_space>& tri_offset) {
   ScopedRegion region("nbmc::marching_cubes::classify");
   McResult r;
-  // The cell count goes through one atomic per word rather than a
-  // parallel_reduce: compute-sanitizer's racecheck reported 88 shared-memory
-  // hazard warnings inside Kokkos 3.4's CUDA block reduction for this
-  // kernel's launch (bench/RESULTS.md); a plain parallel_for has none.
-  Kokkos::View<std::uint64_t, typename ExecSpace::memory_space> counter("nbmc::marching_cubes::cell_count");
-  Kokkos::parallel_for(
+  std::uint64_t cells = 0;
+  Kokkos::parallel_reduce(
       "nbmc::marching_cubes::cases", Kokkos::RangePolicy<ExecSpace, Kokkos::Schedule<Kokkos::Dynamic>>(space, 0, n_words),
-      KOKKOS_LAMBDA(const std::size_t w) {
-        std::uint32_t tris = 0, acc = 0;
+      KOKKOS_LAMBDA(const std::size_t w, std::uint64_t& acc) {
+        std::uint32_t tris = 0;
         band.for_each_vertex(w, [&](const int bit, const std::int64_t self) {
           std::int64_t i, j, k, idx[8];
           band.vertex(w, bit, i, j, k);
@@ -126,11 +122,9 @@ McResult classify_cells(const ExecSpace& space, const BandView<typename ExecSpac
           ++acc;
         });
         tri_offset(w) = tris;
-        if (acc) Kokkos::atomic_add(&counter(), std::uint64_t(acc));
-      });
+      },
+      cells);
   space.fence();
-  std::uint64_t cells = 0;
-  Kokkos::deep_copy(cells, counter);
   r.cells = cells;
   const std::size_t nb = info.extent(0);
   std::uint64_t nverts = 0;
