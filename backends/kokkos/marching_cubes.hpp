@@ -17,6 +17,7 @@
 #include "mc_tables.hpp"
 #include "narrow_band.hpp"
 
+#include <array>
 #include <vector>
 
 namespace nbmc {
@@ -141,6 +142,42 @@ McResult classify_cells(const ExecSpace& space, const BandView<typename ExecSpac
   return r;
 }
 
+// Leaks of the cell with minimum corner (i, j, k) (band index self): the
+// minimum corners of the neighbour cells across its mixed faces that are not
+// entirely in the band (at most 6 cells, written to out); 0 if the cell is
+// not triangulated. Face f: axis a = f / 2, side = f % 2 (0: at the minimum).
+template <class MemSpace>
+KOKKOS_INLINE_FUNCTION int leaks_at(const BandView<MemSpace>& band, const Kokkos::View<const float*, MemSpace>& phi,
+                                    std::int64_t i, std::int64_t j, std::int64_t k, std::int64_t self,
+                                    std::int64_t out[18]) {
+  std::int64_t idx[8];
+  if (!cell_corners(band, i, j, k, self, idx)) return 0;
+  int cs = 0;
+  for (int c = 0; c < 8; ++c) cs |= (phi(idx[c]) < 0.f ? 1 : 0) << c;
+  if (cs == 0 || cs == 255) return 0;
+  int n = 0;
+  for (int f = 0; f < 6; ++f) {
+    const int a = f >> 1, side = f & 1;
+    int inside = 0;
+    for (int c = 0; c < 8; ++c)
+      if (((c >> a) & 1) == side) inside += (cs >> c) & 1;
+    if (inside == 0 || inside == 4) continue;
+    const std::int64_t ni = i + (a == 0 ? (side ? 1 : -1) : 0), nj = j + (a == 1 ? (side ? 1 : -1) : 0),
+                       nk = k + (a == 2 ? (side ? 1 : -1) : 0);
+    if (ni < 0 || nj < 0 || nk < 0 || ni + 1 >= band.dims[0] || nj + 1 >= band.dims[1] || nk + 1 >= band.dims[2])
+      continue;  // the grid's own boundary (padded: only reached with a clipping box)
+    bool full = true;
+    for (int c = 0; c < 8 && full; ++c)
+      full = band.index(ni + (c & 1), nj + ((c >> 1) & 1), nk + (c >> 2)) >= 0;
+    if (full) continue;
+    out[3 * n] = ni;
+    out[3 * n + 1] = nj;
+    out[3 * n + 2] = nk;
+    ++n;
+  }
+  return n;
+}
+
 // Band leaks: cells that are triangulated (all corners in the band, mixed
 // signs) and have a face with mixed signs whose neighbour cell across it is
 // not entirely in the band. The surface continues into that neighbour, so
@@ -152,66 +189,110 @@ std::vector<std::int64_t> find_band_leaks(const ExecSpace& space, const BandView
                                           const Kokkos::View<const float*, typename ExecSpace::memory_space>& phi) {
   using MemSpace = typename ExecSpace::memory_space;
   ScopedRegion region("nbmc::marching_cubes::band_leaks");
-  // Face f: axis a = f / 2, side = f % 2 (0: the face at the cell's minimum).
   auto leaks_of = KOKKOS_LAMBDA(std::size_t w, int bit, std::int64_t self, std::int64_t out[18])->int {
-    std::int64_t i, j, k, idx[8];
+    std::int64_t i, j, k;
     band.vertex(w, bit, i, j, k);
-    if (!cell_corners(band, i, j, k, self, idx)) return 0;
-    int cs = 0;
-    for (int c = 0; c < 8; ++c) cs |= (phi(idx[c]) < 0.f ? 1 : 0) << c;
-    if (cs == 0 || cs == 255) return 0;
-    int n = 0;
-    for (int f = 0; f < 6; ++f) {
-      const int a = f >> 1, side = f & 1;
-      int inside = 0;
-      for (int c = 0; c < 8; ++c)
-        if (((c >> a) & 1) == side) inside += (cs >> c) & 1;
-      if (inside == 0 || inside == 4) continue;
-      const std::int64_t ni = i + (a == 0 ? (side ? 1 : -1) : 0), nj = j + (a == 1 ? (side ? 1 : -1) : 0),
-                         nk = k + (a == 2 ? (side ? 1 : -1) : 0);
-      if (ni < 0 || nj < 0 || nk < 0 || ni + 1 >= band.dims[0] || nj + 1 >= band.dims[1] || nk + 1 >= band.dims[2])
-        continue;  // the grid's own boundary (padded: only reached with a clipping box)
-      bool full = true;
-      for (int c = 0; c < 8 && full; ++c)
-        full = band.index(ni + (c & 1), nj + ((c >> 1) & 1), nk + (c >> 2)) >= 0;
-      if (full) continue;
-      out[3 * n] = ni;
-      out[3 * n + 1] = nj;
-      out[3 * n + 2] = nk;
-      ++n;
-    }
-    return n;
+    return leaks_at(band, phi, i, j, k, self, out);
   };
-  std::uint64_t count = 0;
-  Kokkos::parallel_reduce(
-      "nbmc::marching_cubes::count_leaks",
-      Kokkos::RangePolicy<ExecSpace, Kokkos::Schedule<Kokkos::Dynamic>>(space, 0, n_words),
-      KOKKOS_LAMBDA(const std::size_t w, std::uint64_t& acc) {
-        std::int64_t out[18];
-        band.for_each_vertex(w, [&](const int bit, const std::int64_t self) {
-          acc += std::uint64_t(leaks_of(w, bit, self, out));
-        });
-      },
-      count);
-  space.fence();
+  // One pass that appends the leaks through a 32-bit cursor (a native
+  // atomic; the 64-bit one is emulated with compare-and-swap in Kokkos 3.4
+  // and was 10x slower under contention on an H100). If the guessed capacity
+  // is too small, a second pass with the exact count follows. The order of
+  // the list is sorted on the host, so it does not matter.
   std::vector<std::int64_t> result;
-  if (!count) return result;
-  Kokkos::View<std::int64_t*, MemSpace> list("nbmc::marching_cubes::leaks", 3 * count);
-  Kokkos::View<std::uint64_t, MemSpace> cursor("nbmc::marching_cubes::leak_cursor");
-  Kokkos::parallel_for(
-      "nbmc::marching_cubes::collect_leaks", Kokkos::RangePolicy<ExecSpace>(space, 0, n_words),
-      KOKKOS_LAMBDA(const std::size_t w) {
-        std::int64_t out[18];
-        band.for_each_vertex(w, [&](const int bit, const std::int64_t self) {
-          const int n = leaks_of(w, bit, self, out);
-          if (!n) return;
-          const std::uint64_t at = Kokkos::atomic_fetch_add(&cursor(), std::uint64_t(n));
-          for (int q = 0; q < 3 * n; ++q) list(3 * at + q) = out[q];
+  std::size_t capacity = 1024 + n_words / 16;
+  for (int attempt = 0; attempt < 2; ++attempt) {
+    Kokkos::View<std::int64_t*, MemSpace> list(Kokkos::view_alloc(Kokkos::WithoutInitializing, "nbmc::marching_cubes::leaks"),
+                                               3 * capacity);
+    Kokkos::View<unsigned int, MemSpace> cursor("nbmc::marching_cubes::leak_cursor");
+    const std::size_t cap = capacity;
+    Kokkos::parallel_for(
+        "nbmc::marching_cubes::collect_leaks", Kokkos::RangePolicy<ExecSpace>(space, 0, n_words),
+        KOKKOS_LAMBDA(const std::size_t w) {
+          if (!band.words(w)) return;
+          std::int64_t out[18];
+          band.for_each_vertex(w, [&](const int bit, const std::int64_t self) {
+            const int n = leaks_of(w, bit, self, out);
+            if (!n) return;
+            const std::size_t at = Kokkos::atomic_fetch_add(&cursor(), unsigned(n));
+            for (int q = 0; q < n; ++q)
+              if (at + q < cap)
+                for (int a = 0; a < 3; ++a) list(3 * (at + q) + a) = out[3 * q + a];
+          });
         });
+    space.fence();
+    unsigned int count = 0;
+    Kokkos::deep_copy(count, cursor);
+    if (count <= capacity) {
+      auto h = Kokkos::create_mirror_view_and_copy(Kokkos::HostSpace(), Kokkos::subview(list, std::make_pair(std::size_t(0), 3 * std::size_t(count))));
+      result.assign(h.data(), h.data() + h.extent(0));
+      return result;
+    }
+    capacity = count;
+  }
+  throw Error(9, "band leaks: the leak count changed between two identical passes");
+}
+
+// The same, but only for the cells that can have become leaky after the band
+// grew by the corners of `added` (cells, minimum corners): a cell's leaks can
+// only appear when it becomes complete, i.e. when it has a new corner, so the
+// candidates are the 27 cells around every added cell. Old cells only lose
+// leaks. Same result as a full scan, at the cost of the added cells.
+template <class ExecSpace>
+std::vector<std::int64_t> find_band_leaks_near(const ExecSpace& space,
+                                               const BandView<typename ExecSpace::memory_space>& band,
+                                               const Kokkos::View<const float*, typename ExecSpace::memory_space>& phi,
+                                               const std::vector<std::int64_t>& added) {
+  using MemSpace = typename ExecSpace::memory_space;
+  ScopedRegion region("nbmc::marching_cubes::band_leaks_near");
+  std::vector<std::int64_t> cand;
+  cand.reserve(added.size() * 27);
+  for (std::size_t c = 0; c + 2 < added.size(); c += 3)
+    for (int dz = -1; dz <= 1; ++dz)
+      for (int dy = -1; dy <= 1; ++dy)
+        for (int dx = -1; dx <= 1; ++dx) {
+          const std::int64_t i = added[c] + dx, j = added[c + 1] + dy, k = added[c + 2] + dz;
+          if (i < 0 || j < 0 || k < 0) continue;
+          cand.push_back(i);
+          cand.push_back(j);
+          cand.push_back(k);
+        }
+  {  // unique triples
+    std::vector<std::array<std::int64_t, 3>> t(cand.size() / 3);
+    for (std::size_t q = 0; q < t.size(); ++q) t[q] = {cand[3 * q + 2], cand[3 * q + 1], cand[3 * q]};
+    std::sort(t.begin(), t.end());
+    t.erase(std::unique(t.begin(), t.end()), t.end());
+    cand.resize(3 * t.size());
+    for (std::size_t q = 0; q < t.size(); ++q) {
+      cand[3 * q] = t[q][2];
+      cand[3 * q + 1] = t[q][1];
+      cand[3 * q + 2] = t[q][0];
+    }
+  }
+  const std::size_t n = cand.size() / 3;
+  std::vector<std::int64_t> result;
+  if (!n) return result;
+  Kokkos::View<std::int64_t*, MemSpace> dc("nbmc::marching_cubes::leak_candidates", 3 * n);
+  Kokkos::deep_copy(space, dc, Kokkos::View<const std::int64_t*, Kokkos::HostSpace, Kokkos::MemoryTraits<Kokkos::Unmanaged>>(cand.data(), cand.size()));
+  // 6 faces at most per candidate
+  Kokkos::View<std::int64_t*, MemSpace> list("nbmc::marching_cubes::leaks", 18 * n);
+  Kokkos::View<int*, MemSpace> counts("nbmc::marching_cubes::leak_counts", n);
+  Kokkos::parallel_for(
+      "nbmc::marching_cubes::leaks_near", Kokkos::RangePolicy<ExecSpace>(space, 0, n), KOKKOS_LAMBDA(const std::size_t q) {
+        const std::int64_t i = dc(3 * q), j = dc(3 * q + 1), k = dc(3 * q + 2);
+        if (i + 1 >= band.dims[0] || j + 1 >= band.dims[1] || k + 1 >= band.dims[2]) return;
+        const std::int64_t self = band.index(i, j, k);
+        if (self < 0) return;
+        std::int64_t out[18];
+        const int m = leaks_at(band, phi, i, j, k, self, out);
+        for (int e = 0; e < 3 * m; ++e) list(18 * q + e) = out[e];
+        counts(q) = m;
       });
   space.fence();
-  auto h = Kokkos::create_mirror_view_and_copy(Kokkos::HostSpace(), list);
-  result.assign(h.data(), h.data() + h.extent(0));
+  auto hl = Kokkos::create_mirror_view_and_copy(Kokkos::HostSpace(), list);
+  auto hc = Kokkos::create_mirror_view_and_copy(Kokkos::HostSpace(), counts);
+  for (std::size_t q = 0; q < n; ++q)
+    for (int e = 0; e < 3 * hc(q); ++e) result.push_back(hl(18 * q + e));
   return result;
 }
 
