@@ -39,7 +39,7 @@ nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader | 
 
 if want equivalence; then
   step "CPU (OpenMP) vs GPU (CUDA) equivalence"
-  "$B/tests/gpu/nbmc_cuda_equivalence" "$DATA" 2>&1 | tee "$OUT/equivalence.txt" || status=1
+  NBMC_CHECK_BAND=1 "$B/tests/gpu/nbmc_cuda_equivalence" "$DATA" 2>&1 | tee "$OUT/equivalence.txt" || status=1
 fi
 
 if want pointers; then
@@ -50,9 +50,19 @@ fi
 SMALL="$DATA/xyz/splashsurf_doubledambreak_f26_4732.xyz"
 want sanitizers && for tool in memcheck racecheck; do
   step "compute-sanitizer --tool $tool (4,732 particles, cell r)"
-  compute-sanitizer --tool $tool --error-exitcode 3 "$B/bench/nbmc_bench" "$SMALL" --spacing 0.05 \
-    --cell-size 1 --backend cuda 2>&1 | tail -5 | tee "$OUT/sanitizer-$tool.txt" || status=1
+  compute-sanitizer --tool $tool --print-level warn --error-exitcode 3 "$B/bench/nbmc_bench" "$SMALL" --spacing 0.05 \
+    --cell-size 1 --backend cuda >"$OUT/sanitizer-$tool.txt" 2>&1 || status=1
+  tail -2 "$OUT/sanitizer-$tool.txt"
 done
+if want sanitizers; then
+  step "racecheck hazards by kernel (all inside Kokkos' ParallelReduce so far)"
+  grep "Race reported" "$OUT/sanitizer-racecheck.txt" | grep -oE "Parallel(Reduce|For|Scan)<Kokkos::Impl::CudaFunctorAdapter<[^:]*nbmc::Details::[a-z_]+" |
+    sed -E "s/<Kokkos::Impl::CudaFunctorAdapter<[^:]*nbmc::Details::/ /" | sort | uniq -c
+  step "compute-sanitizer --tool memcheck on the device-pointer test (shapes only)"
+  compute-sanitizer --tool memcheck --error-exitcode 3 "$B/tests/gpu/nbmc_cuda_device_pointers" /nonexistent \
+    >"$OUT/sanitizer-memcheck-device-pointers.txt" 2>&1 || status=1
+  tail -2 "$OUT/sanitizer-memcheck-device-pointers.txt"
+fi
 
 if want ncu && command -v ncu >/dev/null; then
   step "ncu: the team-tiled gather (NBMC_GPU_GATHER=team) against the direct one, 46k frame, cell r"
@@ -69,6 +79,7 @@ BIG="$DATA/xyz/cbd1654k_t040_1654104.xyz"
 want bench && step "benchmarks: $BIG"
 want bench && for cell in 1 0.5; do
   "$B/bench/nbmc_bench" "$BIG" --spacing 0.00484 --cell-size $cell --backend cuda --repeat 5 2>&1 | tee -a "$OUT/bench.txt"
+  "$B/bench/nbmc_bench" "$BIG" --spacing 0.00484 --cell-size $cell --backend cuda --repeat 5 --device-resident 2>&1 | tee -a "$OUT/bench.txt"
   "$B/bench/nbmc_bench" "$BIG" --spacing 0.00484 --cell-size $cell --backend openmp --threads "$(nproc)" --repeat 3 2>&1 | tee -a "$OUT/bench.txt"
 done
 exit $status

@@ -14,26 +14,6 @@
 #include <vector>
 
 namespace nbmc {
-// Leaves new elements uninitialised: the upload writes every one of them (in
-// parallel, so the pages are also first touched by the threads that fill them).
-template <class T>
-struct NoInitAllocator : std::allocator<T> {
-  template <class U>
-  struct rebind {
-    using other = NoInitAllocator<U>;
-  };
-  NoInitAllocator() = default;
-  template <class U>
-  NoInitAllocator(const NoInitAllocator<U>&) noexcept {}
-  template <class U>
-  void construct(U* p) noexcept {
-    ::new (static_cast<void*>(p)) U;
-  }
-  template <class U, class... A>
-  void construct(U* p, A&&... a) {
-    ::new (static_cast<void*>(p)) U(std::forward<A>(a)...);
-  }
-};
 using ParticleVector = std::vector<double, NoInitAllocator<double>>;
 
 // Particles uploaded from device memory: packed doubles on the CUDA device.

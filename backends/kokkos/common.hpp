@@ -5,6 +5,8 @@
 #pragma once
 
 #include <Kokkos_Core.hpp>
+#include <utility>
+#include <memory>
 
 #include <atomic>
 #include <cstdio>
@@ -18,6 +20,27 @@
 namespace nbmc {
 
 // Status carried by exceptions thrown inside the pipeline; the C API maps it.
+// A std::allocator that leaves new elements uninitialised, for large arrays
+// whose every element is written right after (particle uploads, meshes): no
+// zeroing pass, and the pages are first touched where they are filled.
+template <class T>
+struct NoInitAllocator : std::allocator<T> {
+  template <class U>
+  struct rebind {
+    using other = NoInitAllocator<U>;
+  };
+  NoInitAllocator() = default;
+  template <class U>
+  NoInitAllocator(const NoInitAllocator<U>&) noexcept {}
+  template <class U>
+  void construct(U* p) noexcept {
+    ::new (static_cast<void*>(p)) U;
+  }
+  template <class U, class... A>
+  void construct(U* p, A&&... a) {
+    ::new (static_cast<void*>(p)) U(std::forward<A>(a)...);
+  }
+};
 struct Error : std::runtime_error {
   int32_t status;
   Error(int32_t s, const std::string& msg) : std::runtime_error(msg), status(s) {}

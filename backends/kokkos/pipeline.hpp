@@ -25,8 +25,8 @@ namespace nbmc {
 // The mesh as the C API hands it out: in host vectors, or (CUDA backend,
 // NBMC_MEMORY_DEVICE) in one device allocation owned by `device`.
 struct HostMesh {
-  std::vector<float> positions, normals;
-  std::vector<std::uint32_t> triangles;
+  std::vector<float, NoInitAllocator<float>> positions, normals;
+  std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>> triangles;
   bool on_device = false;
   std::shared_ptr<void> device;
   float* d_positions = nullptr;
