@@ -340,6 +340,25 @@ void check_domain(const Params& p) {
   }
 }
 
+void release_host_particles(nbmc_context& ctx) {
+  if (ctx.pinned) cuda_unpin(ctx.pinned);
+  ctx.pinned = nullptr;
+  ParticleVector().swap(ctx.particles);
+}
+
+double* prepare_host_particles(nbmc_context& ctx, std::size_t n) {
+  const bool cuda = ctx.backend == NBMC_BACKEND_CUDA;
+  const std::size_t cap = ctx.particles.capacity();
+  if (!cuda || cap < n || cap > 2 * n) {
+    release_host_particles(ctx);
+    ctx.particles.reserve(n);
+  }
+  ctx.particles.resize(n);  // uninitialised (NoInitAllocator)
+  if (cuda && !ctx.pinned && cuda_pin(ctx.particles.data(), ctx.particles.capacity() * sizeof(double)))
+    ctx.pinned = ctx.particles.data();
+  return ctx.particles.data();
+}
+
 void run_on_kokkos_thread(nbmc_context& ctx, const std::function<void()>& fn) {
   std::lock_guard<std::mutex> lock(g_run_mutex[ctx.backend]);
   kokkos_thread().run(fn);

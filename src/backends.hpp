@@ -46,6 +46,15 @@ void reconstruct_cuda(const ParticleInput& in, const Params& p, MemoryTracker& t
 // into a new packed double array on the device, validating them there.
 DeviceParticles upload_device_particles(const void* xyz, bool f32, std::uint64_t count, std::uint64_t byte_stride,
                                         const char* fn);
+// Page-locks host memory for fast copies to the GPU (cudaHostRegister);
+// false where that is not possible (no CUDA, or the driver refused).
+bool cuda_pin(void* p, std::size_t bytes);
+void cuda_unpin(void* p);
+// Frees the context's host particle buffer (unpinning it first).
+void release_host_particles(nbmc_context& ctx);
+// Makes ctx.particles hold n uninitialised doubles. CUDA contexts keep one
+// page-locked buffer and reuse it while the size stays within a factor 2.
+double* prepare_host_particles(nbmc_context& ctx, std::size_t n);
 // Copies the arrays of a device mesh into host buffers (any may be NULL).
 void download_mesh(const HostMesh& m, float* positions, float* normals, std::uint32_t* triangles);
 

@@ -66,8 +66,7 @@ int32_t nbmc_context_load_particles(nbmc_context* ctx, const char* path, const c
   }
   ctx->last_error.clear();
   return guarded(ctx, fn, [&]() -> int32_t {
-    ctx->particles.clear();
-    ctx->particles.shrink_to_fit();
+    ctx->particles.clear();  // the (pinned) buffer stays for the upload below
     ctx->device_particles = nbmc::DeviceParticles();
     if (!path) return fail(ctx, NBMC_ERROR_INVALID_ARGUMENT, std::string(fn) + ": path is NULL");
     nbmc::io::ReadOptions o;

@@ -24,12 +24,17 @@ struct DeviceParticles {
 }  // namespace nbmc
 
 struct nbmc_context {
+  nbmc_context() = default;
+  nbmc_context(const nbmc_context&) = delete;
+  nbmc_context& operator=(const nbmc_context&) = delete;
+  ~nbmc_context();  // capi.cpp: unpins the particle buffer
   int32_t backend = NBMC_BACKEND_SERIAL;
   int32_t num_threads = 0;
   int32_t device_id = 0;
   uint32_t flags = 0;
   std::string last_error;
   nbmc::ParticleVector particles;  // validated, 3 per particle
+  void* pinned = nullptr;          // particles.data() while page-locked for the GPU (CUDA contexts)
   nbmc::DeviceParticles device_particles;  // or these, on the CUDA device
   int32_t mesh_memory = NBMC_MEMORY_HOST;
   nbmc_progress_fn progress_fn = nullptr;

@@ -272,11 +272,13 @@ std::vector<std::int64_t> find_band_leaks_near(const ExecSpace& space,
   const std::size_t n = cand.size() / 3;
   std::vector<std::int64_t> result;
   if (!n) return result;
-  Kokkos::View<std::int64_t*, MemSpace> dc("nbmc::marching_cubes::leak_candidates", 3 * n);
-  Kokkos::deep_copy(space, dc, Kokkos::View<const std::int64_t*, Kokkos::HostSpace, Kokkos::MemoryTraits<Kokkos::Unmanaged>>(cand.data(), cand.size()));
-  // 6 faces at most per candidate
-  Kokkos::View<std::int64_t*, MemSpace> list("nbmc::marching_cubes::leaks", 18 * n);
-  Kokkos::View<int*, MemSpace> counts("nbmc::marching_cubes::leak_counts", n);
+  using Unmanaged = Kokkos::MemoryTraits<Kokkos::Unmanaged>;
+  Kokkos::View<std::int64_t*, MemSpace> dc(Kokkos::view_alloc(Kokkos::WithoutInitializing, "nbmc::marching_cubes::leak_candidates"), 3 * n);
+  Kokkos::deep_copy(space, dc, Kokkos::View<const std::int64_t*, Kokkos::HostSpace, Unmanaged>(cand.data(), cand.size()));
+  // Appended through a 32-bit cursor (at most 6 leaks per candidate), only
+  // the found ones copied back, then sorted: the order is deterministic.
+  Kokkos::View<std::int64_t*, MemSpace> list(Kokkos::view_alloc(Kokkos::WithoutInitializing, "nbmc::marching_cubes::leaks"), 18 * n);
+  Kokkos::View<unsigned int, MemSpace> cursor("nbmc::marching_cubes::leak_cursor");
   Kokkos::parallel_for(
       "nbmc::marching_cubes::leaks_near", Kokkos::RangePolicy<ExecSpace>(space, 0, n), KOKKOS_LAMBDA(const std::size_t q) {
         const std::int64_t i = dc(3 * q), j = dc(3 * q + 1), k = dc(3 * q + 2);
@@ -285,14 +287,25 @@ std::vector<std::int64_t> find_band_leaks_near(const ExecSpace& space,
         if (self < 0) return;
         std::int64_t out[18];
         const int m = leaks_at(band, phi, i, j, k, self, out);
-        for (int e = 0; e < 3 * m; ++e) list(18 * q + e) = out[e];
-        counts(q) = m;
+        if (!m) return;
+        const std::size_t at = Kokkos::atomic_fetch_add(&cursor(), unsigned(m));
+        for (int e = 0; e < 3 * m; ++e) list(3 * at + e) = out[e];
       });
   space.fence();
-  auto hl = Kokkos::create_mirror_view_and_copy(Kokkos::HostSpace(), list);
-  auto hc = Kokkos::create_mirror_view_and_copy(Kokkos::HostSpace(), counts);
-  for (std::size_t q = 0; q < n; ++q)
-    for (int e = 0; e < 3 * hc(q); ++e) result.push_back(hl(18 * q + e));
+  unsigned int count = 0;
+  Kokkos::deep_copy(count, cursor);
+  if (!count) return result;
+  auto h = Kokkos::create_mirror_view_and_copy(Kokkos::HostSpace(),
+                                               Kokkos::subview(list, std::make_pair(std::size_t(0), 3 * std::size_t(count))));
+  std::vector<std::array<std::int64_t, 3>> t(count);
+  for (std::size_t q = 0; q < count; ++q) t[q] = {h(3 * q + 2), h(3 * q + 1), h(3 * q)};
+  std::sort(t.begin(), t.end());
+  result.resize(3 * std::size_t(count));
+  for (std::size_t q = 0; q < count; ++q) {
+    result[3 * q] = t[q][2];
+    result[3 * q + 1] = t[q][1];
+    result[3 * q + 2] = t[q][0];
+  }
   return result;
 }
 

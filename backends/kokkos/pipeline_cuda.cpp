@@ -161,6 +161,26 @@ DeviceParticles upload_device_particles(const void* xyz, bool f32, std::uint64_t
 #endif
 }
 
+bool cuda_pin(void* p, std::size_t bytes) {
+#if defined(KOKKOS_ENABLE_CUDA)
+  if (!p || !bytes) return false;
+  if (cudaHostRegister(p, bytes, cudaHostRegisterDefault) == cudaSuccess) return true;
+  cudaGetLastError();
+  return false;
+#else
+  (void)p; (void)bytes;
+  return false;
+#endif
+}
+
+void cuda_unpin(void* p) {
+#if defined(KOKKOS_ENABLE_CUDA)
+  if (p && cudaHostUnregister(p) != cudaSuccess) cudaGetLastError();
+#else
+  (void)p;
+#endif
+}
+
 void download_mesh(const HostMesh& m, float* positions, float* normals, std::uint32_t* triangles) {
 #if defined(KOKKOS_ENABLE_CUDA)
   const std::size_t nv = std::size_t(m.d_vertices) * 3, nt = std::size_t(m.d_triangles_count) * 3;

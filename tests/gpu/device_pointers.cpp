@@ -162,6 +162,30 @@ void errors() {
   check(s == NBMC_ERROR_BACKEND_UNAVAILABLE, "device mesh on OpenMP: " + said(cpu));
   cudaFree(d);
 }
+// Host uploads on a CUDA context reuse one page-locked buffer while the size
+// stays within a factor 2: a sequence of uploads on one context gives the
+// meshes fresh contexts give.
+void reuse() {
+  const nbmc_params prm = params(0.1);
+  const Points sets[] = {sphere(0, 0, 0, 1.0, 0.1), sphere(0.05, 0, 0, 1.0, 0.1), sphere(0, 0, 0, 0.5, 0.1),
+                         sphere(0, 0.1, 0, 1.0, 0.1)};
+  Ctx seq(NBMC_BACKEND_CUDA);
+  int k = 0;
+  for (const Points& pts : sets) {
+    nbmc_mesh* a = nullptr;
+    int32_t s = nbmc_context_set_particles_f64(seq.c, pts.data(), pts.size() / 3, 0);
+    if (s == NBMC_OK) s = nbmc_context_reconstruct(seq.c, &prm, &a);
+    Ctx fresh(NBMC_BACKEND_CUDA);
+    nbmc_mesh* b = nullptr;
+    int32_t t = nbmc_context_set_particles_f64(fresh.c, pts.data(), pts.size() / 3, 0);
+    if (t == NBMC_OK) t = nbmc_context_reconstruct(fresh.c, &prm, &b);
+    check(s == NBMC_OK && t == NBMC_OK && same(host_copy(a), host_copy(b)),
+          "upload " + std::to_string(++k) + " of a sequence on one CUDA context (" + std::to_string(pts.size() / 3) +
+              " particles) gives the fresh context's mesh");
+    nbmc_mesh_destroy(a);
+    nbmc_mesh_destroy(b);
+  }
+}
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -170,6 +194,7 @@ int main(int argc, char** argv) {
     return 2;
   }
   errors();
+  reuse();
   run("sphere", sphere(0, 0, 0, 1.0, 0.1), 0.1, 0.5);
   const double lo[3] = {-0.8, -0.5, -0.4}, hi[3] = {0.8, 0.5, 0.4};
   run("box", box(lo, hi, 0.1), 0.1, 1.0);
