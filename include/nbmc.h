@@ -170,7 +170,10 @@ NBMC_API int32_t nbmc_context_backend(const nbmc_context* ctx, int32_t* backend)
  * NBMC_ERROR_INVALID_PARTICLES (the message names the first bad particle),
  * count 0 gives NBMC_ERROR_NO_PARTICLES; on failure the context keeps no
  * particles. One particle, or many at the same position, is valid input (a
- * sphere of radius iso_radius). */
+ * sphere of radius iso_radius). Large uploads are validated on several
+ * threads (the context's num_threads). On a CUDA context the copy is
+ * page-locked for fast transfers to the GPU, and later uploads whose size
+ * is within a factor 2 reuse it (the first upload pays for the locking). */
 NBMC_API int32_t nbmc_context_set_particles_f32(nbmc_context* ctx, const float* xyz,
                                                 uint64_t count, uint64_t byte_stride);
 NBMC_API int32_t nbmc_context_set_particles_f64(nbmc_context* ctx, const double* xyz,
