@@ -86,6 +86,32 @@ KOKKOS_INLINE_FUNCTION float gradient_component(const BandView<MemSpace>& band,
   return 0.f;
 }
 
+// Runs f(w, bit, self) for every band vertex. On the host one work item per
+// band word (its vertices in a loop, dynamic schedule); on a GPU one thread
+// per vertex slot (64 per word): one thread per word gave 0.2 waves and
+// 8-13% achieved occupancy on an H100 (ncu, bench/RESULTS.md).
+template <class ExecSpace, class F>
+void for_each_band_vertex(const ExecSpace& space, const char* label,
+                          const BandView<typename ExecSpace::memory_space>& band, std::size_t n_words, const F& f) {
+  using MemSpace = typename ExecSpace::memory_space;
+  if constexpr (Kokkos::SpaceAccessibility<Kokkos::HostSpace, MemSpace>::accessible) {
+    Kokkos::parallel_for(
+        label, Kokkos::RangePolicy<ExecSpace, Kokkos::Schedule<Kokkos::Dynamic>>(space, 0, n_words),
+        KOKKOS_LAMBDA(const std::size_t w) {
+          band.for_each_vertex(w, [&](const int bit, const std::int64_t self) { f(w, bit, self); });
+        });
+  } else {
+    Kokkos::parallel_for(
+        label, Kokkos::RangePolicy<ExecSpace>(space, 0, n_words * 64), KOKKOS_LAMBDA(const std::size_t v) {
+          const std::size_t w = v >> 6;
+          const int bit = int(v & 63);
+          const std::uint64_t full = band.words(w);
+          if (!((full >> bit) & 1)) return;
+          f(w, bit, std::int64_t(band.word_offset(w) + popcount64(full & ((std::uint64_t(1) << bit) - 1))));
+        });
+  }
+}
+
 struct McResult {
   std::uint64_t vertices = 0, triangles = 0, cells = 0;
 };
@@ -93,41 +119,42 @@ struct McResult {
 // Runs passes A and B; returns the counts. `info` (zeroed, one per band
 // vertex): bits 0-7 the cell case (only for triangulated cells), bits 8-10 the
 // crossed edges owned by the vertex. `vert_offset`: first mesh vertex of each
-// band vertex. `tri_offset`: first triangle of each band word.
+// band vertex. `tri_offset` (one per band vertex): first triangle of the
+// vertex's cell. The mesh order (vertices and triangles by band vertex) does
+// not depend on the thread count or the backend.
 template <class ExecSpace>
 McResult classify_cells(const ExecSpace& space, const BandView<typename ExecSpace::memory_space>& band,
                         std::size_t n_words, const Kokkos::View<const float*, typename ExecSpace::memory_space>& phi,
                         const McTables<typename ExecSpace::memory_space>& tables,
                         const Kokkos::View<std::uint32_t*, typename ExecSpace::memory_space>& info,
                         const Kokkos::View<std::uint32_t*, typename ExecSpace::memory_space>& vert_offset,
-                        const Kokkos::View<std::uint64_t*, typename ExecSpace::memory_space>& tri_offset) {
+                        const Kokkos::View<std::uint32_t*, typename ExecSpace::memory_space>& tri_offset) {
   ScopedRegion region("nbmc::marching_cubes::classify");
   McResult r;
+  const std::size_t nb = info.extent(0);
+  // tri_offset first holds each vertex's triangle count (0 where no cell).
+  Kokkos::deep_copy(space, tri_offset, std::uint32_t(0));
+  for_each_band_vertex(
+      space, "nbmc::marching_cubes::cases", band, n_words,
+      KOKKOS_LAMBDA(const std::size_t w, const int bit, const std::int64_t self) {
+        std::int64_t i, j, k, idx[8];
+        band.vertex(w, bit, i, j, k);
+        if (!cell_corners(band, i, j, k, self, idx)) return;
+        int cs = 0;
+        for (int c = 0; c < 8; ++c) cs |= (phi(idx[c]) < 0.f ? 1 : 0) << c;
+        if (cs == 0 || cs == 255) return;
+        Kokkos::atomic_fetch_or(&info(self), std::uint32_t(cs));
+        const std::uint16_t em = tables.edges(cs);
+        for (int e = 0; e < 12; ++e)
+          if (em & (1u << e)) Kokkos::atomic_fetch_or(&info(idx[edge_start(e)]), std::uint32_t(1) << (8 + e / 4));
+        tri_offset(self) = std::uint32_t(tables.count(cs));
+      });
+  space.fence();
   std::uint64_t cells = 0;
   Kokkos::parallel_reduce(
-      "nbmc::marching_cubes::cases", Kokkos::RangePolicy<ExecSpace, Kokkos::Schedule<Kokkos::Dynamic>>(space, 0, n_words),
-      KOKKOS_LAMBDA(const std::size_t w, std::uint64_t& acc) {
-        std::uint32_t tris = 0;
-        band.for_each_vertex(w, [&](const int bit, const std::int64_t self) {
-          std::int64_t i, j, k, idx[8];
-          band.vertex(w, bit, i, j, k);
-          if (!cell_corners(band, i, j, k, self, idx)) return;
-          int cs = 0;
-          for (int c = 0; c < 8; ++c) cs |= (phi(idx[c]) < 0.f ? 1 : 0) << c;
-          if (cs == 0 || cs == 255) return;
-          Kokkos::atomic_fetch_or(&info(self), std::uint32_t(cs));
-          const std::uint16_t em = tables.edges(cs);
-          for (int e = 0; e < 12; ++e)
-            if (em & (1u << e)) Kokkos::atomic_fetch_or(&info(idx[edge_start(e)]), std::uint32_t(1) << (8 + e / 4));
-          tris += tables.count(cs);
-          ++acc;
-        });
-        tri_offset(w) = tris;
-      },
-      cells);
-  space.fence();
+      "nbmc::marching_cubes::count_cells", Kokkos::RangePolicy<ExecSpace>(space, 0, nb),
+      KOKKOS_LAMBDA(const std::size_t v, std::uint64_t& acc) { acc += tri_offset(v) ? 1 : 0; }, cells);
   r.cells = cells;
-  const std::size_t nb = info.extent(0);
   std::uint64_t nverts = 0;
   Kokkos::parallel_scan(
       "nbmc::marching_cubes::number_vertices", Kokkos::RangePolicy<ExecSpace>(space, 0, nb),
@@ -326,11 +353,10 @@ void compute_vertices(const ExecSpace& space, const BandView<typename ExecSpace:
   ScopedRegion region("nbmc::marching_cubes::vertices");
   const double o0 = g.origin[0], o1 = g.origin[1], o2 = g.origin[2], c = g.cell;
   const float inv_c = float(1.0 / g.cell);
-  Kokkos::parallel_for(
-      "nbmc::marching_cubes::vertices",
-      Kokkos::RangePolicy<ExecSpace, Kokkos::Schedule<Kokkos::Dynamic>>(space, 0, n_words),
-      KOKKOS_LAMBDA(const std::size_t w) {
-        band.for_each_vertex(w, [&](const int bit, const std::int64_t self) {
+  for_each_band_vertex(
+      space, "nbmc::marching_cubes::vertices", band, n_words,
+      KOKKOS_LAMBDA(const std::size_t w, const int bit, const std::int64_t self) {
+        {
           const std::uint32_t edges = (info(self) >> 8) & 7u;
           if (edges) {
             std::int64_t i, j, k;
@@ -367,7 +393,7 @@ void compute_vertices(const ExecSpace& space, const BandView<typename ExecSpace:
               ++out;
             }
           }
-        });
+        }
       });
   space.fence();
 }
@@ -378,32 +404,27 @@ void compute_triangles(const ExecSpace& space, const BandView<typename ExecSpace
                        std::size_t n_words, const McTables<typename ExecSpace::memory_space>& tables,
                        const Kokkos::View<const std::uint32_t*, typename ExecSpace::memory_space>& info,
                        const Kokkos::View<const std::uint32_t*, typename ExecSpace::memory_space>& vert_offset,
-                       const Kokkos::View<const std::uint64_t*, typename ExecSpace::memory_space>& tri_offset,
+                       const Kokkos::View<const std::uint32_t*, typename ExecSpace::memory_space>& tri_offset,
                        const Kokkos::View<std::uint32_t*, typename ExecSpace::memory_space>& triangles) {
   ScopedRegion region("nbmc::marching_cubes::triangles");
   constexpr int W = 3 * mc::kMaxTriangles;
-  Kokkos::parallel_for(
-      "nbmc::marching_cubes::triangles",
-      Kokkos::RangePolicy<ExecSpace, Kokkos::Schedule<Kokkos::Dynamic>>(space, 0, n_words),
-      KOKKOS_LAMBDA(const std::size_t w) {
-        std::uint64_t out = tri_offset(w);
-        band.for_each_vertex(w, [&](const int bit, const std::int64_t self) {
-          const int cs = int(info(self) & 0xffu);
-          if (cs) {
-            std::int64_t i, j, k, idx[8];
-            band.vertex(w, bit, i, j, k);
-            cell_corners(band, i, j, k, self, idx);
-            const int nt = tables.count(cs);
-            for (int t = 0; t < 3 * nt; ++t) {
-              const int e = tables.triangles(cs * W + t);
-              const int axis = e >> 2;
-              const std::int64_t owner = idx[edge_start(e)];
-              const std::uint32_t below = (info(owner) >> 8) & ((1u << axis) - 1u);
-              triangles(3 * out + t) = vert_offset(owner) + std::uint32_t(popcount64(below));
-            }
-            out += std::uint64_t(nt);
-          }
-        });
+  for_each_band_vertex(
+      space, "nbmc::marching_cubes::triangles", band, n_words,
+      KOKKOS_LAMBDA(const std::size_t w, const int bit, const std::int64_t self) {
+        const int cs = int(info(self) & 0xffu);
+        if (!cs) return;
+        std::int64_t i, j, k, idx[8];
+        band.vertex(w, bit, i, j, k);
+        cell_corners(band, i, j, k, self, idx);
+        const std::uint64_t out = tri_offset(self);
+        const int nt = tables.count(cs);
+        for (int t = 0; t < 3 * nt; ++t) {
+          const int e = tables.triangles(cs * W + t);
+          const int axis = e >> 2;
+          const std::int64_t owner = idx[edge_start(e)];
+          const std::uint32_t below = (info(owner) >> 8) & ((1u << axis) - 1u);
+          triangles(3 * out + t) = vert_offset(owner) + std::uint32_t(popcount64(below));
+        }
       });
   space.fence();
 }

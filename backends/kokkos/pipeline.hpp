@@ -233,8 +233,7 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
 
   // ------------------------------------------------------------------ field
   {  // the per-vertex arrays of the field and of marching cubes, before allocating them
-    const std::uint64_t need = band.n_vertices * (sizeof(float) + 2 * sizeof(std::uint32_t)) +
-                               band.n_blocks * 8 * sizeof(std::uint64_t);
+    const std::uint64_t need = band.n_vertices * (sizeof(float) + 3 * sizeof(std::uint32_t));
     tracker.require(need, "the field and triangulation of " + std::to_string(band.n_vertices) +
                               " band vertices (estimated)");
   }
@@ -308,13 +307,14 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
   const McTables<MemSpace> tables = make_mc_tables(space);
   Buffer<std::uint32_t, MemSpace> info(tracker, "marching_cubes::info", band.n_vertices, true);
   Buffer<std::uint32_t, MemSpace> vert_offset(tracker, "marching_cubes::vertex_offsets", band.n_vertices);
-  Buffer<std::uint64_t, MemSpace> tri_offset(tracker, "marching_cubes::triangle_offsets", n_words);
+  Buffer<std::uint32_t, MemSpace> tri_offset(tracker, "marching_cubes::triangle_offsets", band.n_vertices);
   const Kokkos::View<const float*, MemSpace> cphi = phi.view();
   const McResult r = classify_cells(space, bv, n_words, cphi, tables, info.view(), vert_offset.view(),
                                     tri_offset.view());
-  if (r.vertices > std::numeric_limits<std::uint32_t>::max()) {
+  if (r.vertices > std::numeric_limits<std::uint32_t>::max() || r.triangles > std::numeric_limits<std::uint32_t>::max()) {
     std::ostringstream s;
-    s << "the mesh would have " << r.vertices << " vertices, more than 32-bit indices can address";
+    s << "the mesh would have " << r.vertices << " vertices and " << r.triangles
+      << " triangles, more than 32-bit indices and offsets can address";
     throw Error(5, s.str());
   }
   st.cells = r.cells;
@@ -346,7 +346,7 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
     compute_vertices(space, bv, n_words, g, cphi, cinfo, cvoff, Kokkos::View<float*, MemSpace>(hpos),
                      Kokkos::View<float*, MemSpace>(hnrm), p.normals);
     compute_triangles(space, bv, n_words, tables, cinfo, cvoff,
-                      Kokkos::View<const std::uint64_t*, MemSpace>(tri_offset.view()),
+                      Kokkos::View<const std::uint32_t*, MemSpace>(tri_offset.view()),
                       Kokkos::View<std::uint32_t*, MemSpace>(htri));
     lap(5);
   } else if (mesh_on_device) {
@@ -367,7 +367,7 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
     compute_vertices(space, bv, n_words, g, cphi, cinfo, cvoff, Kokkos::View<float*, MemSpace>(dpos),
                      Kokkos::View<float*, MemSpace>(dnrm), p.normals);
     compute_triangles(space, bv, n_words, tables, cinfo, cvoff,
-                      Kokkos::View<const std::uint64_t*, MemSpace>(tri_offset.view()),
+                      Kokkos::View<const std::uint32_t*, MemSpace>(tri_offset.view()),
                       Kokkos::View<std::uint32_t*, MemSpace>(dtri));
     lap(5);
 #else
@@ -379,7 +379,7 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
     Buffer<std::uint32_t, MemSpace> dtri(tracker, "mesh::triangles", htri.extent(0));
     compute_vertices(space, bv, n_words, g, cphi, cinfo, cvoff, dpos.view(), dnrm.view(), p.normals);
     compute_triangles(space, bv, n_words, tables, cinfo, cvoff,
-                      Kokkos::View<const std::uint64_t*, MemSpace>(tri_offset.view()), dtri.view());
+                      Kokkos::View<const std::uint32_t*, MemSpace>(tri_offset.view()), dtri.view());
     lap(5);
     // The host vectors are fresh, uninitialised memory: touch their pages
     // with all host threads first (single-threaded page faults inside the
