@@ -171,6 +171,19 @@ int32_t nbmc_context_backend(const nbmc_context* ctx, int32_t* backend) {
 
 }  // extern "C"
 
+// The argument checks both uploads share (count, pointer, stride, size).
+template <class T>
+static void check_upload(const T* xyz, uint64_t count, uint64_t byte_stride, const char* fn) {
+  if (count == 0) throw Error(NBMC_ERROR_NO_PARTICLES, std::string(fn) + ": count is 0");
+  if (!xyz) throw Error(NBMC_ERROR_INVALID_ARGUMENT, std::string(fn) + ": xyz is NULL");
+  if (byte_stride != 0 && byte_stride < 3 * sizeof(T))
+    throw Error(NBMC_ERROR_INVALID_ARGUMENT, std::string(fn) + ": byte_stride " + std::to_string(byte_stride) +
+                                                 " is smaller than one position (" + std::to_string(3 * sizeof(T)) +
+                                                 " bytes)");
+  if (count > uint64_t(UINT32_MAX) - 1)
+    throw Error(NBMC_ERROR_DOMAIN_TOO_LARGE, std::string(fn) + ": at most 4294967294 particles are supported");
+}
+
 template <class T>
 static int32_t set_particles(nbmc_context* ctx, const T* xyz, uint64_t count, uint64_t byte_stride,
                              const char* fn) {
@@ -178,15 +191,8 @@ static int32_t set_particles(nbmc_context* ctx, const T* xyz, uint64_t count, ui
   NBMC_CAPI_BEGIN(ctx)
   ctx->particles.clear();  // keeps the (pinned) buffer for the next upload
   ctx->device_particles = nbmc::DeviceParticles();
-  if (count == 0) throw Error(NBMC_ERROR_NO_PARTICLES, std::string(fn) + ": count is 0");
-  if (!xyz) throw Error(NBMC_ERROR_INVALID_ARGUMENT, std::string(fn) + ": xyz is NULL");
+  check_upload(xyz, count, byte_stride, fn);
   if (byte_stride == 0) byte_stride = 3 * sizeof(T);
-  if (byte_stride < 3 * sizeof(T))
-    throw Error(NBMC_ERROR_INVALID_ARGUMENT, std::string(fn) + ": byte_stride " + std::to_string(byte_stride) +
-                                                 " is smaller than one position (" + std::to_string(3 * sizeof(T)) +
-                                                 " bytes)");
-  if (count > uint64_t(UINT32_MAX) - 1)
-    throw Error(NBMC_ERROR_DOMAIN_TOO_LARGE, std::string(fn) + ": at most 4294967294 particles are supported");
   double* out = nbmc::prepare_host_particles(*ctx, 3 * std::size_t(count));
   const unsigned char* base = reinterpret_cast<const unsigned char*>(xyz);
   std::uint64_t bad = 0, first_bad = UINT64_MAX;
@@ -243,14 +249,7 @@ static int32_t set_particles_device(nbmc_context* ctx, const T* xyz, uint64_t co
     throw Error(NBMC_ERROR_BACKEND_UNAVAILABLE, std::string(fn) + ": the context uses the " +
                                                     nbmc::backend_name(ctx->backend) +
                                                     " backend; device pointers need the CUDA backend");
-  if (count == 0) throw Error(NBMC_ERROR_NO_PARTICLES, std::string(fn) + ": count is 0");
-  if (!xyz) throw Error(NBMC_ERROR_INVALID_ARGUMENT, std::string(fn) + ": xyz is NULL");
-  if (byte_stride != 0 && byte_stride < 3 * sizeof(T))
-    throw Error(NBMC_ERROR_INVALID_ARGUMENT, std::string(fn) + ": byte_stride " + std::to_string(byte_stride) +
-                                                 " is smaller than one position (" + std::to_string(3 * sizeof(T)) +
-                                                 " bytes)");
-  if (count > uint64_t(UINT32_MAX) - 1)
-    throw Error(NBMC_ERROR_DOMAIN_TOO_LARGE, std::string(fn) + ": at most 4294967294 particles are supported");
+  check_upload(xyz, count, byte_stride, fn);
   nbmc::DeviceParticles d;
   nbmc::run_on_kokkos_thread(*ctx, [&]() {
     d = nbmc::upload_device_particles(xyz, sizeof(T) == sizeof(float), count, byte_stride, fn);
