@@ -180,6 +180,15 @@ void put_floats(char* dst, const float* src, std::size_t n, bool swap) {
     for (std::size_t i = 0; i < n; ++i) std::reverse(dst + 4 * i, dst + 4 * i + 4);
 }
 
+// Appends n floats to out, byte-swapped if swap, in bounded chunks.
+void put_float_array(Output& out, const float* src, std::size_t n, bool swap) {
+  for (std::size_t off = 0; off < n; off += 64) {
+    const std::size_t k = std::min<std::size_t>(64, n - off);
+    put_floats(out.room(4 * k), src + off, k, swap);
+    out.advance(4 * k);
+  }
+}
+
 void write_ply(Output& out, const MeshView& m) {
   const bool normals = m.normals != nullptr;
   std::string h = "ply\nformat binary_little_endian 1.0\ncomment written by nbmc\n";
@@ -226,11 +235,7 @@ void write_ply(Output& out, const MeshView& m) {
         const std::size_t c = static_cast<std::size_t>(at.components);
         for (std::size_t j = 0; j < c; ++j) values[k++] = static_cast<float>(at.values[i * c + j]);
       }
-      for (std::size_t off = 0; off < extra; off += 32) {
-        const std::size_t n = std::min<std::size_t>(32, extra - off);
-        put_floats(out.room(4 * n), values.data() + off, n, swap);
-        out.advance(4 * n);
-      }
+      put_float_array(out, values.data(), extra, swap);
     }
   }
   for (std::uint64_t i = 0; i < m.triangle_count; ++i) {
@@ -396,12 +401,7 @@ Mesh parse_ply(ByteReader& in) {
 // ------------------------------------------------------------ legacy VTK
 // Appends n floats in big-endian order (legacy VTK binary data).
 void put_floats_be(Output& out, const float* src, std::size_t n) {
-  const bool swap = host_is_little_endian();
-  for (std::size_t off = 0; off < n; off += 64) {
-    const std::size_t k = std::min<std::size_t>(64, n - off);
-    put_floats(out.room(4 * k), src + off, k, swap);
-    out.advance(4 * k);
-  }
+  put_float_array(out, src, n, host_is_little_endian());
 }
 
 void put_i32_be(char* p, std::int32_t v) {
@@ -515,13 +515,7 @@ void write_vtu(Output& out, const MeshView& m) {
   out.put(head);
 
   const bool swap = !host_is_little_endian();
-  const auto floats = [&](const float* src, std::size_t n) {
-    for (std::size_t off = 0; off < n; off += 64) {
-      const std::size_t k = std::min<std::size_t>(64, n - off);
-      put_floats(out.room(4 * k), src + off, k, swap);
-      out.advance(4 * k);
-    }
-  };
+  const auto floats = [&](const float* src, std::size_t n) { put_float_array(out, src, n, swap); };
   put_u64_le(out, 12 * nv);
   floats(m.positions, static_cast<std::size_t>(3 * nv));
   if (m.normals) {
@@ -660,13 +654,7 @@ void write_glb(Output& out, const std::string& path, const MeshView& m) {
   std::memcpy(chunk + 4, "BIN\0", 4);
   out.put(chunk, 8);
   const bool swap = !host_is_little_endian();
-  const auto floats = [&](const float* src, std::size_t n) {
-    for (std::size_t off = 0; off < n; off += 64) {
-      const std::size_t k = std::min<std::size_t>(64, n - off);
-      put_floats(out.room(4 * k), src + off, k, swap);
-      out.advance(4 * k);
-    }
-  };
+  const auto floats = [&](const float* src, std::size_t n) { put_float_array(out, src, n, swap); };
   floats(m.positions, static_cast<std::size_t>(3 * nv));
   if (m.normals) {
     // glTF requires unit normals: normalise, and give degenerate ones +z.
