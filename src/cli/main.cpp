@@ -177,6 +177,17 @@ bool emit_report(const Options& o, bool json_to_stdout, Text text, Json json) {
 }
 
 // R of the field in absolute units (what attributes are interpolated with).
+// The writers' view of a (host) mesh from the C API.
+nbmc::io::MeshView mesh_view(const nbmc_mesh* mesh) {
+  nbmc::io::MeshView view;
+  view.positions = nbmc_mesh_positions(mesh);
+  view.normals = nbmc_mesh_normals(mesh);
+  view.triangles = nbmc_mesh_triangles(mesh);
+  view.vertex_count = nbmc_mesh_vertex_count(mesh);
+  view.triangle_count = nbmc_mesh_triangle_count(mesh);
+  return view;
+}
+
 double absolute_radius(const nbmc_params& p) {
   return p.length_unit == NBMC_UNIT_ABSOLUTE ? p.influence_radius : p.influence_radius * p.spacing;
 }
@@ -257,12 +268,7 @@ int reconstruct_sequence(Options& o, const std::vector<nbmc::cli::Frame>& frames
           break;
         }
         if (st != NBMC_OK) throw cli::FrameError(std::string(nbmc_status_string(st)) + ": " + nbmc_context_last_error(ctx.get()));
-        io::MeshView view;
-        view.positions = nbmc_mesh_positions(mesh.get());
-        view.normals = nbmc_mesh_normals(mesh.get());
-        view.triangles = nbmc_mesh_triangles(mesh.get());
-        view.vertex_count = nbmc_mesh_vertex_count(mesh.get());
-        view.triangle_count = nbmc_mesh_triangle_count(mesh.get());
+        io::MeshView view = mesh_view(mesh.get());
         std::vector<io::Attribute> attrs;
         if (!o.attributes.empty()) {
           attrs = io::interpolate_attributes(particles.xyz, particles.attributes, o.attributes, view.positions,
@@ -381,12 +387,7 @@ int reconstruct(Options& o) {
   if (cli::interrupted()) return cancelled(progress);
 
   // Write the mesh.
-  io::MeshView view;
-  view.positions = nbmc_mesh_positions(mesh.get());
-  view.normals = nbmc_mesh_normals(mesh.get());
-  view.triangles = nbmc_mesh_triangles(mesh.get());
-  view.vertex_count = nbmc_mesh_vertex_count(mesh.get());
-  view.triangle_count = nbmc_mesh_triangle_count(mesh.get());
+  io::MeshView view = mesh_view(mesh.get());
   report.normals = view.normals != nullptr;
   std::vector<io::Attribute> vertex_attributes;
   try {
