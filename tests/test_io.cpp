@@ -2,6 +2,7 @@
 // nbmc::io: particle readers (raw xyz, PLY points) and mesh writers/readers.
 #include "io/mesh.hpp"
 #include "io/particles.hpp"
+#include "io_expect.hpp"
 
 #include <gtest/gtest.h>
 
@@ -55,17 +56,7 @@ protected:
   fs::path dir_;
 };
 
-// Runs f, expects nbmc::io::Error whose message contains every needle.
-void expect_error(const std::function<void()>& f, const std::vector<std::string>& needles) {
-  try {
-    f();
-    ADD_FAILURE() << "no nbmc::io::Error thrown (expected one mentioning '" << needles.front() << "')";
-  } catch (const Error& e) {
-    const std::string msg = e.what();
-    for (const std::string& n : needles)
-      EXPECT_NE(msg.find(n), std::string::npos) << "message '" << msg << "' does not contain '" << n << "'";
-  }
-}
+using nbmc_test::expect_error;
 
 // Binary encoders.
 template <class T> void put(std::string& out, T v, bool big_endian = false) {

@@ -4,6 +4,7 @@
 // frames of NBMC_DATA_DIR (partio BGEO, SPlisHSPlasH and DualSPHysics VTK).
 #include "io/mesh.hpp"
 #include "io/particles.hpp"
+#include "io_expect.hpp"
 
 #include <gtest/gtest.h>
 
@@ -55,16 +56,7 @@ void expect_sample(const Particles& p, double tol, bool velocity = true, bool de
   }
 }
 
-void expect_error(const std::function<void()>& f, const std::vector<std::string>& needles) {
-  try {
-    f();
-    ADD_FAILURE() << "no nbmc::io::Error thrown (expected one mentioning '" << needles.front() << "')";
-  } catch (const Error& e) {
-    const std::string msg = e.what();
-    for (const std::string& n : needles)
-      EXPECT_NE(msg.find(n), std::string::npos) << "message '" << msg << "' does not contain '" << n << "'";
-  }
-}
+using nbmc_test::expect_error;
 
 } // namespace
 
