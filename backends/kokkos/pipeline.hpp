@@ -64,6 +64,21 @@ struct RunStats {
 
 namespace Details {
 
+// The bounding box extended by the influence radius: the particles a
+// clipped reconstruction keeps (host and device paths).
+struct ExtendedBox {
+  double lo[3], hi[3];
+  explicit ExtendedBox(const Params& p) {
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = p.bbox_min[a] - p.influence_radius;
+      hi[a] = p.bbox_max[a] + p.influence_radius;
+    }
+  }
+  KOKKOS_INLINE_FUNCTION bool contains(double x, double y, double z) const {
+    return x >= lo[0] && x <= hi[0] && y >= lo[1] && y <= hi[1] && z >= lo[2] && z <= hi[2];
+  }
+};
+
 template <class ExecSpace>
 void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& p, MemoryTracker& tracker,
                  const Progress& progress, bool mesh_on_device, HostMesh& mesh, RunStats& st) {
@@ -95,6 +110,7 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
   Kokkos::View<const double*, MemSpace> dxyz;
   Buffer<std::uint32_t, MemSpace> dkeep;
   std::size_t n_used = count;
+  const ExtendedBox box(p);
   if constexpr (!host_memory) {
     using Range = Kokkos::RangePolicy<ExecSpace>;
     if (in.on_device) {
@@ -108,32 +124,24 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
     }
     const Kokkos::View<const double*, MemSpace> dx = dxyz;
     if (p.use_bbox) {
-      const double R = p.influence_radius;
-      const double b0 = p.bbox_min[0] - R, b1 = p.bbox_min[1] - R, b2 = p.bbox_min[2] - R;
-      const double e0 = p.bbox_max[0] + R, e1 = p.bbox_max[1] + R, e2 = p.bbox_max[2] + R;
       std::uint64_t kept = 0;
       Kokkos::parallel_reduce(
           "nbmc::upload::count_in_box", Range(space, 0, count),
           KOKKOS_LAMBDA(const std::size_t i, std::uint64_t& c) {
-            const double x = dx(3 * i), y = dx(3 * i + 1), z = dx(3 * i + 2);
-            c += (x >= b0 && x <= e0 && y >= b1 && y <= e1 && z >= b2 && z <= e2) ? 1 : 0;
+            c += box.contains(dx(3 * i), dx(3 * i + 1), dx(3 * i + 2)) ? 1 : 0;
           },
           kept);
-      if (kept == 0) throw Error(3, "no particle lies within the bounding box (extended by the influence radius)");
-      dkeep = Buffer<std::uint32_t, MemSpace>(tracker, "particles::kept", kept);
-      const auto kv = dkeep.view();
-      Kokkos::parallel_scan(
-          "nbmc::upload::select_in_box", Range(space, 0, count),
-          KOKKOS_LAMBDA(const std::size_t i, std::uint64_t& c, const bool final) {
-            const double x = dx(3 * i), y = dx(3 * i + 1), z = dx(3 * i + 2);
-            const bool inside = x >= b0 && x <= e0 && y >= b1 && y <= e1 && z >= b2 && z <= e2;
-            if (final && inside) kv(c) = std::uint32_t(i);
-            c += inside ? 1 : 0;
-          });
       n_used = std::size_t(kept);
-      for (int a = 0; a < 3; ++a) {
-        lo[a] = p.bbox_min[a];
-        hi[a] = p.bbox_max[a];
+      if (kept) {
+        dkeep = Buffer<std::uint32_t, MemSpace>(tracker, "particles::kept", kept);
+        const auto kv = dkeep.view();
+        Kokkos::parallel_scan(
+            "nbmc::upload::select_in_box", Range(space, 0, count),
+            KOKKOS_LAMBDA(const std::size_t i, std::uint64_t& c, const bool final) {
+              const bool inside = box.contains(dx(3 * i), dx(3 * i + 1), dx(3 * i + 2));
+              if (final && inside) kv(c) = std::uint32_t(i);
+              c += inside ? 1 : 0;
+            });
       }
     } else {
       for (int a = 0; a < 3; ++a) {
@@ -151,20 +159,9 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
       }
     }
   } else if (p.use_bbox) {
-    const double R = p.influence_radius;
-    for (std::size_t i = 0; i < count; ++i) {
-      bool in = true;
-      for (int a = 0; a < 3; ++a) {
-        const double x = xyz[3 * i + a];
-        in = in && x >= p.bbox_min[a] - R && x <= p.bbox_max[a] + R;
-      }
-      if (in) keep.push_back(std::uint32_t(i));
-    }
-    if (keep.empty()) throw Error(3, "no particle lies within the bounding box (extended by the influence radius)");
-    for (int a = 0; a < 3; ++a) {
-      lo[a] = p.bbox_min[a];
-      hi[a] = p.bbox_max[a];
-    }
+    for (std::size_t i = 0; i < count; ++i)
+      if (box.contains(xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2])) keep.push_back(std::uint32_t(i));
+    n_used = keep.size();
   } else {
     for (std::size_t i = 0; i < count; ++i)
       for (int a = 0; a < 3; ++a) {
@@ -173,7 +170,13 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
         hi[a] = x > hi[a] ? x : hi[a];
       }
   }
-  if (host_memory && !keep.empty()) n_used = keep.size();
+  if (p.use_bbox) {
+    if (n_used == 0) throw Error(3, "no particle lies within the bounding box (extended by the influence radius)");
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = p.bbox_min[a];
+      hi[a] = p.bbox_max[a];
+    }
+  }
   const Grid g = make_grid(lo, hi, p);
   st.particles = n_used;
   st.grid_vertices = g.vertex_count();
