@@ -17,6 +17,7 @@
 #include "mc_tables.hpp"
 #include "narrow_band.hpp"
 
+#include <algorithm>
 #include <array>
 #include <vector>
 
@@ -210,42 +211,54 @@ KOKKOS_INLINE_FUNCTION int leaks_at(const BandView<MemSpace>& band, const Kokkos
 // not entirely in the band. The surface continues into that neighbour, so
 // without it the mesh would have a hole there. Returns the minimum corners
 // of those neighbour cells (x, y, z triples, host memory, sorted).
+// Sorts cell triples (minimum corners, x y z) by z, then y, then x, so that
+// lists filled in parallel come out in one order; with `unique`, drops repeats.
+inline void sort_cells(std::vector<std::int64_t>& cells, bool unique) {
+  std::vector<std::array<std::int64_t, 3>> t(cells.size() / 3);
+  for (std::size_t q = 0; q < t.size(); ++q) t[q] = {cells[3 * q + 2], cells[3 * q + 1], cells[3 * q]};
+  std::sort(t.begin(), t.end());
+  if (unique) t.erase(std::unique(t.begin(), t.end()), t.end());
+  cells.resize(3 * t.size());
+  for (std::size_t q = 0; q < t.size(); ++q) {
+    cells[3 * q] = t[q][2];
+    cells[3 * q + 1] = t[q][1];
+    cells[3 * q + 2] = t[q][0];
+  }
+}
+
+// The first `count` triples of a device list, on the host, sorted.
+template <class View>
+std::vector<std::int64_t> cells_to_host(const View& list, std::size_t count) {
+  auto h = Kokkos::create_mirror_view_and_copy(Kokkos::HostSpace(),
+                                               Kokkos::subview(list, std::make_pair(std::size_t(0), 3 * count)));
+  std::vector<std::int64_t> cells(h.data(), h.data() + h.extent(0));
+  sort_cells(cells, false);
+  return cells;
+}
+
 template <class ExecSpace>
 std::vector<std::int64_t> find_band_leaks(const ExecSpace& space, const BandView<typename ExecSpace::memory_space>& band,
                                           std::size_t n_words,
                                           const Kokkos::View<const float*, typename ExecSpace::memory_space>& phi) {
   using MemSpace = typename ExecSpace::memory_space;
   ScopedRegion region("nbmc::marching_cubes::band_leaks");
-  auto leaks_of = KOKKOS_LAMBDA(std::size_t w, int bit, std::int64_t self, std::int64_t out[18])->int {
-    std::int64_t i, j, k;
-    band.vertex(w, bit, i, j, k);
-    return leaks_at(band, phi, i, j, k, self, out);
-  };
   // One pass that appends the leaks through a 32-bit cursor (a native
   // atomic; the 64-bit one is emulated with compare-and-swap in Kokkos 3.4
   // and was 10x slower under contention on an H100). If the guessed capacity
-  // is too small, a second pass with the exact count follows. The order of
-  // the list is sorted on the host, so it does not matter.
-  std::vector<std::int64_t> result;
+  // is too small, a second pass with the exact count follows. The list is
+  // sorted on the host, so the order of the appends does not matter.
   std::size_t capacity = 1024 + n_words / 16;
   for (int attempt = 0; attempt < 2; ++attempt) {
     Kokkos::View<std::int64_t*, MemSpace> list(Kokkos::view_alloc(Kokkos::WithoutInitializing, "nbmc::marching_cubes::leaks"),
                                                3 * capacity);
     Kokkos::View<unsigned int, MemSpace> cursor("nbmc::marching_cubes::leak_cursor");
     const std::size_t cap = capacity;
-    // One thread per vertex slot (64 per word): one per word gave 0.18 waves
-    // and 8% occupancy on an H100 (ncu, 1.65 M frame at cell r).
-    Kokkos::parallel_for(
-        "nbmc::marching_cubes::collect_leaks", Kokkos::RangePolicy<ExecSpace>(space, 0, n_words * 64),
-        KOKKOS_LAMBDA(const std::size_t v) {
-          const std::size_t w = v >> 6;
-          const int bit = int(v & 63);
-          const std::uint64_t full = band.words(w);
-          if (!((full >> bit) & 1)) return;
-          const std::int64_t self =
-              std::int64_t(band.word_offset(w) + popcount64(full & ((std::uint64_t(1) << bit) - 1)));
-          std::int64_t out[18];
-          const int n = leaks_of(w, bit, self, out);
+    for_each_band_vertex(
+        space, "nbmc::marching_cubes::collect_leaks", band, n_words,
+        KOKKOS_LAMBDA(const std::size_t w, const int bit, const std::int64_t self) {
+          std::int64_t i, j, k, out[18];
+          band.vertex(w, bit, i, j, k);
+          const int n = leaks_at(band, phi, i, j, k, self, out);
           if (!n) return;
           const std::size_t at = Kokkos::atomic_fetch_add(&cursor(), unsigned(n));
           for (int q = 0; q < n; ++q)
@@ -255,11 +268,7 @@ std::vector<std::int64_t> find_band_leaks(const ExecSpace& space, const BandView
     space.fence();
     unsigned int count = 0;
     Kokkos::deep_copy(count, cursor);
-    if (count <= capacity) {
-      auto h = Kokkos::create_mirror_view_and_copy(Kokkos::HostSpace(), Kokkos::subview(list, std::make_pair(std::size_t(0), 3 * std::size_t(count))));
-      result.assign(h.data(), h.data() + h.extent(0));
-      return result;
-    }
+    if (count <= capacity) return count ? cells_to_host(list, count) : std::vector<std::int64_t>();
     capacity = count;
   }
   throw Error(9, "band leaks: the leak count changed between two identical passes");
@@ -289,26 +298,13 @@ std::vector<std::int64_t> find_band_leaks_near(const ExecSpace& space,
           cand.push_back(j);
           cand.push_back(k);
         }
-  {  // unique triples
-    std::vector<std::array<std::int64_t, 3>> t(cand.size() / 3);
-    for (std::size_t q = 0; q < t.size(); ++q) t[q] = {cand[3 * q + 2], cand[3 * q + 1], cand[3 * q]};
-    std::sort(t.begin(), t.end());
-    t.erase(std::unique(t.begin(), t.end()), t.end());
-    cand.resize(3 * t.size());
-    for (std::size_t q = 0; q < t.size(); ++q) {
-      cand[3 * q] = t[q][2];
-      cand[3 * q + 1] = t[q][1];
-      cand[3 * q + 2] = t[q][0];
-    }
-  }
+  sort_cells(cand, true);
   const std::size_t n = cand.size() / 3;
-  std::vector<std::int64_t> result;
-  if (!n) return result;
+  if (!n) return {};
   using Unmanaged = Kokkos::MemoryTraits<Kokkos::Unmanaged>;
   Kokkos::View<std::int64_t*, MemSpace> dc(Kokkos::view_alloc(Kokkos::WithoutInitializing, "nbmc::marching_cubes::leak_candidates"), 3 * n);
   Kokkos::deep_copy(space, dc, Kokkos::View<const std::int64_t*, Kokkos::HostSpace, Unmanaged>(cand.data(), cand.size()));
-  // Appended through a 32-bit cursor (at most 6 leaks per candidate), only
-  // the found ones copied back, then sorted: the order is deterministic.
+  // Appended through a 32-bit cursor (at most 6 leaks per candidate).
   Kokkos::View<std::int64_t*, MemSpace> list(Kokkos::view_alloc(Kokkos::WithoutInitializing, "nbmc::marching_cubes::leaks"), 18 * n);
   Kokkos::View<unsigned int, MemSpace> cursor("nbmc::marching_cubes::leak_cursor");
   Kokkos::parallel_for(
@@ -326,19 +322,7 @@ std::vector<std::int64_t> find_band_leaks_near(const ExecSpace& space,
   space.fence();
   unsigned int count = 0;
   Kokkos::deep_copy(count, cursor);
-  if (!count) return result;
-  auto h = Kokkos::create_mirror_view_and_copy(Kokkos::HostSpace(),
-                                               Kokkos::subview(list, std::make_pair(std::size_t(0), 3 * std::size_t(count))));
-  std::vector<std::array<std::int64_t, 3>> t(count);
-  for (std::size_t q = 0; q < count; ++q) t[q] = {h(3 * q + 2), h(3 * q + 1), h(3 * q)};
-  std::sort(t.begin(), t.end());
-  result.resize(3 * std::size_t(count));
-  for (std::size_t q = 0; q < count; ++q) {
-    result[3 * q] = t[q][2];
-    result[3 * q + 1] = t[q][1];
-    result[3 * q + 2] = t[q][0];
-  }
-  return result;
+  return count ? cells_to_host(list, count) : std::vector<std::int64_t>();
 }
 
 // Pass C: intersection points (absolute, float) and normals.
