@@ -345,20 +345,16 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
   Kokkos::View<float*, Kokkos::HostSpace, Unmanaged> hnrm(mesh.normals.data(), mesh.normals.size());
   Kokkos::View<std::uint32_t*, Kokkos::HostSpace, Unmanaged> htri(mesh.triangles.data(), mesh.triangles.size());
   const Kokkos::View<const std::uint32_t*, MemSpace> cinfo = info.view(), cvoff = vert_offset.view();
-  // Where passes C and D write: straight into the host vectors (host
-  // backends), into one device allocation the caller owns (NBMC_MEMORY_DEVICE),
-  // or into device buffers copied to the host vectors afterwards.
-  constexpr bool direct = std::is_same<MemSpace, Kokkos::HostSpace>::value;
-  Kokkos::View<float*, MemSpace> vpos, vnrm;
-  Kokkos::View<std::uint32_t*, MemSpace> vtri;
-  Buffer<float, MemSpace> dpos, dnrm;
-  Buffer<std::uint32_t, MemSpace> dtri;
-  if constexpr (direct) {
-    vpos = hpos;
-    vnrm = hnrm;
-    vtri = htri;
+  if constexpr (std::is_same<MemSpace, Kokkos::HostSpace>::value) {
+    compute_vertices(space, bv, n_words, g, cphi, cinfo, cvoff, Kokkos::View<float*, MemSpace>(hpos),
+                     Kokkos::View<float*, MemSpace>(hnrm), p.normals);
+    compute_triangles(space, bv, n_words, tables, cinfo, cvoff,
+                      Kokkos::View<const std::uint32_t*, MemSpace>(tri_offset.view()),
+                      Kokkos::View<std::uint32_t*, MemSpace>(htri));
+    lap(5);
   } else if (mesh_on_device) {
 #if defined(KOKKOS_ENABLE_CUDA)
+    // One allocation the caller owns: positions, normals, triangles.
     const std::size_t np = 3 * std::size_t(r.vertices), nn = p.normals ? np : 0, nt = 3 * std::size_t(r.triangles);
     const std::size_t bytes = (np + nn) * sizeof(float) + nt * sizeof(std::uint32_t);
     mesh.device = cuda_allocate(bytes, "the mesh");
@@ -369,44 +365,46 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
     mesh.d_triangles = nt ? reinterpret_cast<std::uint32_t*>(base + np + nn) : nullptr;
     mesh.d_vertices = r.vertices;
     mesh.d_triangles_count = r.triangles;
-    vpos = Kokkos::View<float*, MemSpace, Unmanaged>(mesh.d_positions, np);
-    vnrm = Kokkos::View<float*, MemSpace, Unmanaged>(mesh.d_normals, nn);
-    vtri = Kokkos::View<std::uint32_t*, MemSpace, Unmanaged>(mesh.d_triangles, nt);
+    Kokkos::View<float*, MemSpace, Unmanaged> dpos(mesh.d_positions, np), dnrm(mesh.d_normals, nn);
+    Kokkos::View<std::uint32_t*, MemSpace, Unmanaged> dtri(mesh.d_triangles, nt);
+    compute_vertices(space, bv, n_words, g, cphi, cinfo, cvoff, Kokkos::View<float*, MemSpace>(dpos),
+                     Kokkos::View<float*, MemSpace>(dnrm), p.normals);
+    compute_triangles(space, bv, n_words, tables, cinfo, cvoff,
+                      Kokkos::View<const std::uint32_t*, MemSpace>(tri_offset.view()),
+                      Kokkos::View<std::uint32_t*, MemSpace>(dtri));
+    lap(5);
 #else
     throw Error(7, "device memory needs the CUDA backend");
 #endif
   } else {
-    dpos = Buffer<float, MemSpace>(tracker, "mesh::positions", hpos.extent(0));
-    dnrm = Buffer<float, MemSpace>(tracker, "mesh::normals", hnrm.extent(0));
-    dtri = Buffer<std::uint32_t, MemSpace>(tracker, "mesh::triangles", htri.extent(0));
-    vpos = dpos.view();
-    vnrm = dnrm.view();
-    vtri = dtri.view();
-  }
-  compute_vertices(space, bv, n_words, g, cphi, cinfo, cvoff, vpos, vnrm, p.normals);
-  compute_triangles(space, bv, n_words, tables, cinfo, cvoff,
-                    Kokkos::View<const std::uint32_t*, MemSpace>(tri_offset.view()), vtri);
-  lap(5);
-  if (!direct && !mesh_on_device) {
+    Buffer<float, MemSpace> dpos(tracker, "mesh::positions", hpos.extent(0));
+    Buffer<float, MemSpace> dnrm(tracker, "mesh::normals", hnrm.extent(0));
+    Buffer<std::uint32_t, MemSpace> dtri(tracker, "mesh::triangles", htri.extent(0));
+    compute_vertices(space, bv, n_words, g, cphi, cinfo, cvoff, dpos.view(), dnrm.view(), p.normals);
+    compute_triangles(space, bv, n_words, tables, cinfo, cvoff,
+                      Kokkos::View<const std::uint32_t*, MemSpace>(tri_offset.view()), dtri.view());
+    lap(5);
     // The host vectors are fresh, uninitialised memory: touch their pages
     // with all host threads first (single-threaded page faults inside the
     // copy cost 20 ms for the 40 MB mesh of the 1.65 M frame at r/2).
-    using HostExec = Kokkos::DefaultHostExecutionSpace;
-    auto touch = [](void* data, std::size_t bytes) {
-      if (!bytes) return;
-      char* base = static_cast<char*>(data);
-      const std::size_t pages = (bytes + 4095) / 4096;
-      Kokkos::parallel_for(
-          "nbmc::mesh::first_touch", Kokkos::RangePolicy<HostExec>(0, pages),
-          [=](const std::size_t q) { base[q * 4096] = 0; });
-    };
-    touch(hpos.data(), hpos.extent(0) * sizeof(float));
-    touch(hnrm.data(), hnrm.extent(0) * sizeof(float));
-    touch(htri.data(), htri.extent(0) * sizeof(std::uint32_t));
-    HostExec().fence();
-    Kokkos::deep_copy(space, hpos, vpos);
-    Kokkos::deep_copy(space, hnrm, vnrm);
-    Kokkos::deep_copy(space, htri, vtri);
+    {
+      using HostExec = Kokkos::DefaultHostExecutionSpace;
+      auto touch = [](void* data, std::size_t bytes) {
+        if (!bytes) return;
+        char* base = static_cast<char*>(data);
+        const std::size_t pages = (bytes + 4095) / 4096;
+        Kokkos::parallel_for(
+            "nbmc::mesh::first_touch", Kokkos::RangePolicy<HostExec>(0, pages),
+            [=](const std::size_t q) { base[q * 4096] = 0; });
+      };
+      touch(hpos.data(), hpos.extent(0) * sizeof(float));
+      touch(hnrm.data(), hnrm.extent(0) * sizeof(float));
+      touch(htri.data(), htri.extent(0) * sizeof(std::uint32_t));
+      HostExec().fence();
+    }
+    Kokkos::deep_copy(space, hpos, dpos.view());
+    Kokkos::deep_copy(space, hnrm, dnrm.view());
+    Kokkos::deep_copy(space, htri, dtri.view());
   }
   lap(6);
   st.total = total.seconds();
