@@ -1,0 +1,273 @@
+// SPDX-License-Identifier: MIT
+// Mesh check (nbmc_mesh_check, `nbmc reconstruct --check`): topology and
+// quality figures of a triangle mesh given as flat host arrays. Plain C++,
+// serial, so the figures are the same on every backend and thread count.
+//
+// Definitions (also in include/nbmc.h):
+//  - an edge is an unordered pair of vertices used by at least one triangle;
+//    boundary: used by one triangle; non-manifold: by three or more;
+//    misoriented: by two triangles in the same direction;
+//  - a vertex is non-manifold when its triangles, joined through the edges at
+//    that vertex, form more than one fan (two cones touching at a tip);
+//  - degenerate: area below 1e-12 of the squared largest side of the bounding
+//    box, or two equal vertex indices; sliver: not degenerate, smallest angle
+//    below 1 degree;
+//  - components: sets of triangles connected through shared edges;
+//  - Euler characteristic: V - E + F with V the vertices used by triangles;
+//  - volume: the divergence theorem, sum of det(p0 - c, p1 - c, p2 - c) / 6
+//    with c the centre of the bounding box (for a closed mesh independent of
+//    c; positive when the triangles are counter-clockwise seen from outside).
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <numeric>
+#include <stdexcept>
+#include <vector>
+
+namespace nbmc {
+namespace mesh {
+
+// sin(1 degree): a triangle's smallest angle is below 1 degree when
+// 2 * area / (product of its two longest edges) is below this.
+constexpr double kSinOneDegree = 0.017452406437283512;
+// Degenerate: area below this fraction of the squared bounding-box extent.
+constexpr double kDegenerateAreaFraction = 1e-12;
+
+struct Vec3 {
+  double x = 0, y = 0, z = 0;
+};
+inline Vec3 operator-(const Vec3& a, const Vec3& b) { return {a.x - b.x, a.y - b.y, a.z - b.z}; }
+inline Vec3 operator+(const Vec3& a, const Vec3& b) { return {a.x + b.x, a.y + b.y, a.z + b.z}; }
+inline Vec3 operator*(double s, const Vec3& a) { return {s * a.x, s * a.y, s * a.z}; }
+inline double dot(const Vec3& a, const Vec3& b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+inline Vec3 cross(const Vec3& a, const Vec3& b) {
+  return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
+}
+inline double norm(const Vec3& a) { return std::sqrt(dot(a, a)); }
+inline Vec3 load(const float* p, std::uint32_t v) { return {p[3 * std::size_t(v)], p[3 * std::size_t(v) + 1], p[3 * std::size_t(v) + 2]}; }
+
+// Shape of one triangle: twice its area and the sine of its smallest angle
+// (0 when two vertices coincide).
+struct TriangleShape {
+  double double_area = 0;
+  double sin_min_angle = 0;
+  double min_edge = 0;
+};
+inline TriangleShape triangle_shape(const Vec3& a, const Vec3& b, const Vec3& c) {
+  TriangleShape s;
+  const Vec3 ab = b - a, bc = c - b, ca = a - c;
+  s.double_area = norm(cross(ab, ca));
+  double l[3] = {norm(ab), norm(bc), norm(ca)};
+  std::sort(l, l + 3);
+  s.min_edge = l[0];
+  // The smallest angle lies opposite the shortest edge, between the two
+  // longer ones: sin = 2A / (l1 * l2).
+  s.sin_min_angle = l[1] > 0 ? std::min(1.0, s.double_area / (l[1] * l[2])) : 0;
+  return s;
+}
+
+// Largest side of the bounding box of the vertices (0 for none).
+inline double bounding_extent(const float* positions, std::size_t vertex_count, Vec3* centre = nullptr) {
+  if (vertex_count == 0) {
+    if (centre) *centre = Vec3{};
+    return 0;
+  }
+  double lo[3], hi[3];
+  for (int a = 0; a < 3; ++a) lo[a] = hi[a] = positions[a];
+  for (std::size_t v = 1; v < vertex_count; ++v)
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = std::min(lo[a], double(positions[3 * v + a]));
+      hi[a] = std::max(hi[a], double(positions[3 * v + a]));
+    }
+  if (centre) *centre = Vec3{0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1]), 0.5 * (lo[2] + hi[2])};
+  return std::max({hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]});
+}
+
+// Classifies a triangle: 0 good, 1 sliver, 2 degenerate.
+inline int triangle_class(const TriangleShape& s, double degenerate_double_area) {
+  if (s.double_area < degenerate_double_area || s.sin_min_angle <= 0) return 2;
+  return s.sin_min_angle < kSinOneDegree ? 1 : 0;
+}
+
+struct CheckResult {
+  bool closed = false, manifold = false, oriented = false;
+  std::uint64_t vertices = 0, triangles = 0, edges = 0;
+  std::uint64_t boundary_edges = 0, nonmanifold_edges = 0, misoriented_edges = 0;
+  std::uint64_t nonmanifold_vertices = 0, unreferenced_vertices = 0;
+  std::uint64_t degenerate_triangles = 0, sliver_triangles = 0;
+  std::uint64_t components = 0;
+  std::int64_t euler_characteristic = 0;
+  double volume = 0, area = 0;
+  double min_angle_degrees = 0;  // smallest angle of the non-degenerate triangles (0 if none)
+};
+
+namespace detail {
+
+struct UnionFind {
+  std::vector<std::uint32_t> parent;
+  explicit UnionFind(std::size_t n) : parent(n) { std::iota(parent.begin(), parent.end(), 0u); }
+  std::uint32_t find(std::uint32_t x) {
+    while (parent[x] != x) {
+      parent[x] = parent[parent[x]];
+      x = parent[x];
+    }
+    return x;
+  }
+  // Deterministic: the smaller root survives.
+  void unite(std::uint32_t a, std::uint32_t b) {
+    a = find(a);
+    b = find(b);
+    if (a == b) return;
+    if (a < b) parent[b] = a;
+    else parent[a] = b;
+  }
+};
+
+// One directed edge of a triangle, keyed by its unordered vertex pair.
+struct HalfEdge {
+  std::uint64_t key;     // (min << 32) | max
+  std::uint32_t tri;
+  std::uint32_t forward; // 1 when the triangle runs min -> max
+  bool operator<(const HalfEdge& o) const { return key != o.key ? key < o.key : tri < o.tri; }
+};
+
+inline std::uint64_t edge_key(std::uint32_t a, std::uint32_t b) {
+  return a < b ? (std::uint64_t(a) << 32) | b : (std::uint64_t(b) << 32) | a;
+}
+
+}  // namespace detail
+
+// Checks the mesh. Throws std::invalid_argument when a triangle refers to a
+// vertex index >= vertex_count.
+// When irregular is given, it gets one flag per vertex: 1 where the vertex
+// touches a boundary, non-manifold or misoriented edge, a triangle that
+// repeats a vertex, or has more than one fan (mesh clean-up leaves these
+// alone).
+inline CheckResult check_mesh(const float* positions, std::size_t vertex_count, const std::uint32_t* triangles,
+                              std::size_t triangle_count, std::vector<std::uint8_t>* irregular = nullptr) {
+  using detail::HalfEdge;
+  CheckResult r;
+  r.vertices = vertex_count;
+  r.triangles = triangle_count;
+  for (std::size_t i = 0; i < 3 * triangle_count; ++i)
+    if (triangles[i] >= vertex_count) throw std::invalid_argument("a triangle refers to a vertex that does not exist");
+
+  if (irregular) irregular->assign(vertex_count, 0);
+  auto irregular_mark = [&](std::uint32_t v) { (*irregular)[v] = 1; };
+  Vec3 centre;
+  const double extent = bounding_extent(positions, vertex_count, &centre);
+  const double degenerate_double_area = 2 * kDegenerateAreaFraction * extent * extent;
+
+  // Quality, area, volume (serial sums in triangle order: reproducible).
+  double min_sin = 2;
+  std::vector<std::uint8_t> used(vertex_count, 0);
+  for (std::size_t t = 0; t < triangle_count; ++t) {
+    const std::uint32_t* v = triangles + 3 * t;
+    for (int k = 0; k < 3; ++k) used[v[k]] = 1;
+    const Vec3 a = load(positions, v[0]), b = load(positions, v[1]), c = load(positions, v[2]);
+    const bool repeated = v[0] == v[1] || v[1] == v[2] || v[2] == v[0];
+    if (repeated && irregular) irregular_mark(v[0]), irregular_mark(v[1]), irregular_mark(v[2]);
+    const TriangleShape s = triangle_shape(a, b, c);
+    const int cls = repeated ? 2 : triangle_class(s, degenerate_double_area);
+    if (cls == 2) ++r.degenerate_triangles;
+    else {
+      if (cls == 1) ++r.sliver_triangles;
+      min_sin = std::min(min_sin, s.sin_min_angle);
+    }
+    r.area += 0.5 * s.double_area;
+    r.volume += dot(a - centre, cross(b - centre, c - centre)) / 6;
+  }
+  r.min_angle_degrees = min_sin <= 1 ? std::asin(min_sin) * 180.0 / 3.14159265358979323846 : 0;
+  std::uint64_t used_count = 0;
+  for (std::uint8_t u : used) used_count += u;
+  r.unreferenced_vertices = vertex_count - used_count;
+
+  // Edges: the directed edges sorted by their unordered pair.
+  std::vector<HalfEdge> he;
+  he.reserve(3 * triangle_count);
+  for (std::size_t t = 0; t < triangle_count; ++t)
+    for (int k = 0; k < 3; ++k) {
+      const std::uint32_t a = triangles[3 * t + k], b = triangles[3 * t + (k + 1) % 3];
+      if (a == b) continue;
+      he.push_back({detail::edge_key(a, b), std::uint32_t(t), a < b ? 1u : 0u});
+    }
+  std::sort(he.begin(), he.end());
+  detail::UnionFind tri_sets(triangle_count);
+  for (std::size_t i = 0; i < he.size();) {
+    std::size_t j = i + 1;
+    while (j < he.size() && he[j].key == he[i].key) ++j;
+    const std::size_t n = j - i;
+    ++r.edges;
+    const bool bad = n != 2 || he[i].forward == he[i + 1].forward;
+    if (n == 1) ++r.boundary_edges;
+    else if (n > 2) ++r.nonmanifold_edges;
+    else if (he[i].forward == he[i + 1].forward) ++r.misoriented_edges;
+    if (bad && irregular) irregular_mark(std::uint32_t(he[i].key >> 32)), irregular_mark(std::uint32_t(he[i].key));
+    for (std::size_t k = i + 1; k < j; ++k) tri_sets.unite(he[i].tri, he[k].tri);
+    i = j;
+  }
+  for (std::size_t t = 0; t < triangle_count; ++t)
+    if (tri_sets.find(std::uint32_t(t)) == t) ++r.components;
+  r.euler_characteristic = std::int64_t(used_count) - std::int64_t(r.edges) + std::int64_t(triangle_count);
+
+  // Vertex fans: around each vertex, join the triangles that share an edge
+  // at it (the same other vertex); more than one group is two fans.
+  std::vector<std::uint32_t> start(vertex_count + 1, 0);
+  for (std::size_t i = 0; i < 3 * triangle_count; ++i) ++start[triangles[i] + 1];
+  for (std::size_t v = 0; v < vertex_count; ++v) start[v + 1] += start[v];
+  std::vector<std::uint32_t> incident(start[vertex_count]);
+  {
+    std::vector<std::uint32_t> fill(start.begin(), start.end() - 1);
+    for (std::size_t t = 0; t < triangle_count; ++t)
+      for (int k = 0; k < 3; ++k) {
+        const std::uint32_t v = triangles[3 * t + k];
+        // A triangle that repeats v is listed once.
+        if (k > 0 && triangles[3 * t + k - 1] == v) continue;
+        if (k == 2 && triangles[3 * t] == v) continue;
+        incident[fill[v]++] = std::uint32_t(t);
+      }
+    const std::vector<std::uint32_t>& end = fill;  // lists may be shorter than reserved
+    std::vector<std::pair<std::uint32_t, std::uint32_t>> spokes;  // (other vertex, local triangle)
+    std::vector<std::uint32_t> local_parent;
+    for (std::size_t v = 0; v < vertex_count; ++v) {
+      const std::uint32_t b = start[v], e = end[v];
+      if (e - b < 2) continue;
+      spokes.clear();
+      for (std::uint32_t i = b; i < e; ++i) {
+        const std::uint32_t* tv = triangles + 3 * std::size_t(incident[i]);
+        for (int k = 0; k < 3; ++k)
+          if (tv[k] != v) spokes.push_back({tv[k], i - b});
+      }
+      std::sort(spokes.begin(), spokes.end());
+      local_parent.resize(e - b);
+      std::iota(local_parent.begin(), local_parent.end(), 0u);
+      auto find = [&](std::uint32_t x) {
+        while (local_parent[x] != x) x = local_parent[x] = local_parent[local_parent[x]];
+        return x;
+      };
+      std::uint32_t groups = e - b;
+      for (std::size_t k = 1; k < spokes.size(); ++k)
+        if (spokes[k].first == spokes[k - 1].first) {
+          const std::uint32_t x = find(spokes[k].second), y = find(spokes[k - 1].second);
+          if (x != y) {
+            local_parent[std::max(x, y)] = std::min(x, y);
+            --groups;
+          }
+        }
+      if (groups > 1) {
+        ++r.nonmanifold_vertices;
+        if (irregular) irregular_mark(std::uint32_t(v));
+      }
+    }
+  }
+  r.closed = r.boundary_edges == 0 && r.nonmanifold_edges == 0;
+  r.manifold = r.nonmanifold_edges == 0 && r.nonmanifold_vertices == 0;
+  r.oriented = r.misoriented_edges == 0;
+  return r;
+}
+
+}  // namespace mesh
+}  // namespace nbmc

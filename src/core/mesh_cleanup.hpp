@@ -1,0 +1,429 @@
+// SPDX-License-Identifier: MIT
+// Mesh clean-up (nbmc_params.cleanup, on by default): removes degenerate and
+// sliver triangles (see mesh_check.hpp) from a marching-cubes mesh while it
+// stays closed, manifold and consistently oriented.
+//
+// Marching cubes makes slivers where the surface passes close to a grid
+// vertex: the mesh vertices on the grid edges around that grid vertex nearly
+// coincide (short edges, "needles"), or one lies almost on the segment of two
+// others ("caps"). Each bad triangle is repaired by the best of
+//  - collapsing one of its edges (to the midpoint or to either end), allowed
+//    only when the link condition holds (the two ends share no neighbour but
+//    the two opposite vertices), the opposite vertices keep at least three
+//    neighbours, and every triangle that moves keeps its facing (its normal
+//    turns by less than kMaxNormalTurn) and, if it was good, stays good;
+//  - flipping its longest edge (caps), allowed when the new edge does not
+//    exist yet and both new triangles are good and face the same way as the
+//    two old ones;
+// "best" being the largest smallest angle among the triangles it changes.
+// Vertices on a boundary, non-manifold or misoriented edge are left alone,
+// so an open or broken input is never made worse.
+//
+// Serial and in a fixed order (worst triangle first, then by index), so the
+// result depends only on the input mesh: the same on every backend and
+// thread count. The output keeps the surviving triangles in their order and
+// the surviving vertices in theirs; unreferenced vertices are dropped.
+#pragma once
+
+#include "mesh_check.hpp"
+
+#include <algorithm>
+#include <cstdint>
+#include <iterator>
+#include <tuple>
+#include <utility>
+#include <vector>
+
+namespace nbmc {
+namespace mesh {
+
+// Largest turn of a triangle's normal that a collapse or flip may cause.
+constexpr double kCosMaxNormalTurn = 0.5;  // 60 degrees
+// Passes over the bad triangles (each pass repairs what the previous one
+// could not, after its neighbours changed).
+constexpr int kCleanupPasses = 8;
+
+struct CleanupResult {
+  std::uint64_t collapses = 0, flips = 0;
+  std::uint64_t removed_triangles = 0, removed_vertices = 0;
+  std::uint64_t bad_before = 0;  // degenerate + sliver triangles of the input
+  std::uint64_t bad_after = 0;   // of the output
+};
+
+namespace detail {
+
+class Cleaner {
+ public:
+  Cleaner(float* positions, float* normals, std::size_t nv, std::uint32_t* tri, std::size_t nt)
+      : P_(positions), N_(normals), nv_(nv), T_(tri), nt_(nt), alive_(nt, 1), next_(nv, kNone), tail_(nv) {
+    for (std::size_t v = 0; v < nv; ++v) tail_[v] = std::uint32_t(v);
+    const double extent = bounding_extent(positions, nv);
+    degenerate_double_area_ = 2 * kDegenerateAreaFraction * extent * extent;
+    start_.assign(nv + 1, 0);
+    for (std::size_t i = 0; i < 3 * nt; ++i) ++start_[tri[i] + 1];
+    for (std::size_t v = 0; v < nv; ++v) start_[v + 1] += start_[v];
+    incident_.resize(start_[nv]);
+    std::vector<std::uint32_t> fill(start_.begin(), start_.end() - 1);
+    for (std::size_t t = 0; t < nt; ++t)
+      for (int k = 0; k < 3; ++k) incident_[fill[tri[3 * t + k]]++] = std::uint32_t(t);
+    mark_irregular();
+  }
+
+  std::uint64_t collapses = 0, flips = 0;
+
+  // Bad triangles now: (class, sin of the smallest angle, index), worst first.
+  std::vector<std::tuple<int, double, std::uint32_t>> bad_triangles() const {
+    std::vector<std::tuple<int, double, std::uint32_t>> bad;
+    for (std::size_t t = 0; t < nt_; ++t) {
+      if (!alive_[t]) continue;
+      const int c = tri_class(std::uint32_t(t));
+      if (c) bad.emplace_back(-c, shape(std::uint32_t(t)).sin_min_angle, std::uint32_t(t));
+    }
+    std::sort(bad.begin(), bad.end());
+    return bad;
+  }
+
+  bool repair(std::uint32_t t) {
+    if (!alive_[t] || tri_class(t) == 0) return false;
+    const std::uint32_t* v = T_ + 3 * std::size_t(t);
+    for (int k = 0; k < 3; ++k)
+      if (irregular_[v[k]]) return false;
+    Candidate best;
+    for (int k = 0; k < 3; ++k) {
+      const std::uint32_t a = v[k], b = v[(k + 1) % 3];
+      const Vec3 pa = load(P_, a), pb = load(P_, b);
+      const Vec3 targets[3] = {0.5 * (pa + pb), pa, pb};
+      for (int w = 0; w < 3; ++w) consider_collapse(a, b, targets[w], w, best);
+    }
+    consider_flip(t, best);
+    if (!best.valid) return false;
+    if (best.flip) apply_flip(best);
+    else apply_collapse(best);
+    return true;
+  }
+
+  // Writes the surviving triangles and vertices back, compacted; returns the
+  // new counts.
+  std::pair<std::size_t, std::size_t> compact() {
+    std::vector<std::uint32_t> remap(nv_, kNone);
+    std::size_t nt = 0;
+    for (std::size_t t = 0; t < nt_; ++t) {
+      if (!alive_[t]) continue;
+      for (int k = 0; k < 3; ++k) {
+        T_[3 * nt + k] = T_[3 * t + k];
+        remap[T_[3 * t + k]] = 0;
+      }
+      ++nt;
+    }
+    std::size_t nv = 0;
+    for (std::size_t v = 0; v < nv_; ++v) {
+      if (remap[v] == kNone) continue;
+      remap[v] = std::uint32_t(nv);
+      for (int a = 0; a < 3; ++a) {
+        P_[3 * nv + a] = P_[3 * v + a];
+        if (N_) N_[3 * nv + a] = N_[3 * v + a];
+      }
+      ++nv;
+    }
+    for (std::size_t i = 0; i < 3 * nt; ++i) T_[i] = remap[T_[i]];
+    return {nv, nt};
+  }
+
+ private:
+  static constexpr std::uint32_t kNone = 0xffffffffu;
+
+  struct Candidate {
+    bool valid = false, flip = false;
+    double score = -1;
+    std::uint32_t a = 0, b = 0;  // collapse b into a / flip edge (a, b)
+    std::uint32_t t1 = 0, t2 = 0;  // the two triangles removed (collapse) or rewritten (flip)
+    std::uint32_t c = 0, d = 0;    // flip: the opposite vertices
+    Vec3 p;
+    int where = 0;  // 0 midpoint, 1 at a, 2 at b
+  };
+
+  TriangleShape shape(std::uint32_t t) const {
+    const std::uint32_t* v = T_ + 3 * std::size_t(t);
+    return triangle_shape(load(P_, v[0]), load(P_, v[1]), load(P_, v[2]));
+  }
+  int tri_class(std::uint32_t t) const { return triangle_class(shape(t), degenerate_double_area_); }
+
+  // A vertex is regular when each of its edges is used once in each
+  // direction (two triangles, opposite orientations) and its triangles form
+  // one closed fan; the others, and the vertices of triangles that repeat a
+  // vertex, are never touched.
+  void mark_irregular() {
+    irregular_.assign(nv_, 0);
+    std::vector<std::pair<std::uint32_t, std::uint32_t>> in;  // (previous vertex, local index)
+    std::vector<std::uint32_t> out;                           // next vertex, by local index
+    for (std::size_t v = 0; v < nv_; ++v) {
+      const std::uint32_t b = start_[v], e = start_[v + 1];
+      bool ok = e - b >= 3;
+      in.clear();
+      out.clear();
+      for (std::uint32_t i = b; i < e && ok; ++i) {
+        const std::uint32_t* w = T_ + 3 * std::size_t(incident_[i]);
+        const int k = w[0] == v ? 0 : w[1] == v ? 1 : 2;
+        const std::uint32_t nx = w[(k + 1) % 3], pv = w[(k + 2) % 3];
+        if (nx == v || pv == v) ok = false;
+        out.push_back(nx);
+        in.push_back({pv, i - b});
+      }
+      if (ok) {
+        std::sort(in.begin(), in.end());
+        for (std::size_t k = 1; k < in.size() && ok; ++k) ok = in[k].first != in[k - 1].first;
+      }
+      if (ok) {
+        // Walk the fan: from a triangle to the one whose previous vertex is
+        // this one's next; one cycle through all of them.
+        std::uint32_t cur = 0, steps = 0;
+        do {
+          auto it = std::lower_bound(in.begin(), in.end(), std::make_pair(out[cur], 0u));
+          if (it == in.end() || it->first != out[cur]) {
+            ok = false;
+            break;
+          }
+          cur = it->second;
+          ++steps;
+        } while (cur != 0 && steps <= out.size());
+        ok = ok && cur == 0 && steps == out.size();
+      }
+      if (!ok) irregular_[v] = 1;
+    }
+  }
+
+  // Alive triangles around v: in its own lists and those of the vertices
+  // merged into it, that still contain v (flips move triangles away).
+  void fan(std::uint32_t v, std::vector<std::uint32_t>& out) const {
+    out.clear();
+    auto take = [&](std::uint32_t t) {
+      if (alive_[t] && contains(T_ + 3 * std::size_t(t), v)) out.push_back(t);
+    };
+    for (std::uint32_t u = v; u != kNone; u = next_[u]) {
+      for (std::uint32_t i = start_[u]; i < start_[u + 1]; ++i) take(incident_[i]);
+      for (std::uint32_t x = extra_head_.empty() ? kNone : extra_head_[u]; x != kNone; x = extra_[x].second)
+        take(extra_[x].first);
+    }
+    std::sort(out.begin(), out.end());
+    out.erase(std::unique(out.begin(), out.end()), out.end());
+  }
+  // Vertices of the triangles in f other than v, sorted, unique.
+  void ring(std::uint32_t v, const std::vector<std::uint32_t>& f, std::vector<std::uint32_t>& out) const {
+    out.clear();
+    for (std::uint32_t t : f)
+      for (int k = 0; k < 3; ++k)
+        if (T_[3 * std::size_t(t) + k] != v) out.push_back(T_[3 * std::size_t(t) + k]);
+    std::sort(out.begin(), out.end());
+    out.erase(std::unique(out.begin(), out.end()), out.end());
+  }
+  std::size_t degree(std::uint32_t v) {
+    fan(v, scratch_);
+    return scratch_.size();
+  }
+  static bool contains(const std::uint32_t* v, std::uint32_t x) { return v[0] == x || v[1] == x || v[2] == x; }
+
+  void consider_collapse(std::uint32_t a, std::uint32_t b, const Vec3& p, int where, Candidate& best) {
+    fan(a, fa_);
+    fan(b, fb_);
+    std::uint32_t shared[2], n_shared = 0;
+    for (std::uint32_t t : fa_)
+      if (contains(T_ + 3 * std::size_t(t), b)) {
+        if (n_shared == 2) return;
+        shared[n_shared++] = t;
+      }
+    if (n_shared != 2) return;
+    std::uint32_t opposite[2];
+    for (int s = 0; s < 2; ++s) {
+      const std::uint32_t* v = T_ + 3 * std::size_t(shared[s]);
+      opposite[s] = v[0] != a && v[0] != b ? v[0] : v[1] != a && v[1] != b ? v[1] : v[2];
+    }
+    if (opposite[0] == opposite[1]) return;
+    ring(a, fa_, ra_);
+    ring(b, fb_, rb_);
+    // Link condition: a and b share exactly the two opposite vertices.
+    common_.clear();
+    std::set_intersection(ra_.begin(), ra_.end(), rb_.begin(), rb_.end(), std::back_inserter(common_));
+    if (common_.size() != 2) return;
+    if (ra_.size() + rb_.size() < 4 + 3) return;  // the merged vertex keeps three neighbours
+    for (std::uint32_t o : opposite)
+      if (degree(o) < 4) return;
+    // A reference normal for triangles that are bad now (theirs is noise).
+    Vec3 ref;
+    for (const auto* f : {&fa_, &fb_})
+      for (std::uint32_t t : *f) {
+        const std::uint32_t* v = T_ + 3 * std::size_t(t);
+        ref = ref + cross(load(P_, v[1]) - load(P_, v[0]), load(P_, v[2]) - load(P_, v[0]));
+      }
+    double score = 2;
+    for (const auto* f : {&fa_, &fb_})
+      for (std::uint32_t t : *f) {
+        if (t == shared[0] || t == shared[1]) continue;
+        const std::uint32_t* v = T_ + 3 * std::size_t(t);
+        Vec3 q[3], o[3];
+        for (int k = 0; k < 3; ++k) {
+          o[k] = load(P_, v[k]);
+          q[k] = v[k] == a || v[k] == b ? p : o[k];
+        }
+        // Rounded as the output will be.
+        for (int k = 0; k < 3; ++k) q[k] = Vec3{double(float(q[k].x)), double(float(q[k].y)), double(float(q[k].z))};
+        const TriangleShape s_old = triangle_shape(o[0], o[1], o[2]);
+        const TriangleShape s_new = triangle_shape(q[0], q[1], q[2]);
+        const int c_old = triangle_class(s_old, degenerate_double_area_);
+        const int c_new = triangle_class(s_new, degenerate_double_area_);
+        if (c_new == 2 || (c_old == 0 && c_new != 0)) return;
+        const Vec3 n_new = cross(q[1] - q[0], q[2] - q[0]);
+        const Vec3 n_ref = c_old == 0 ? cross(o[1] - o[0], o[2] - o[0]) : ref;
+        if (dot(n_new, n_ref) <= kCosMaxNormalTurn * norm(n_new) * norm(n_ref)) return;
+        score = std::min(score, s_new.sin_min_angle);
+      }
+    if (score <= best.score) return;
+    best.valid = true;
+    best.flip = false;
+    best.score = score;
+    best.a = a;
+    best.b = b;
+    best.t1 = shared[0];
+    best.t2 = shared[1];
+    best.p = p;
+    best.where = where;
+  }
+
+  void consider_flip(std::uint32_t t, Candidate& best) {
+    const std::uint32_t* v = T_ + 3 * std::size_t(t);
+    // The longest edge (a, b), in the triangle's direction; c opposite.
+    int k_long = 0;
+    double l_long = -1;
+    for (int k = 0; k < 3; ++k) {
+      const double l = norm(load(P_, v[(k + 1) % 3]) - load(P_, v[k]));
+      if (l > l_long) l_long = l, k_long = k;
+    }
+    const std::uint32_t a = v[k_long], b = v[(k_long + 1) % 3], c = v[(k_long + 2) % 3];
+    fan(a, fa_);
+    std::uint32_t t2 = kNone;
+    for (std::uint32_t u : fa_) {
+      if (u == t) continue;
+      const std::uint32_t* w = T_ + 3 * std::size_t(u);
+      if (contains(w, b)) {
+        if (t2 != kNone) return;
+        t2 = u;
+      }
+    }
+    if (t2 == kNone) return;
+    const std::uint32_t* w = T_ + 3 * std::size_t(t2);
+    const std::uint32_t d = w[0] != a && w[0] != b ? w[0] : w[1] != a && w[1] != b ? w[1] : w[2];
+    if (d == c || irregular_[d]) return;
+    fan(c, fb_);
+    ring(c, fb_, rb_);
+    if (std::binary_search(rb_.begin(), rb_.end(), d)) return;  // edge c-d exists
+    if (degree(a) < 4 || degree(b) < 4) return;
+    const Vec3 pa = load(P_, a), pb = load(P_, b), pc = load(P_, c), pd = load(P_, d);
+    const Vec3 n_old = cross(pb - pa, pc - pa) + cross(pa - pb, pd - pb);
+    // New triangles (c, a, d) and (c, d, b).
+    const TriangleShape s1 = triangle_shape(pc, pa, pd), s2 = triangle_shape(pc, pd, pb);
+    if (triangle_class(s1, degenerate_double_area_) || triangle_class(s2, degenerate_double_area_)) return;
+    const Vec3 n1 = cross(pa - pc, pd - pc), n2 = cross(pd - pc, pb - pc);
+    for (const Vec3& n : {n1, n2})
+      if (dot(n, n_old) <= kCosMaxNormalTurn * norm(n) * norm(n_old)) return;
+    if (dot(n1, n2) <= kCosMaxNormalTurn * norm(n1) * norm(n2)) return;
+    const double score = std::min(s1.sin_min_angle, s2.sin_min_angle);
+    if (score <= best.score) return;
+    best.valid = true;
+    best.flip = true;
+    best.score = score;
+    best.a = a;
+    best.b = b;
+    best.c = c;
+    best.d = d;
+    best.t1 = t;
+    best.t2 = t2;
+  }
+
+  void apply_collapse(const Candidate& c) {
+    const std::uint32_t a = c.a, b = c.b;
+    fan(b, fb_);
+    alive_[c.t1] = alive_[c.t2] = 0;
+    for (std::uint32_t t : fb_)
+      for (int k = 0; k < 3; ++k)
+        if (T_[3 * std::size_t(t) + k] == b) T_[3 * std::size_t(t) + k] = a;
+    if (N_) {
+      float n[3];
+      for (int x = 0; x < 3; ++x)
+        n[x] = c.where == 0 ? 0.5f * (N_[3 * std::size_t(a) + x] + N_[3 * std::size_t(b) + x])
+               : c.where == 1 ? N_[3 * std::size_t(a) + x]
+                              : N_[3 * std::size_t(b) + x];
+      const double l = std::sqrt(double(n[0]) * n[0] + double(n[1]) * n[1] + double(n[2]) * n[2]);
+      for (int x = 0; x < 3; ++x) N_[3 * std::size_t(a) + x] = l > 0 ? float(n[x] / l) : N_[3 * std::size_t(a) + x];
+    }
+    P_[3 * std::size_t(a)] = float(c.p.x);
+    P_[3 * std::size_t(a) + 1] = float(c.p.y);
+    P_[3 * std::size_t(a) + 2] = float(c.p.z);
+    // b's triangles now belong to a.
+    next_[tail_[a]] = b;
+    tail_[a] = tail_[b];
+    ++collapses;
+  }
+
+  void apply_flip(const Candidate& c) {
+    std::uint32_t* t1 = T_ + 3 * std::size_t(c.t1);
+    std::uint32_t* t2 = T_ + 3 * std::size_t(c.t2);
+    t1[0] = c.c, t1[1] = c.a, t1[2] = c.d;
+    t2[0] = c.c, t2[1] = c.d, t2[2] = c.b;
+    // t1 now touches d and t2 touches c: extra entries in their lists (a
+    // and b keep stale entries, which fan() skips).
+    add_incidence(c.d, c.t1);
+    add_incidence(c.c, c.t2);
+    ++flips;
+  }
+
+  void add_incidence(std::uint32_t v, std::uint32_t t) {
+    if (extra_head_.empty()) extra_head_.assign(nv_, kNone);
+    extra_.push_back({t, extra_head_[v]});
+    extra_head_[v] = std::uint32_t(extra_.size() - 1);
+  }
+
+  float* P_;
+  float* N_;
+  std::size_t nv_;
+  std::uint32_t* T_;
+  std::size_t nt_;
+  std::vector<std::uint8_t> alive_, irregular_;
+  std::vector<std::uint32_t> start_, incident_, next_, tail_;
+  std::vector<std::uint32_t> extra_head_;                       // per vertex, into extra_ (after flips)
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> extra_;  // (triangle, next entry)
+  double degenerate_double_area_ = 0;
+  std::vector<std::uint32_t> fa_, fb_, ra_, rb_, common_, scratch_;
+};
+
+}  // namespace detail
+
+// Cleans the mesh in place: positions and normals (3 floats per vertex;
+// normals may be empty), triangles (3 indices each). Vectors of any
+// allocator; they are shrunk to the new counts.
+template <class FloatVec, class IndexVec>
+CleanupResult cleanup_mesh(FloatVec& positions, FloatVec& normals, IndexVec& triangles) {
+  CleanupResult r;
+  const std::size_t nv = positions.size() / 3, nt = triangles.size() / 3;
+  if (nt == 0) return r;
+  const bool has_normals = !normals.empty() && normals.size() == positions.size();
+  detail::Cleaner c(positions.data(), has_normals ? normals.data() : nullptr, nv, triangles.data(), nt);
+  for (int pass = 0; pass < kCleanupPasses; ++pass) {
+    const auto bad = c.bad_triangles();
+    if (pass == 0) r.bad_before = bad.size();
+    std::uint64_t repaired = 0;
+    for (const auto& b : bad) repaired += c.repair(std::get<2>(b)) ? 1 : 0;
+    if (repaired == 0) break;
+  }
+  r.bad_after = c.bad_triangles().size();
+  r.collapses = c.collapses;
+  r.flips = c.flips;
+  const auto counts = c.compact();
+  positions.resize(3 * counts.first);
+  if (has_normals) normals.resize(3 * counts.first);
+  triangles.resize(3 * counts.second);
+  r.removed_vertices = nv - counts.first;
+  r.removed_triangles = nt - counts.second;
+  return r;
+}
+
+}  // namespace mesh
+}  // namespace nbmc
