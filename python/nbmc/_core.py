@@ -1,0 +1,772 @@
+# SPDX-License-Identifier: MIT
+"""Contexts, meshes, particle files and sequences over the C ABI."""
+
+import ctypes
+import dataclasses
+import inspect
+import os
+import re
+import threading
+import weakref
+from ctypes import byref, c_int32, c_uint64, c_void_p
+from typing import (Any, Callable, Dict, Iterable, Iterator, NamedTuple, Optional, Sequence,
+                    Tuple, Union)
+
+import numpy as np
+
+from . import _arrays as A
+from . import _capi as C
+from ._errors import Cancelled, error_for
+
+lib = C.lib
+
+PathLike = Union[str, os.PathLike]
+#: ``progress(stage, fraction)``: stage name ("upload", "field", ...) and the
+#: fraction of it done; a true return value cancels the reconstruction.
+ProgressFn = Callable[[str, float], Any]
+
+BACKENDS = {"auto": C.BACKEND_AUTO, "serial": C.BACKEND_SERIAL, "openmp": C.BACKEND_OPENMP,
+            "cuda": C.BACKEND_CUDA}
+METHODS = {"ssp07": C.METHOD_SSP07, "zb05": C.METHOD_ZB05}
+FIELDS = {"narrow-band": C.FIELD_NARROW_BAND, "dense": C.FIELD_DENSE, "scatter": C.FIELD_SCATTER}
+UNITS = {"spacing": C.UNIT_SPACING, "absolute": C.UNIT_ABSOLUTE}
+MEMORIES = {"host": C.MEMORY_HOST, "device": C.MEMORY_DEVICE}
+
+
+def _name_of(table: Dict[str, int], value: int) -> str:
+    for k, v in table.items():
+        if v == value:
+            return k
+    return str(value)
+
+
+def _enum(table: Dict[str, int], value: Union[str, int], what: str) -> int:
+    """A name from table (case-insensitive, '_' for '-'), or an int passed
+    through for the library to judge."""
+    if isinstance(value, (int, np.integer)) and not isinstance(value, bool):
+        return int(value)
+    key = str(value).lower().replace("_", "-")
+    if key not in table:
+        raise ValueError(f"unknown {what} {value!r}; choose one of {', '.join(table)}")
+    return table[key]
+
+
+STAGES: Tuple[str, ...] = tuple(C.text(lib.nbmc_stage_name(i)) for i in range(C.STAGE_COUNT))
+
+
+def stage_name(stage: int) -> str:
+    """Name of a pipeline stage (``nbmc_stage_name``)."""
+    return STAGES[stage] if 0 <= stage < len(STAGES) else f"stage {stage}"
+
+
+# ---------------------------------------------------------------- parameters
+# Keyword arguments of reconstruct() that map onto nbmc_params, named like the
+# CLI's options (--cell-size -> cell_size); 'normals' is the inverse of --no-normals.
+_LENGTHS = ("cell_size", "influence_radius", "band_width", "surface_radius", "iso_radius")
+_PARAM_KEYS = _LENGTHS + ("method", "field", "t_low", "t_high", "color_threshold",
+                          "neighbour_threshold", "normals", "length_unit")
+
+
+def defaults() -> Dict[str, Any]:
+    """The library's default parameters (``nbmc_params_init``), by keyword name.
+
+    Lengths are multiples of the spacing (``length_unit="spacing"``).
+    """
+    p = C.Params()
+    lib.nbmc_params_init(byref(p))
+    d: Dict[str, Any] = {k: p.__getattribute__(k) for k in _LENGTHS}
+    d.update(method=_name_of(METHODS, p.method), field=_name_of(FIELDS, p.field), t_low=p.t_low,
+             t_high=p.t_high, color_threshold=p.color_threshold,
+             neighbour_threshold=p.neighbour_threshold, normals=bool(p.compute_normals),
+             length_unit=_name_of(UNITS, p.length_unit))
+    return d
+
+
+def _bbox(bbox: Any) -> Tuple[Sequence[float], Sequence[float]]:
+    b = np.asarray(bbox, dtype=np.float64)
+    if b.shape == (6,):
+        return b[:3], b[3:]
+    if b.shape == (2, 3):
+        return b[0], b[1]
+    raise ValueError("bbox must be (xmin, ymin, zmin, xmax, ymax, zmax) or "
+                     f"((xmin, ymin, zmin), (xmax, ymax, zmax)), not shape {b.shape}")
+
+
+def make_params(spacing: Optional[float] = None, particle_radius: Optional[float] = None,
+                bbox: Any = None, **kw: Any) -> C.Params:
+    """nbmc_params from keyword arguments; None means the library default."""
+    unknown = set(kw) - set(_PARAM_KEYS)
+    if unknown:
+        raise TypeError(f"unknown parameter(s) {', '.join(sorted(unknown))}; "
+                        f"known: spacing, particle_radius, bbox, {', '.join(_PARAM_KEYS)}")
+    if (spacing is None) == (particle_radius is None):
+        raise TypeError("give the particle spacing: spacing=r or particle_radius=r/2 (one of them)")
+    p = C.Params()
+    lib.nbmc_params_init(byref(p))
+    p.spacing = float(spacing) if spacing is not None else 2.0 * float(particle_radius)  # type: ignore[arg-type]
+    for k in _LENGTHS + ("t_low", "t_high", "color_threshold"):
+        if kw.get(k) is not None:
+            setattr(p, k, float(kw[k]))
+    if kw.get("neighbour_threshold") is not None:
+        p.neighbour_threshold = int(kw["neighbour_threshold"])
+    if kw.get("method") is not None:
+        p.method = _enum(METHODS, kw["method"], "method")
+    if kw.get("field") is not None:
+        p.field = _enum(FIELDS, kw["field"], "field")
+    if kw.get("length_unit") is not None:
+        p.length_unit = _enum(UNITS, kw["length_unit"], "length_unit")
+    if kw.get("normals") is not None:
+        p.compute_normals = 1 if kw["normals"] else 0
+    if bbox is not None:
+        lo, hi = _bbox(bbox)
+        p.use_bbox = 1
+        p.bbox_min[:] = [float(v) for v in lo]
+        p.bbox_max[:] = [float(v) for v in hi]
+    return p
+
+
+def parse_bytes(value: Union[int, str, None]) -> int:
+    """A memory budget: bytes as an int, or a string like the CLI's ("4G", "512M", "64k")."""
+    if value is None:
+        return 0
+    if isinstance(value, (int, np.integer)):
+        if value < 0:
+            raise ValueError("memory_budget must be >= 0")
+        return int(value)
+    m = re.fullmatch(r"\s*(\d+(?:\.\d*)?)\s*([kKmMgGtT]?)(?:i?[bB])?\s*", str(value))
+    if not m:
+        raise ValueError(f"memory_budget {value!r} is not a size like 4G, 512M or 1000000")
+    scale = {"": 1, "k": 2**10, "m": 2**20, "g": 2**30, "t": 2**40}[m.group(2).lower()]
+    return int(float(m.group(1)) * scale)
+
+
+# --------------------------------------------------------------------- stats
+@dataclasses.dataclass(frozen=True)
+class Stats:
+    """Figures of one reconstruction (``nbmc_stats``)."""
+
+    particle_count: int
+    surface_particle_count: int
+    occupied_cell_count: int
+    band_vertex_count: int
+    band_block_count: int
+    grid_vertex_count: int
+    triangulated_cell_count: int
+    vertex_count: int
+    triangle_count: int
+    grid_dims: Tuple[int, int, int]
+    peak_memory_bytes: int
+    neighbour_evaluations: int
+    #: wall time per stage in seconds, by stage name, in pipeline order
+    stage_seconds: Dict[str, float]
+    total_seconds: float
+    grid_origin: Tuple[float, float, float]
+    #: absolute marching-cubes cell edge
+    cell_size: float
+
+    @classmethod
+    def _from_c(cls, s: C.Stats) -> "Stats":
+        return cls(
+            particle_count=s.particle_count, surface_particle_count=s.surface_particle_count,
+            occupied_cell_count=s.occupied_cell_count, band_vertex_count=s.band_vertex_count,
+            band_block_count=s.band_block_count, grid_vertex_count=s.grid_vertex_count,
+            triangulated_cell_count=s.triangulated_cell_count, vertex_count=s.vertex_count,
+            triangle_count=s.triangle_count, grid_dims=tuple(s.grid_dims),  # type: ignore[arg-type]
+            peak_memory_bytes=s.peak_memory_bytes, neighbour_evaluations=s.neighbour_evaluations,
+            stage_seconds={STAGES[i]: s.stage_seconds[i] for i in range(C.STAGE_COUNT)},
+            total_seconds=s.total_seconds, grid_origin=tuple(s.grid_origin),  # type: ignore[arg-type]
+            cell_size=s.cell_size)
+
+
+# ---------------------------------------------------------------------- mesh
+class _MeshHandle:
+    """Owns one nbmc_mesh; every array view holds a reference to it."""
+
+    __slots__ = ("ptr", "memory", "device_id", "__weakref__")
+
+    def __init__(self, ptr: int, device_id: int) -> None:
+        self.ptr = ptr
+        self.memory = lib.nbmc_mesh_memory(ptr)
+        self.device_id = device_id
+
+    def __del__(self, _destroy=lib.nbmc_mesh_destroy) -> None:
+        if self.ptr:
+            _destroy(self.ptr)
+            self.ptr = None
+
+    def copy_to_host(self, which: str) -> np.ndarray:
+        n = lib.nbmc_mesh_triangle_count(self.ptr) if which == "triangles" else \
+            lib.nbmc_mesh_vertex_count(self.ptr)
+        out = np.empty((n, 3), dtype=np.uint32 if which == "triangles" else np.float32)
+        ptrs = {"vertices": None, "normals": None, "triangles": None}
+        ptrs[which] = out.ctypes.data
+        status = lib.nbmc_mesh_copy_to_host(self.ptr, ptrs["vertices"], ptrs["normals"],
+                                            ptrs["triangles"])
+        if status:
+            raise error_for(status, "nbmc_mesh_copy_to_host failed")
+        return out
+
+
+class Mesh:
+    """A triangle mesh made by nbmc. Immutable; independent of its context.
+
+    ``vertices`` (V, 3) float32, ``normals`` (V, 3) float32 or None, and
+    ``triangles`` (T, 3) uint32 (counter-clockwise seen from outside the
+    fluid) are read-only numpy views of nbmc's memory, without a copy, that
+    stay valid as long as any of them (or the mesh) is referenced. A mesh left
+    on the GPU (``mesh_memory="device"``) gives :class:`DeviceArray` objects
+    instead, which expose ``__cuda_array_interface__`` and ``__dlpack__``.
+    """
+
+    def __init__(self, handle: _MeshHandle, stats: Optional[Stats]) -> None:
+        self._h = handle
+        self._cache: Dict[str, Any] = {}
+        #: figures of the reconstruction that made this mesh (counts, grid, timings)
+        self.stats = stats
+
+    @property
+    def vertex_count(self) -> int:
+        return int(lib.nbmc_mesh_vertex_count(self._h.ptr))
+
+    @property
+    def triangle_count(self) -> int:
+        return int(lib.nbmc_mesh_triangle_count(self._h.ptr))
+
+    @property
+    def memory(self) -> str:
+        """"host" or "device" (CUDA memory of the context's GPU)."""
+        return _name_of(MEMORIES, self._h.memory)
+
+    @property
+    def has_normals(self) -> bool:
+        """False without normals (``normals=False``) and for an empty mesh."""
+        return bool(lib.nbmc_mesh_normals(self._h.ptr))
+
+    def _array(self, which: str, getter: Callable[[int], Optional[int]], rows: int, dtype: Any):
+        if which not in self._cache:
+            ptr = getter(self._h.ptr)
+            if which == "normals" and not ptr and rows:
+                self._cache[which] = None
+            elif self._h.memory == C.MEMORY_DEVICE:
+                self._cache[which] = A.DeviceArray(ptr or 0, (rows, 3), dtype, self._h.device_id,
+                                                   self._h, which)
+            else:
+                self._cache[which] = A.host_view(ptr or 0, (rows, 3), dtype, self._h)
+        return self._cache[which]
+
+    @property
+    def vertices(self) -> Union[np.ndarray, A.DeviceArray]:
+        """(V, 3) float32 vertex positions (a view, no copy)."""
+        return self._array("vertices", lib.nbmc_mesh_positions, self.vertex_count, np.float32)
+
+    @property
+    def normals(self) -> Union[np.ndarray, A.DeviceArray, None]:
+        """(V, 3) float32 unit normals pointing out of the fluid, or None when
+        the mesh was made with ``normals=False``."""
+        return self._array("normals", lib.nbmc_mesh_normals, self.vertex_count, np.float32)
+
+    @property
+    def triangles(self) -> Union[np.ndarray, A.DeviceArray]:
+        """(T, 3) uint32 vertex indices per triangle (a view, no copy)."""
+        return self._array("triangles", lib.nbmc_mesh_triangles, self.triangle_count, np.uint32)
+
+    @property
+    def attributes(self) -> Dict[str, np.ndarray]:
+        """Interpolated particle attributes: always empty, because the C ABI
+        (0.1) has no call that passes attributes (see docs/python.md)."""
+        return {}
+
+    @property
+    def timings(self) -> Dict[str, float]:
+        """Seconds per pipeline stage, plus "total" (from :attr:`stats`)."""
+        if self.stats is None:
+            return {}
+        return {**self.stats.stage_seconds, "total": self.stats.total_seconds}
+
+    def to_host(self) -> Tuple[np.ndarray, Optional[np.ndarray], np.ndarray]:
+        """Copies (vertices, normals, triangles) into new numpy arrays, from
+        host or device memory (``nbmc_mesh_copy_to_host``)."""
+        v = self._h.copy_to_host("vertices")
+        n = self._h.copy_to_host("normals") if lib.nbmc_mesh_normals(self._h.ptr) else None
+        t = self._h.copy_to_host("triangles")
+        return v, n, t
+
+    def write(self, path: PathLike, format: Optional[str] = None) -> None:
+        """Writes the mesh with nbmc's writers: "ply" (binary), "obj", "vtk"
+        (legacy), "vtu" or "glb"; by default from the extension. The file
+        appears complete or not at all (written under a temporary name)."""
+        fmt = format.encode() if format else None
+        status = lib.nbmc_mesh_write(self._h.ptr, os.fsencode(path), fmt)
+        if status:
+            raise error_for(status, C.text(lib.nbmc_last_error()))
+
+    def __repr__(self) -> str:
+        return (f"<nbmc.Mesh {self.vertex_count} vertices, {self.triangle_count} triangles, "
+                f"{'normals, ' if self.has_normals else ''}{self.memory}>")
+
+
+# ------------------------------------------------------------------- context
+def _interruptible(call: Callable[[], int], on_interrupt: Callable[[], None]) -> int:
+    """Runs call() (a blocking foreign call; ctypes releases the GIL) so that
+    Ctrl-C reaches it: on the main thread it runs in a helper thread while the
+    main thread waits where Python can raise KeyboardInterrupt; then
+    on_interrupt() asks the library to stop, the call is awaited and the
+    exception re-raised. Elsewhere (no signals there) it runs directly."""
+    if threading.current_thread() is not threading.main_thread():
+        return call()
+    result: Dict[str, Any] = {}
+    done = threading.Event()
+
+    def worker() -> None:
+        try:
+            result["status"] = call()
+        except BaseException as e:  # noqa: BLE001 - handed to the waiting thread
+            result["error"] = e
+        finally:
+            done.set()
+
+    threading.Thread(target=worker, name="nbmc-call", daemon=True).start()
+    try:
+        while not done.wait(0.5):
+            pass
+    except BaseException:
+        on_interrupt()
+        while True:  # the library stops at its next progress report
+            try:
+                done.wait()
+                break
+            except BaseException:  # noqa: BLE001 - a second Ctrl-C while stopping
+                continue
+        raise
+    if "error" in result:
+        raise result["error"]
+    return result["status"]
+
+
+class Context:
+    """A reconstruction context: a backend, uploaded particles, reusable
+    buffers. Use one per sequence of frames so that buffers are reused.
+
+    ``backend``: "auto" (CUDA if available, else OpenMP, else serial),
+    "serial", "openmp" or "cuda". ``threads``: host threads (None: all cores).
+    ``progress``: a callable ``progress(stage, fraction)``; a true return value
+    cancels (:class:`nbmc.Cancelled`). ``mesh_memory="device"`` leaves meshes
+    on the GPU (CUDA backend). ``memory_budget``: cap on nbmc's memory (bytes or
+    "4G"). Ctrl-C during :meth:`reconstruct` cancels it cleanly and raises
+    KeyboardInterrupt; the context stays usable.
+
+    A context is not for concurrent use from several threads (calls are
+    serialised by a lock); contexts on different threads are independent.
+    """
+
+    def __init__(self, backend: Union[str, int] = "auto", *, threads: Optional[int] = None,
+                 device_id: int = 0, progress: Optional[ProgressFn] = None,
+                 memory_budget: Union[int, str, None] = None, mesh_memory: str = "host") -> None:
+        desc = C.ContextDesc()
+        lib.nbmc_context_desc_init(byref(desc))
+        desc.backend = _enum(BACKENDS, backend, "backend")
+        desc.num_threads = 0 if threads is None else int(threads)
+        desc.device_id = int(device_id)
+        h = c_void_p()
+        status = lib.nbmc_context_create(byref(desc), byref(h))
+        if status:
+            raise error_for(status, C.text(lib.nbmc_context_last_error(None)))
+        self._ptr: Optional[int] = h.value
+        self._device_id = int(device_id)
+        self._finalizer = weakref.finalize(self, lib.nbmc_context_destroy, h.value)
+        self._lock = threading.Lock()
+        self._stop = threading.Event()
+        self._callback_error: Optional[BaseException] = None
+        self.progress: Optional[ProgressFn] = progress
+        self._count = 0
+        # One trampoline for the context's life; it holds only a weak reference.
+        me = weakref.ref(self)
+
+        def trampoline(_user: Any, stage: int, fraction: float) -> int:
+            ctx = me()
+            if ctx is None or ctx._stop.is_set():
+                return 1
+            fn = ctx.progress
+            if fn is None:
+                return 0
+            try:
+                return 1 if fn(stage_name(stage), fraction) else 0
+            except BaseException as e:  # noqa: BLE001 - must not unwind through C
+                ctx._callback_error = e
+                ctx._stop.set()
+                return 1
+
+        self._trampoline = C.PROGRESS_FN(trampoline)
+        self._check(lib.nbmc_context_set_progress(self._ptr, self._trampoline, None))
+        if memory_budget is not None:
+            self.memory_budget = memory_budget
+        if mesh_memory != "host":
+            self.mesh_memory = mesh_memory
+
+    # -- plumbing
+    @property
+    def _handle(self) -> int:
+        if not self._ptr:
+            raise ValueError("the nbmc.Context is closed")
+        return self._ptr
+
+    def _check(self, status: int) -> None:
+        if status:
+            raise error_for(status, C.text(lib.nbmc_context_last_error(self._ptr)))
+
+    def close(self) -> None:
+        """Frees the context and its buffers now (meshes stay valid)."""
+        with self._lock:
+            self._finalizer()
+            self._ptr = None
+
+    def __enter__(self) -> "Context":
+        return self
+
+    def __exit__(self, *exc: Any) -> None:
+        self.close()
+
+    # -- properties
+    @property
+    def backend(self) -> str:
+        """The backend really used ("serial", "openmp" or "cuda")."""
+        b = c_int32()
+        self._check(lib.nbmc_context_backend(self._handle, byref(b)))
+        return _name_of(BACKENDS, b.value)
+
+    @property
+    def device_id(self) -> int:
+        return self._device_id
+
+    @property
+    def particle_count(self) -> int:
+        """Particles uploaded by the last successful upload (0 if none)."""
+        return self._count
+
+    _budget = 0
+
+    @property
+    def memory_budget(self) -> int:
+        """Cap on nbmc's memory in bytes (0: none). Set an int or "4G"."""
+        return self._budget
+
+    @memory_budget.setter
+    def memory_budget(self, value: Union[int, str, None]) -> None:
+        n = parse_bytes(value)
+        with self._lock:
+            self._check(lib.nbmc_context_set_memory_budget(self._handle, n))
+        self._budget = n
+
+    _mesh_memory = "host"
+
+    @property
+    def mesh_memory(self) -> str:
+        """Where meshes go: "host" or "device" (CUDA only)."""
+        return self._mesh_memory
+
+    @mesh_memory.setter
+    def mesh_memory(self, value: Union[str, int]) -> None:
+        m = _enum(MEMORIES, value, "mesh_memory")
+        with self._lock:
+            self._check(lib.nbmc_context_set_mesh_memory(self._handle, m))
+        self._mesh_memory = _name_of(MEMORIES, m)
+
+    # -- particles
+    def set_particles(self, points: Any) -> int:
+        """Uploads (copies) particle positions and returns their count.
+
+        ``points``: an (N, 3) array-like of float32 or float64 (other numeric
+        types are converted to float64 once). Any row stride is read in place
+        (structured arrays, every other row, the transpose of a Fortran
+        ``pos(3, n)``); Fortran-ordered (N, 3) arrays, negative strides and
+        non-native byte order are copied first. Arrays exposing
+        ``__cuda_array_interface__`` or CUDA DLPack go to the device upload
+        (CUDA backend) without a host copy.
+        """
+        with self._lock:
+            return self._set_particles(points)
+
+    def _set_particles(self, points: Any) -> int:
+        self._count = 0
+        if A.is_device_array(points):
+            d = A.device_points(points)
+            try:
+                A.synchronize(d.stream)
+                fn = (lib.nbmc_context_set_particles_device_f64 if d.double
+                      else lib.nbmc_context_set_particles_device_f32)
+                self._check(fn(self._handle, d.pointer, d.count, d.byte_stride))
+            finally:
+                if d.release is not None:
+                    d.release()
+            self._count = d.count
+            return d.count
+        h = A.host_points(points)
+        fn = lib.nbmc_context_set_particles_f64 if h.double else lib.nbmc_context_set_particles_f32
+        self._check(fn(self._handle, h.pointer, h.count, h.byte_stride))
+        self._count = h.count  # h.keep held the array through the call
+        return h.count
+
+    def load_particles(self, path: PathLike, format: Optional[str] = None) -> int:
+        """Reads a particle file with nbmc's readers (xyz, ply, vtk, vtu, vtp,
+        bgeo, h5part, pysph, gadget/swift, hdf5; ``"run.h5:/PartType1"`` names
+        an HDF5 object) and uploads its positions; returns the count.
+        Multi-step H5Part files give their first step."""
+        with self._lock:
+            return self._load(path, format)
+
+    def _load(self, path: PathLike, format: Optional[str]) -> int:
+        self._count = 0
+        n = c_uint64()
+        fmt = format.encode() if format else None
+        self._check(lib.nbmc_context_load_particles(self._handle, os.fsencode(path), fmt, byref(n)))
+        self._count = n.value
+        return n.value
+
+    # -- reconstruction
+    def reconstruct(self, points: Any = None, spacing: Optional[float] = None, *,
+                    particle_radius: Optional[float] = None, bbox: Any = None,
+                    format: Optional[str] = None, attributes: Optional[Sequence[str]] = None,
+                    **params: Any) -> Mesh:
+        """Reconstructs the surface; see :func:`nbmc.reconstruct` for the
+        parameters. ``points``: an array (uploaded first), a path (read with
+        :meth:`load_particles`, ``format`` as there), a :class:`Particles`
+        (its file is read), or None to reuse the particles uploaded last."""
+        if attributes:
+            raise NotImplementedError(
+                "attributes: the nbmc C ABI 0.1 cannot pass particle attributes or return "
+                "interpolated ones; use the CLI's --attributes (see docs/python.md)")
+        p = make_params(spacing, particle_radius, bbox, **params)
+        with self._lock:
+            if isinstance(points, Particles):
+                self._load(points.path, points.format)
+            elif isinstance(points, (str, os.PathLike)):
+                self._load(points, format)
+            elif points is not None:
+                self._set_particles(points)
+            return self._reconstruct(p)
+
+    def _reconstruct(self, p: C.Params) -> Mesh:
+        handle = self._handle
+        out = c_void_p()
+        self._stop.clear()
+        self._callback_error = None
+
+        def call() -> int:
+            return lib.nbmc_context_reconstruct(handle, byref(p), byref(out))
+
+        try:
+            status = _interruptible(call, self._stop.set)
+        except BaseException:
+            if out.value:  # finished before it saw the request to stop
+                lib.nbmc_mesh_destroy(out.value)
+            raise
+        if status == C.OK:
+            mesh = Mesh(_MeshHandle(out.value, self._device_id), self._stats())
+        if self._callback_error is not None:
+            error, self._callback_error = self._callback_error, None
+            raise error  # the progress callback's own exception (the mesh is dropped)
+        if status == C.ERROR_CANCELLED:
+            raise Cancelled(status, C.text(lib.nbmc_context_last_error(handle)) or
+                            "the progress callback cancelled the reconstruction")
+        self._check(status)
+        return mesh
+
+    def _stats(self) -> Optional[Stats]:
+        s = C.Stats()
+        lib.nbmc_stats_init(byref(s))
+        if lib.nbmc_context_stats(self._ptr, byref(s)):
+            return None
+        return Stats._from_c(s)
+
+    @property
+    def stats(self) -> Stats:
+        """Figures of the last successful reconstruction on this context."""
+        s = C.Stats()
+        lib.nbmc_stats_init(byref(s))
+        with self._lock:
+            self._check(lib.nbmc_context_stats(self._handle, byref(s)))
+        return Stats._from_c(s)
+
+    def reconstruct_frames(self, pattern: PathLike, spacing: Optional[float] = None, *,
+                           numbers: Optional[Iterable[int]] = None,
+                           format: Optional[str] = None,
+                           **params: Any) -> Iterator[Tuple["Frame", Mesh]]:
+        """Yields ``(frame, mesh)`` for every file of a ``{}`` pattern (see
+        :func:`frames`), reusing this context's buffers."""
+        for frame in frames(pattern, numbers):
+            yield frame, self.reconstruct(frame.path, spacing, format=format, **params)
+
+    def __repr__(self) -> str:
+        state = "closed" if not self._ptr else self.backend
+        return f"<nbmc.Context {state}>"
+
+
+# ------------------------------------------------------------ particle files
+class Particles:
+    """Particles read from a file by nbmc's readers (:func:`read_particles`).
+
+    The C ABI has no call that hands positions back to the caller, so this is
+    a handle, not an array: ``count``, ``path``, ``format`` and
+    :meth:`reconstruct`, which runs on the context that holds the particles
+    (no second read). ``context`` is that :class:`Context`.
+    """
+
+    def __init__(self, path: PathLike, format: Optional[str], context: Context, count: int) -> None:
+        self.path = os.fspath(path)
+        self.format = format
+        self.context = context
+        self.count = count
+
+    def reconstruct(self, spacing: Optional[float] = None, **params: Any) -> Mesh:
+        """Reconstructs these particles; parameters as :func:`nbmc.reconstruct`."""
+        with self.context._lock:
+            if self.context.particle_count != self.count:  # replaced meanwhile
+                self.context._load(self.path, self.format)
+        return self.context.reconstruct(None, spacing, **params)
+
+    def __len__(self) -> int:
+        return self.count
+
+    def __repr__(self) -> str:
+        return f"<nbmc.Particles {self.count} particles from {self.path!r}>"
+
+
+def read_particles(path: PathLike, format: Optional[str] = None, *,
+                   backend: Union[str, int] = "auto", threads: Optional[int] = None,
+                   attributes: Optional[Sequence[str]] = None) -> Particles:
+    """Reads a particle file with nbmc's own readers and validates it.
+
+    Formats: xyz, ply, vtk, vtu, vtp, bgeo, h5part, pysph, gadget (swift),
+    hdf5, from the extension unless ``format`` is given; an HDF5 object is
+    named after the file (``"run.h5:/PartType1"``). Multi-step H5Part files
+    give their first step. Returns a :class:`Particles` handle (the C ABI 0.1
+    cannot return positions or attributes to Python; see docs/python.md).
+    Raises :class:`nbmc.FileError`, :class:`nbmc.FormatError`,
+    :class:`nbmc.InvalidParticles` or :class:`nbmc.NoParticles`.
+    """
+    if attributes:
+        raise NotImplementedError("attributes: the nbmc C ABI 0.1 cannot return particle "
+                                  "attributes (see docs/python.md)")
+    ctx = Context(backend, threads=threads)
+    count = ctx.load_particles(path, format)
+    return Particles(path, format, ctx, count)
+
+
+# ----------------------------------------------------------------- sequences
+class Frame(NamedTuple):
+    """One file of a sequence: its number, the digits as in the name
+    (zero padding kept, for output names) and its path."""
+
+    number: int
+    label: str
+    path: str
+
+    def output(self, pattern: PathLike) -> str:
+        """pattern with ``{}`` replaced by this frame's digits."""
+        return os.fspath(pattern).replace("{}", self.label)
+
+
+def frames(pattern: PathLike, numbers: Optional[Iterable[int]] = None) -> Iterator[Frame]:
+    """The files matching ``pattern`` with digits in place of ``{}``, in
+    numeric order (``f_2`` before ``f_10``), like the CLI's sequences.
+
+    ``{}`` must appear once, in the file-name part. ``numbers`` (e.g.
+    ``range(0, 100, 5)``) keeps only those frame numbers. Raises
+    FileNotFoundError if the folder does not exist.
+    """
+    pattern = os.fspath(pattern)
+    folder, name = os.path.split(pattern)
+    if pattern.count("{}") != 1:
+        raise ValueError(f"the pattern {pattern!r} must contain {{}} exactly once")
+    if "{}" not in name:
+        raise ValueError("{} must be in the file name of the pattern, not in a folder name")
+    prefix, suffix = name.split("{}")
+    rx = re.compile(re.escape(prefix) + r"(\d+)" + re.escape(suffix))
+    keep = None if numbers is None else set(int(n) for n in numbers)
+    found = []
+    with os.scandir(folder or ".") as it:
+        for entry in it:
+            m = rx.fullmatch(entry.name)
+            if m and (keep is None or int(m.group(1)) in keep):
+                found.append(Frame(int(m.group(1)), m.group(1), os.path.join(folder, entry.name)))
+    found.sort(key=lambda f: (f.number, f.label))
+    return iter(found)
+
+
+# ----------------------------------------------------------- one-call helper
+def reconstruct(points: Any, spacing: Optional[float] = None, *,
+                particle_radius: Optional[float] = None,
+                cell_size: Optional[float] = None, influence_radius: Optional[float] = None,
+                band_width: Optional[float] = None, surface_radius: Optional[float] = None,
+                iso_radius: Optional[float] = None, method: Optional[str] = None,
+                field: Optional[str] = None, t_low: Optional[float] = None,
+                t_high: Optional[float] = None, color_threshold: Optional[float] = None,
+                neighbour_threshold: Optional[int] = None, normals: Optional[bool] = None,
+                length_unit: Optional[str] = None, bbox: Any = None,
+                backend: Union[str, int] = "auto", threads: Optional[int] = None,
+                device_id: int = 0, memory_budget: Union[int, str, None] = None,
+                mesh_memory: str = "host", progress: Optional[ProgressFn] = None,
+                format: Optional[str] = None,
+                attributes: Optional[Sequence[str]] = None) -> Mesh:
+    """Reconstructs the surface of particles as a triangle mesh.
+
+    points
+        (N, 3) float32 or float64 array-like (any strides; read in place when
+        the layout allows), a CUDA array (``__cuda_array_interface__`` or
+        DLPack; CUDA backend), a particle file path (``format`` overrides its
+        extension), or a :class:`Particles`.
+    spacing / particle_radius
+        The particle spacing r (absolute), or the particle radius of
+        SPlisHSPlasH/splashsurf (r/2). One of them is required.
+    cell_size, influence_radius, band_width, surface_radius, iso_radius
+        Lengths in multiples of the spacing (``length_unit="absolute"``: in the
+        units of the positions); defaults {cell_size}, {influence_radius},
+        {band_width}, {surface_radius}, {iso_radius}.
+    method
+        "ssp07" (Solenthaler et al. 2007) or "zb05" (Zhu & Bridson 2005);
+        default {method!r}.
+    field
+        "narrow-band", or the baselines "dense" and "scatter"; default {field!r}.
+    t_low, t_high, color_threshold, neighbour_threshold
+        Surface-particle test; defaults {t_low}, {t_high}, {color_threshold},
+        {neighbour_threshold}.
+    normals
+        Compute vertex normals (default {normals}).
+    bbox
+        Only reconstruct near this box (absolute): (xmin, ymin, zmin, xmax,
+        ymax, zmax) or ((xmin, ymin, zmin), (xmax, ymax, zmax)).
+    backend, threads, device_id, memory_budget, mesh_memory, progress
+        As for :class:`Context`.
+    attributes
+        Not available through the C ABI 0.1 (raises NotImplementedError).
+
+    The defaults above are read from the loaded library (``nbmc_params_init``)
+    and are what ``None`` means. Names follow the CLI's options
+    (``--cell-size`` is ``cell_size``). Raises :class:`nbmc.Error` subclasses
+    with the library's message; Ctrl-C cancels and raises KeyboardInterrupt.
+    For a sequence of frames, use one :class:`Context` to reuse its buffers.
+    """
+    with Context(backend, threads=threads, device_id=device_id, progress=progress,
+                 memory_budget=memory_budget, mesh_memory=mesh_memory) as ctx:
+        return ctx.reconstruct(points, spacing, particle_radius=particle_radius, bbox=bbox,
+                               format=format, attributes=attributes, cell_size=cell_size,
+                               influence_radius=influence_radius, band_width=band_width,
+                               surface_radius=surface_radius, iso_radius=iso_radius,
+                               method=method, field=field, t_low=t_low, t_high=t_high,
+                               color_threshold=color_threshold,
+                               neighbour_threshold=neighbour_threshold, normals=normals,
+                               length_unit=length_unit)
+
+
+def _show_library_defaults(fn: Callable[..., Any]) -> None:
+    """Puts the library's defaults into fn's docstring and signature, so that
+    help() shows the real numbers without this file repeating them."""
+    d = defaults()
+    fn.__doc__ = (fn.__doc__ or "").format(**d)
+    sig = inspect.signature(fn)
+    fn.__signature__ = sig.replace(parameters=[  # type: ignore[attr-defined]
+        p.replace(default=d[p.name]) if p.name in d and p.default is None else p
+        for p in sig.parameters.values()])
+
+
+_show_library_defaults(reconstruct)
