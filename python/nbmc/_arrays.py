@@ -250,8 +250,10 @@ def cudart() -> Optional[ctypes.CDLL]:
     if _cudart is None:
         _cudart = False
         import ctypes.util
-        names = [ctypes.util.find_library("cudart"), "libcudart.so", "libcudart.so.13",
-                 "libcudart.so.12", "libcudart.so.11.0"]
+        import os
+        names = [os.environ.get("NBMC_CUDART"), ctypes.util.find_library("cudart"),
+                 "libcudart.so", "libcudart.so.13", "libcudart.so.12", "libcudart.so.11.0",
+                 "/usr/local/cuda/lib64/libcudart.so"]
         for name in names:
             if not name:
                 continue
