@@ -6,8 +6,9 @@ where the C library is installed, so that `import nbmc` finds it without
 environment variables:
 
   NBMC_PREFIX   install prefix of the C library (PREFIX/include/nbmc.h,
-                PREFIX/lib/libnbmc.so); default: the header of this source
-                tree (../include/nbmc.h) and no recorded library folder.
+                PREFIX/lib/libnbmc.so); default: <repo>/build/install if it
+                holds the library (scripts/setup.sh puts it there), else
+                no recorded folder and the header of this source tree.
   NBMC_HEADER   the nbmc.h to read the version from (overrides the above).
 
 When the prefix holds the library, its nbmc_version() must equal the
@@ -22,7 +23,15 @@ from setuptools import setup
 from setuptools.command.build_py import build_py
 
 HERE = Path(__file__).resolve().parent
-PREFIX = os.environ.get("NBMC_PREFIX")
+
+
+def default_prefix():
+    """<repo>/build/install when scripts/setup.sh has put the library there."""
+    prefix = HERE.parent / "build" / "install"
+    return str(prefix) if any((prefix / "lib").glob("libnbmc.so*")) else None
+
+
+PREFIX = os.environ.get("NBMC_PREFIX") or default_prefix()
 
 
 def header_path() -> Path:
