@@ -13,7 +13,6 @@
 
 # %%
 import argparse
-import os
 import tempfile
 from pathlib import Path
 

@@ -11,7 +11,7 @@ import ctypes
 import ctypes.util
 import os
 import sys
-from ctypes import (CFUNCTYPE, POINTER, Structure, c_char_p, c_double, c_float, c_int32,
+from ctypes import (CFUNCTYPE, POINTER, Structure, c_char_p, c_double, c_int32,
                     c_uint32, c_uint64, c_void_p)
 from pathlib import Path
 from typing import List, Optional

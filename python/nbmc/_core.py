@@ -1,7 +1,6 @@
 # SPDX-License-Identifier: MIT
 """Contexts, meshes, particle files and sequences over the C ABI."""
 
-import ctypes
 import dataclasses
 import inspect
 import os
