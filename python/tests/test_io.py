@@ -159,6 +159,20 @@ def write_vtk_xml(path, p, kind):
         f"</Points></Piece></{kind}></VTKFile>\n")
 
 
+def write_bgeo(path, p, gz=False):
+    """Houdini classic geometry, version 5 (big-endian), with a vector attribute 'v'."""
+    import gzip
+    n = len(p)
+    head = b"BgeoV" + struct.pack(">9i", 5, n, 0, 0, 0, 1, 0, 0, 0)
+    attr = struct.pack(">H", 1) + b"v" + struct.pack(">Hi3f", 3, 5, 0, 0, 0)
+    rec = np.zeros((n, 7), ">f4")
+    rec[:, :3] = p
+    rec[:, 3] = 1.0  # w
+    rec[:, 4:] = 0.5  # v
+    data = head + attr + rec.tobytes()
+    path.write_bytes(gzip.compress(data) if gz else data)
+
+
 def h5py_or_skip():
     return pytest.importorskip("h5py")
 
@@ -207,6 +221,9 @@ READERS = {
     "vtk legacy ascii": ("p.vtk", write_vtk, None, ""),
     "vtu ascii": ("p.vtu", lambda path, p: write_vtk_xml(path, p, "UnstructuredGrid"), None, ""),
     "vtp ascii": ("p.vtp", lambda path, p: write_vtk_xml(path, p, "PolyData"), None, ""),
+    "bgeo": ("p.bgeo", write_bgeo, None, ""),
+    "bgeo gzip": ("p.bgeo.gz", lambda path, p: write_bgeo(path, p, gz=True), None, ""),
+    "bgeo gzip without .gz": ("p.bgeo", lambda path, p: write_bgeo(path, p, gz=True), None, ""),
     "xyz under another name": ("p.bin", lambda path, p: p.astype("<f4").tofile(path), "xyz", ""),
     "h5part (first step)": ("p.h5part", write_h5part, None, ""),
     "h5part detected in .h5": ("p.h5", write_h5part, None, ""),
