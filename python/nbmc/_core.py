@@ -304,6 +304,19 @@ class Mesh:
                 f"{'normals, ' if self.has_normals else ''}{self.memory}>")
 
 
+class Frame(NamedTuple):
+    """One file of a sequence: its number, the digits as in the name
+    (zero padding kept, for output names) and its path."""
+
+    number: int
+    label: str
+    path: str
+
+    def output(self, pattern: PathLike) -> str:
+        """pattern with ``{}`` replaced by this frame's digits."""
+        return os.fspath(pattern).replace("{}", self.label)
+
+
 # ------------------------------------------------------------------- context
 def _interruptible(call: Callable[[], int], on_interrupt: Callable[[], None]) -> int:
     """Runs call() (a blocking foreign call; ctypes releases the GIL) so that
@@ -589,7 +602,7 @@ class Context:
     def reconstruct_frames(self, pattern: PathLike, spacing: Optional[float] = None, *,
                            numbers: Optional[Iterable[int]] = None,
                            format: Optional[str] = None,
-                           **params: Any) -> Iterator[Tuple["Frame", Mesh]]:
+                           **params: Any) -> Iterator[Tuple[Frame, Mesh]]:
         """Yields ``(frame, mesh)`` for every file of a ``{}`` pattern (see
         :func:`frames`), reusing this context's buffers."""
         for frame in frames(pattern, numbers):
@@ -652,19 +665,6 @@ def read_particles(path: PathLike, format: Optional[str] = None, *,
 
 
 # ----------------------------------------------------------------- sequences
-class Frame(NamedTuple):
-    """One file of a sequence: its number, the digits as in the name
-    (zero padding kept, for output names) and its path."""
-
-    number: int
-    label: str
-    path: str
-
-    def output(self, pattern: PathLike) -> str:
-        """pattern with ``{}`` replaced by this frame's digits."""
-        return os.fspath(pattern).replace("{}", self.label)
-
-
 def frames(pattern: PathLike, numbers: Optional[Iterable[int]] = None) -> Iterator[Frame]:
     """The files matching ``pattern`` with digits in place of ``{}``, in
     numeric order (``f_2`` before ``f_10``), like the CLI's sequences.
