@@ -115,3 +115,25 @@ def test_ctrl_c_cancels_cleanly(tmp_path):
     expected = nbmc.reconstruct(np.fromfile(DATA, "<f4").reshape(-1, 3), particle_radius=RADIUS,
                                 threads=1).triangle_count
     assert lines[1] == f"again {expected}"
+
+
+def test_gil_is_released_while_nbmc_works(frame):
+    """Python keeps running on another thread during a reconstruction."""
+    import time
+    inside = []
+
+    def progress(stage, f):
+        inside.append((stage, f, time.perf_counter()))
+
+    t = threading.Thread(target=lambda: nbmc.reconstruct(frame, particle_radius=RADIUS, threads=1,
+                                                         progress=progress))
+    ticks = []
+    t.start()
+    while t.is_alive():
+        ticks.append(time.perf_counter())
+        time.sleep(0.0005)
+    t.join()
+    start = next(ts for s, f, ts in inside if s == "field")
+    end = next(ts for s, f, ts in inside if s == "triangulation")
+    during = [x for x in ticks if start < x < end]
+    assert end - start > 0.01 and len(during) >= 5, (end - start, len(during))
