@@ -6,18 +6,29 @@
 // Marching cubes makes slivers where the surface passes close to a grid
 // vertex: the mesh vertices on the grid edges around that grid vertex nearly
 // coincide (short edges, "needles"), or one lies almost on the segment of two
-// others ("caps"). Each bad triangle is repaired by the best of
-//  - collapsing one of its edges (to the midpoint or to either end), allowed
-//    only when the link condition holds (the two ends share no neighbour but
-//    the two opposite vertices), the opposite vertices keep at least three
-//    neighbours, and every triangle that moves keeps its facing (its normal
-//    turns by less than kMaxNormalTurn) and, if it was good, stays good;
-//  - flipping its longest edge (caps), allowed when the new edge does not
-//    exist yet and both new triangles are good and face the same way as the
-//    two old ones;
-// "best" being the largest smallest angle among the triangles it changes.
-// Vertices on a boundary, non-manifold or misoriented edge are left alone,
-// so an open or broken input is never made worse.
+// others ("caps"). Each bad triangle is repaired by the first kind of these
+// that works, the best of its kind ("best": the largest smallest angle among
+// the triangles it changes):
+//  1. without losing a triangle:
+//     - moving one of its vertices toward the centroid of its neighbours,
+//       within its tangent plane (a quarter, half or all the way: the
+//       shortest move that works);
+//     - flipping its longest edge (caps), when the new edge does not exist
+//       yet and both new triangles are good;
+//  2. widening a needle whose short edge cannot be collapsed (the surface is
+//     a thin tube there): the cluster of nearly coincident vertices is scaled
+//     about its centre until the needle's angle is 2 (or 4) degrees, a move
+//     of about 1e-4 cell;
+//  3. collapsing one of its edges (to the midpoint or to either end), when
+//     the link condition holds (the two ends share no neighbour but the two
+//     opposite vertices) and the opposite vertices keep three neighbours.
+// Every repair must make the bad triangle good (or remove it), keep every
+// good triangle good, create no degenerate triangle, and turn no triangle's
+// normal by 60 degrees or more (a second round allows 90 degrees for what is
+// left; a fold, beyond 90, never). Vertices on a boundary, non-manifold or
+// misoriented edge are left alone, so an open or broken input is never made
+// worse. Orientation is kept by construction (collapses rename a vertex,
+// flips keep the quad's boundary direction).
 //
 // Serial and in a fixed order (worst triangle first, then by index), so the
 // result depends only on the input mesh: the same on every backend and
@@ -37,14 +48,16 @@
 namespace nbmc {
 namespace mesh {
 
-// Largest turn of a triangle's normal that a collapse or flip may cause.
+// Largest turn of a triangle's normal that a repair may cause.
 constexpr double kCosMaxNormalTurn = 0.5;  // 60 degrees
+// ... for the triangles still bad after that.
+constexpr double kCosMaxNormalTurnLast = 0.0;  // 90 degrees
 // Passes over the bad triangles (each pass repairs what the previous one
 // could not, after its neighbours changed).
 constexpr int kCleanupPasses = 8;
 
 struct CleanupResult {
-  std::uint64_t collapses = 0, flips = 0;
+  std::uint64_t collapses = 0, flips = 0, moves = 0;
   std::uint64_t removed_triangles = 0, removed_vertices = 0;
   std::uint64_t bad_before = 0;  // degenerate + sliver triangles of the input
   std::uint64_t bad_after = 0;   // of the output
@@ -69,7 +82,9 @@ class Cleaner {
     mark_irregular();
   }
 
-  std::uint64_t collapses = 0, flips = 0;
+  std::uint64_t collapses = 0, flips = 0, moves = 0;
+  // Largest turn of a triangle's normal a repair may cause (cosine).
+  double cos_limit = kCosMaxNormalTurn;
 
   // Bad triangles now: (class, sin of the smallest angle, index), worst first.
   std::vector<std::tuple<int, double, std::uint32_t>> bad_triangles() const {
@@ -88,17 +103,33 @@ class Cleaner {
     const std::uint32_t* v = T_ + 3 * std::size_t(t);
     for (int k = 0; k < 3; ++k)
       if (irregular_[v[k]]) return false;
+    // First what keeps every triangle: moving a vertex, flipping an edge.
     Candidate best;
+    // The shortest move of each vertex that works (a quarter, half or all
+    // the way), the best of the three vertices.
+    for (int k = 0; k < 3; ++k)
+      for (double f : {0.25, 0.5, 1.0}) {
+        Candidate c;
+        consider_move(t, v[k], f, c);
+        if (!c.valid) continue;
+        if (c.score > best.score) best = std::move(c);
+        break;
+      }
+    consider_flip(t, best);
+    if (!best.valid) consider_push(t, best);
+    if (best.valid) {
+      if (best.kind == Candidate::Flip) apply_flip(best);
+      else apply_move(best);
+      return true;
+    }
     for (int k = 0; k < 3; ++k) {
       const std::uint32_t a = v[k], b = v[(k + 1) % 3];
       const Vec3 pa = load(P_, a), pb = load(P_, b);
       const Vec3 targets[3] = {0.5 * (pa + pb), pa, pb};
       for (int w = 0; w < 3; ++w) consider_collapse(a, b, targets[w], w, best);
     }
-    consider_flip(t, best);
     if (!best.valid) return false;
-    if (best.flip) apply_flip(best);
-    else apply_collapse(best);
+    apply_collapse(best);
     return true;
   }
 
@@ -133,13 +164,16 @@ class Cleaner {
   static constexpr std::uint32_t kNone = 0xffffffffu;
 
   struct Candidate {
-    bool valid = false, flip = false;
+    enum Kind { Collapse, Flip, Move };
+    bool valid = false;
+    Kind kind = Collapse;
     double score = -1;
     std::uint32_t a = 0, b = 0;  // collapse b into a / flip edge (a, b)
     std::uint32_t t1 = 0, t2 = 0;  // the two triangles removed (collapse) or rewritten (flip)
     std::uint32_t c = 0, d = 0;    // flip: the opposite vertices
     Vec3 p;
     int where = 0;  // 0 midpoint, 1 at a, 2 at b
+    std::vector<std::pair<std::uint32_t, Vec3>> moved;  // move: vertices and new positions
   };
 
   TriangleShape shape(std::uint32_t t) const {
@@ -273,12 +307,12 @@ class Cleaner {
         if (c_new == 2 || (c_old == 0 && c_new != 0)) return;
         const Vec3 n_new = cross(q[1] - q[0], q[2] - q[0]);
         const Vec3 n_ref = c_old == 0 ? cross(o[1] - o[0], o[2] - o[0]) : ref;
-        if (dot(n_new, n_ref) <= kCosMaxNormalTurn * norm(n_new) * norm(n_ref)) return;
+        if (dot(n_new, n_ref) <= cos_limit * norm(n_new) * norm(n_ref)) return;
         score = std::min(score, s_new.sin_min_angle);
       }
     if (score <= best.score) return;
     best.valid = true;
-    best.flip = false;
+    best.kind = Candidate::Collapse;
     best.score = score;
     best.a = a;
     best.b = b;
@@ -286,6 +320,133 @@ class Cleaner {
     best.t2 = shared[1];
     best.p = p;
     best.where = where;
+  }
+
+  // Moves v by f times the way to the centroid of its neighbours, within
+  // its tangent plane (the normal of its fan): the fan keeps its triangles.
+  void consider_move(std::uint32_t t, std::uint32_t v, double f, Candidate& best) {
+    if (irregular_[v]) return;
+    fan(v, fa_);
+    ring(v, fa_, ra_);
+    if (ra_.empty()) return;
+    const Vec3 pv = load(P_, v);
+    Vec3 centroid, n;
+    for (std::uint32_t u : ra_) centroid = centroid + load(P_, u);
+    centroid = (1.0 / double(ra_.size())) * centroid;
+    for (std::uint32_t u : fa_) {
+      const std::uint32_t* w = T_ + 3 * std::size_t(u);
+      n = n + cross(load(P_, w[1]) - load(P_, w[0]), load(P_, w[2]) - load(P_, w[0]));
+    }
+    const double ln = norm(n);
+    if (!(ln > 0)) return;
+    n = (1.0 / ln) * n;
+    Vec3 d = centroid - pv;
+    d = d - dot(d, n) * n;
+    consider_positions(t, {{v, pv + f * d}}, best);
+  }
+
+  // Moving vertices (v, p): valid when the bad triangle t becomes good, no
+  // good triangle turns bad, nothing becomes degenerate, and no triangle
+  // turns by more than the limit (triangles that were bad are compared with
+  // the mean normal around the moved vertices).
+  void consider_positions(std::uint32_t t, std::vector<std::pair<std::uint32_t, Vec3>> moved, Candidate& best) {
+    around_.clear();
+    for (auto& m : moved) {
+      if (irregular_[m.first]) return;
+      m.second = Vec3{double(float(m.second.x)), double(float(m.second.y)), double(float(m.second.z))};
+      fan(m.first, fa_);
+      around_.insert(around_.end(), fa_.begin(), fa_.end());
+    }
+    std::sort(around_.begin(), around_.end());
+    around_.erase(std::unique(around_.begin(), around_.end()), around_.end());
+    Vec3 n;
+    for (std::uint32_t u : around_) {
+      const std::uint32_t* w = T_ + 3 * std::size_t(u);
+      n = n + cross(load(P_, w[1]) - load(P_, w[0]), load(P_, w[2]) - load(P_, w[0]));
+    }
+    if (!(norm(n) > 0)) return;
+    double score = 2;
+    for (std::uint32_t u : around_) {
+      const std::uint32_t* w = T_ + 3 * std::size_t(u);
+      Vec3 q[3], o[3];
+      for (int k = 0; k < 3; ++k) {
+        o[k] = q[k] = load(P_, w[k]);
+        for (const auto& m : moved)
+          if (m.first == w[k]) q[k] = m.second;
+      }
+      const TriangleShape s_old = triangle_shape(o[0], o[1], o[2]);
+      const TriangleShape s_new = triangle_shape(q[0], q[1], q[2]);
+      const int c_old = triangle_class(s_old, degenerate_double_area_);
+      const int c_new = triangle_class(s_new, degenerate_double_area_);
+      if (c_new == 2 || (c_new != 0 && (c_old == 0 || u == t))) return;
+      const Vec3 n_new = cross(q[1] - q[0], q[2] - q[0]);
+      const Vec3 n_ref = c_old == 0 ? cross(o[1] - o[0], o[2] - o[0]) : n;
+      if (dot(n_new, n_ref) <= cos_limit * norm(n_new) * norm(n_ref)) return;
+      score = std::min(score, s_new.sin_min_angle);
+    }
+    if (score <= best.score) return;
+    best.valid = true;
+    best.kind = Candidate::Move;
+    best.score = score;
+    best.moved = std::move(moved);
+  }
+
+  void apply_move(const Candidate& c) {
+    for (const auto& m : c.moved) {
+      P_[3 * std::size_t(m.first)] = float(m.second.x);
+      P_[3 * std::size_t(m.first) + 1] = float(m.second.y);
+      P_[3 * std::size_t(m.first) + 2] = float(m.second.z);
+    }
+    ++moves;
+  }
+
+  // A needle whose short edge cannot be collapsed (its ends share a third
+  // neighbour: the surface is a thin tube there, marching cubes' pinch near
+  // a grid vertex) is widened instead: the cluster of vertices joined to the
+  // short edge's ends by edges shorter than sin(1 degree) times the needle's
+  // long edge is scaled about its centre until its shortest edge is 2 (or 4)
+  // degrees' worth of the long edge (a move of about 1e-4 cell).
+  void consider_push(std::uint32_t t, Candidate& best) {
+    const std::uint32_t* v = T_ + 3 * std::size_t(t);
+    int k_short = 0;
+    double l_short = 0, l_long = 0;
+    for (int k = 0; k < 3; ++k) {
+      const double l = norm(load(P_, v[(k + 1) % 3]) - load(P_, v[k]));
+      if (k == 0 || l < l_short) l_short = l, k_short = k;
+      l_long = std::max(l_long, l);
+    }
+    if (!(l_short > 0)) return;
+    const double near = kSinOneDegree * l_long;
+    cluster_.assign({v[k_short], v[(k_short + 1) % 3]});
+    for (std::size_t i = 0; i < cluster_.size() && cluster_.size() <= 8; ++i) {
+      fan(cluster_[i], fb_);
+      ring(cluster_[i], fb_, rb_);
+      for (std::uint32_t u : rb_)
+        if (norm(load(P_, u) - load(P_, cluster_[i])) < near &&
+            std::find(cluster_.begin(), cluster_.end(), u) == cluster_.end())
+          cluster_.push_back(u);
+    }
+    if (cluster_.size() > 8) return;
+    Vec3 centre;
+    for (std::uint32_t u : cluster_) centre = centre + load(P_, u);
+    centre = (1.0 / double(cluster_.size())) * centre;
+    // The shortest edge within the cluster.
+    double shortest = l_short;
+    for (std::uint32_t x : cluster_) {
+      fan(x, fb_);
+      ring(x, fb_, rb_);
+      for (std::uint32_t y : cluster_)
+        if (y != x && std::binary_search(rb_.begin(), rb_.end(), y))
+          shortest = std::min(shortest, norm(load(P_, x) - load(P_, y)));
+    }
+    if (!(shortest > 0)) return;
+    for (double factor : {2.0, 4.0}) {
+      const double scale = factor * kSinOneDegree * l_long / shortest;
+      if (scale <= 1) continue;
+      std::vector<std::pair<std::uint32_t, Vec3>> moved;
+      for (std::uint32_t u : cluster_) moved.push_back({u, centre + scale * (load(P_, u) - centre)});
+      consider_positions(t, std::move(moved), best);
+    }
   }
 
   void consider_flip(std::uint32_t t, Candidate& best) {
@@ -323,12 +484,12 @@ class Cleaner {
     if (triangle_class(s1, degenerate_double_area_) || triangle_class(s2, degenerate_double_area_)) return;
     const Vec3 n1 = cross(pa - pc, pd - pc), n2 = cross(pd - pc, pb - pc);
     for (const Vec3& n : {n1, n2})
-      if (dot(n, n_old) <= kCosMaxNormalTurn * norm(n) * norm(n_old)) return;
-    if (dot(n1, n2) <= kCosMaxNormalTurn * norm(n1) * norm(n2)) return;
+      if (dot(n, n_old) <= cos_limit * norm(n) * norm(n_old)) return;
+    if (dot(n1, n2) <= cos_limit * norm(n1) * norm(n2)) return;
     const double score = std::min(s1.sin_min_angle, s2.sin_min_angle);
     if (score <= best.score) return;
     best.valid = true;
-    best.flip = true;
+    best.kind = Candidate::Flip;
     best.score = score;
     best.a = a;
     best.b = b;
@@ -391,7 +552,7 @@ class Cleaner {
   std::vector<std::uint32_t> extra_head_;                       // per vertex, into extra_ (after flips)
   std::vector<std::pair<std::uint32_t, std::uint32_t>> extra_;  // (triangle, next entry)
   double degenerate_double_area_ = 0;
-  std::vector<std::uint32_t> fa_, fb_, ra_, rb_, common_, scratch_;
+  std::vector<std::uint32_t> fa_, fb_, ra_, rb_, common_, scratch_, around_, cluster_;
 };
 
 }  // namespace detail
@@ -406,16 +567,22 @@ CleanupResult cleanup_mesh(FloatVec& positions, FloatVec& normals, IndexVec& tri
   if (nt == 0) return r;
   const bool has_normals = !normals.empty() && normals.size() == positions.size();
   detail::Cleaner c(positions.data(), has_normals ? normals.data() : nullptr, nv, triangles.data(), nt);
-  for (int pass = 0; pass < kCleanupPasses; ++pass) {
-    const auto bad = c.bad_triangles();
-    if (pass == 0) r.bad_before = bad.size();
-    std::uint64_t repaired = 0;
-    for (const auto& b : bad) repaired += c.repair(std::get<2>(b)) ? 1 : 0;
-    if (repaired == 0) break;
+  // Passes until nothing more can be repaired; then again with a looser
+  // limit on the normals' turn for what is left (folds stay excluded).
+  for (double cos_limit : {kCosMaxNormalTurn, kCosMaxNormalTurnLast}) {
+    c.cos_limit = cos_limit;
+    for (int pass = 0; pass < kCleanupPasses; ++pass) {
+      const auto bad = c.bad_triangles();
+      if (r.bad_before == 0 && pass == 0 && cos_limit == kCosMaxNormalTurn) r.bad_before = bad.size();
+      std::uint64_t repaired = 0;
+      for (const auto& b : bad) repaired += c.repair(std::get<2>(b)) ? 1 : 0;
+      if (repaired == 0) break;
+    }
   }
   r.bad_after = c.bad_triangles().size();
   r.collapses = c.collapses;
   r.flips = c.flips;
+  r.moves = c.moves;
   const auto counts = c.compact();
   positions.resize(3 * counts.first);
   if (has_normals) normals.resize(3 * counts.first);

@@ -1,0 +1,106 @@
+// SPDX-License-Identifier: MIT
+// The mesh post-processing section of include/nbmc.h: nbmc_mesh_check, and
+// the clean-up / smoothing hook of nbmc_context_reconstruct. Everything runs
+// on the host, serially, for every backend (device meshes are copied).
+#include "capi_mesh.hpp"
+
+#include "backends.hpp"
+#include "core/mesh_check.hpp"
+#include "core/mesh_cleanup.hpp"
+#include "core/mesh_smooth.hpp"
+
+#include <chrono>
+#include <cstring>
+#include <new>
+#include <stdexcept>
+#include <string>
+
+namespace nbmc {
+
+void check_postprocess_params(const nbmc_params& params) {
+  if (params.smooth_iterations < 0 || params.smooth_iterations > 100000)
+    throw Error(NBMC_ERROR_INVALID_PARAMETER, "smooth_iterations must be in [0, 100000] (got " +
+                                                  std::to_string(params.smooth_iterations) + ")");
+}
+
+mesh::PostprocessStats postprocess_mesh(const nbmc_params& params, HostMesh& m, RunStats& st) {
+  mesh::PostprocessStats ps;
+  ps.raw_triangles = m.triangle_count();
+  if (m.on_device || (!params.cleanup && params.smooth_iterations <= 0)) return ps;
+  const auto t0 = std::chrono::steady_clock::now();
+  if (params.cleanup) {
+    const mesh::CleanupResult c = mesh::cleanup_mesh(m.positions, m.normals, m.triangles);
+    ps.collapses = c.collapses;
+    ps.flips = c.flips;
+    ps.bad_before = c.bad_before;
+    ps.bad_after = c.bad_after;
+  }
+  if (params.smooth_iterations > 0) {
+    const mesh::SmoothResult s = mesh::smooth_mesh(m.positions, m.normals, m.triangles, params.smooth_iterations);
+    ps.volume_before_smoothing = s.volume_before;
+    ps.volume_after_smoothing = s.volume_after;
+    ps.volume_change = s.volume_before != 0 ? s.volume_after / s.volume_before - 1 : 0;
+  }
+  const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  st.vertices = m.vertex_count();
+  st.triangles = m.triangle_count();
+  st.stage[NBMC_STAGE_POSTPROCESS] += s;
+  st.total += s;
+  return ps;
+}
+
+}  // namespace nbmc
+
+extern "C" {
+
+void nbmc_mesh_check_result_init(nbmc_mesh_check_result* r) {
+  if (!r) return;
+  std::memset(r, 0, sizeof(*r));
+  r->struct_size = sizeof(nbmc_mesh_check_result);
+}
+
+int32_t nbmc_mesh_check(const nbmc_mesh* m, nbmc_mesh_check_result* out) {
+  if (!m || !out || out->struct_size < sizeof(nbmc_mesh_check_result)) return NBMC_ERROR_INVALID_ARGUMENT;
+  try {
+    const nbmc::HostMesh& h = m->mesh;
+    nbmc::HostMesh copy;  // a device mesh, brought to the host
+    if (h.on_device) {
+      copy.positions.resize(3 * h.vertex_count());
+      copy.triangles.resize(3 * h.triangle_count());
+      nbmc::download_mesh(h, copy.positions.data(), nullptr, copy.triangles.data());
+    }
+    const nbmc::HostMesh& src = h.on_device ? copy : h;
+    const nbmc::mesh::CheckResult c = nbmc::mesh::check_mesh(src.positions.data(), src.positions.size() / 3,
+                                                             src.triangles.data(), src.triangles.size() / 3);
+    nbmc_mesh_check_result_init(out);
+    out->closed = c.closed;
+    out->manifold = c.manifold;
+    out->oriented = c.oriented;
+    out->vertex_count = c.vertices;
+    out->triangle_count = c.triangles;
+    out->edge_count = c.edges;
+    out->boundary_edge_count = c.boundary_edges;
+    out->nonmanifold_edge_count = c.nonmanifold_edges;
+    out->misoriented_edge_count = c.misoriented_edges;
+    out->nonmanifold_vertex_count = c.nonmanifold_vertices;
+    out->unreferenced_vertex_count = c.unreferenced_vertices;
+    out->degenerate_triangle_count = c.degenerate_triangles;
+    out->sliver_triangle_count = c.sliver_triangles;
+    out->component_count = c.components;
+    out->euler_characteristic = c.euler_characteristic;
+    out->volume = c.volume;
+    out->area = c.area;
+    out->min_angle_degrees = c.min_angle_degrees;
+    return NBMC_OK;
+  } catch (const std::bad_alloc&) {
+    return NBMC_ERROR_OUT_OF_MEMORY;
+  } catch (const nbmc::Error& e) {
+    return e.status;
+  } catch (const std::invalid_argument&) {
+    return NBMC_ERROR_INVALID_ARGUMENT;
+  } catch (...) {
+    return NBMC_ERROR_INTERNAL;
+  }
+}
+
+}  // extern "C"

@@ -1,0 +1,20 @@
+// SPDX-License-Identifier: MIT
+// Figures of the mesh post-processing of one reconstruction (clean-up and
+// smoothing, src/capi_mesh.cpp), kept on the context for nbmc_context_stats.
+#pragma once
+
+#include <cstdint>
+
+namespace nbmc {
+namespace mesh {
+
+struct PostprocessStats {
+  std::uint64_t raw_triangles = 0;     // before the clean-up
+  std::uint64_t collapses = 0, flips = 0;
+  std::uint64_t bad_before = 0, bad_after = 0;  // degenerate + sliver triangles
+  double volume_before_smoothing = 0, volume_after_smoothing = 0;
+  double volume_change = 0;            // after / before - 1 (0 without smoothing)
+};
+
+}  // namespace mesh
+}  // namespace nbmc

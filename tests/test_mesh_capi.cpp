@@ -1,0 +1,255 @@
+// SPDX-License-Identifier: MIT
+// Mesh post-processing through the C API: nbmc_mesh_check on reconstructed
+// shapes (agrees with the tests' own checker), the clean-up (on by default,
+// off with cleanup = 0) on random-jittered lattices, smoothing, and the
+// ABI's handling of structs from callers built before the fields were
+// appended.
+#include "nbmc_test.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstddef>
+#include <cstdint>
+#include <cstring>
+#include <random>
+#include <vector>
+
+namespace {
+
+using nbmc_test::Points;
+
+// One context for many reconstructions (OpenMP, 2 threads).
+struct Context {
+  nbmc_context* ctx = nullptr;
+  explicit Context(int32_t backend = NBMC_BACKEND_OPENMP, int threads = 2) {
+    nbmc_context_desc d;
+    nbmc_context_desc_init(&d);
+    d.backend = backend;
+    d.num_threads = threads;
+    EXPECT_EQ(nbmc_context_create(&d, &ctx), NBMC_OK);
+  }
+  ~Context() { nbmc_context_destroy(ctx); }
+  nbmc_mesh* run(const Points& p, const nbmc_params& prm) {
+    EXPECT_EQ(nbmc_context_set_particles_f64(ctx, p.data(), p.size() / 3, 0), NBMC_OK);
+    nbmc_mesh* m = nullptr;
+    EXPECT_EQ(nbmc_context_reconstruct(ctx, &prm, &m), NBMC_OK) << nbmc_context_last_error(ctx);
+    return m;
+  }
+};
+
+nbmc_mesh_check_result check(const nbmc_mesh* m) {
+  nbmc_mesh_check_result r;
+  nbmc_mesh_check_result_init(&r);
+  EXPECT_EQ(nbmc_mesh_check(m, &r), NBMC_OK);
+  return r;
+}
+
+nbmc_test::Mesh copy(const nbmc_mesh* m) {
+  nbmc_test::Mesh out;
+  const std::size_t nv = nbmc_mesh_vertex_count(m), nt = nbmc_mesh_triangle_count(m);
+  out.positions.resize(3 * nv);
+  out.normals.resize(nbmc_mesh_normals(m) ? 3 * nv : 0);
+  out.triangles.resize(3 * nt);
+  nbmc_mesh_copy_to_host(m, out.positions.data(), out.normals.empty() ? nullptr : out.normals.data(),
+                         out.triangles.data());
+  return out;
+}
+
+bool good(const nbmc_mesh_check_result& c) { return c.closed && c.manifold && c.oriented; }
+
+TEST(MeshCheckCapi, Errors) {
+  nbmc_mesh_check_result r;
+  nbmc_mesh_check_result_init(&r);
+  EXPECT_EQ(r.struct_size, sizeof r);
+  EXPECT_EQ(nbmc_mesh_check(nullptr, &r), NBMC_ERROR_INVALID_ARGUMENT);
+  nbmc_mesh_check_result_init(nullptr);
+  Context c;
+  nbmc_mesh* m = c.run(nbmc_test::sphere(0, 0, 0, 3, 1), nbmc_test::params(1));
+  EXPECT_EQ(nbmc_mesh_check(m, nullptr), NBMC_ERROR_INVALID_ARGUMENT);
+  r.struct_size = 8;
+  EXPECT_EQ(nbmc_mesh_check(m, &r), NBMC_ERROR_INVALID_ARGUMENT);
+  nbmc_mesh_destroy(m);
+  EXPECT_STREQ(nbmc_stage_name(NBMC_STAGE_POSTPROCESS), "postprocess");
+}
+
+// The library's check and the tests' own agree on reconstructed shapes.
+TEST(MeshCheckCapi, Shapes) {
+  Context c;
+  const double lo[3] = {0, 0, 0}, hi[3] = {6, 4, 3};
+  const struct {
+    Points p;
+    int64_t euler;
+  } shapes[] = {{nbmc_test::sphere(0, 0, 0, 5, 1), 2},
+                {nbmc_test::box(lo, hi, 1), 2},
+                {nbmc_test::torus(8, 3, 1), 0},
+                {nbmc_test::concat(nbmc_test::sphere(0, 0, 0, 3, 1), nbmc_test::sphere(20, 0, 0, 3, 1)), 4}};
+  for (double cell : {0.5, 1.0})
+    for (const auto& s : shapes) {
+      nbmc_params prm = nbmc_test::params(1);
+      prm.cell_size = cell;
+      nbmc_mesh* m = c.run(s.p, prm);
+      const nbmc_mesh_check_result r = check(m);
+      const nbmc_test::MeshReport t = nbmc_test::check_mesh(copy(m));
+      EXPECT_TRUE(good(r)) << t.summary();
+      EXPECT_EQ(r.euler_characteristic, s.euler);
+      EXPECT_EQ(r.component_count, t.components);
+      EXPECT_EQ(r.vertex_count, nbmc_mesh_vertex_count(m));
+      EXPECT_EQ(r.triangle_count, nbmc_mesh_triangle_count(m));
+      EXPECT_EQ(r.degenerate_triangle_count, 0u);
+      EXPECT_EQ(r.sliver_triangle_count, 0u);
+      EXPECT_GE(r.min_angle_degrees, 1.0);
+      EXPECT_NEAR(r.volume, t.volume, 1e-6 * std::fabs(t.volume));
+      EXPECT_NEAR(r.area, t.area, 1e-6 * t.area);
+      EXPECT_GT(r.volume, 0);
+      nbmc_mesh_destroy(m);
+    }
+}
+
+// Random-jittered lattices (small shapes, many seeds, cells r and r/2):
+// the clean-up never opens or breaks the mesh, removes every bad triangle
+// the raw mesh has, and at most 1% of the triangles.
+TEST(MeshCleanupCapi, JitteredLatticesStayClosed) {
+  Context c;
+  std::uint64_t raw_bad = 0, clean_bad = 0, raw_tris = 0, clean_tris = 0;
+  for (unsigned seed = 1; seed <= 120; ++seed) {
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<double> u(-1, 1);
+    const double radius = 2.5 + 2 * (u(rng) + 1);
+    Points p = nbmc_test::sphere(0, 0, 0, radius, 1);
+    if (seed % 3 == 0) p = nbmc_test::concat(p, nbmc_test::sphere(radius + 2.2, 0.3, 0, 2.5, 1));  // a bridge
+    const double jitter = 0.05 + 0.3 * (u(rng) + 1) / 2;
+    for (double& x : p) x += jitter * u(rng);
+    for (double cell : {0.5, 1.0}) {
+      nbmc_params prm = nbmc_test::params(1);
+      prm.cell_size = cell;
+      prm.cleanup = 0;
+      nbmc_mesh* raw = c.run(p, prm);
+      prm.cleanup = 1;
+      nbmc_mesh* clean = c.run(p, prm);
+      const nbmc_mesh_check_result a = check(raw), b = check(clean);
+      ASSERT_TRUE(good(a)) << "seed " << seed;
+      ASSERT_TRUE(good(b)) << "seed " << seed << " cell " << cell;
+      ASSERT_EQ(a.euler_characteristic, b.euler_characteristic) << "seed " << seed;
+      ASSERT_EQ(a.component_count, b.component_count) << "seed " << seed;
+      ASSERT_EQ(b.unreferenced_vertex_count, 0u);
+      EXPECT_EQ(b.degenerate_triangle_count + b.sliver_triangle_count, 0u) << "seed " << seed << " cell " << cell;
+      EXPECT_LE(a.triangle_count - b.triangle_count, a.triangle_count / 100) << "seed " << seed;
+      // Real frames change by about 1e-6; these small rough shapes at cell r
+      // by up to 0.3% (a vertex moved within a bumpy fan's plane).
+      EXPECT_NEAR(b.volume, a.volume, 0.005 * a.volume) << "seed " << seed;
+      nbmc_stats st;
+      nbmc_stats_init(&st);
+      ASSERT_EQ(nbmc_context_stats(c.ctx, &st), NBMC_OK);
+      EXPECT_EQ(st.raw_triangle_count, a.triangle_count);
+      EXPECT_EQ(st.triangle_count, b.triangle_count);
+      EXPECT_EQ(st.vertex_count, b.vertex_count);
+      raw_bad += a.degenerate_triangle_count + a.sliver_triangle_count;
+      clean_bad += b.degenerate_triangle_count + b.sliver_triangle_count;
+      raw_tris += a.triangle_count;
+      clean_tris += b.triangle_count;
+      nbmc_mesh_destroy(raw);
+      nbmc_mesh_destroy(clean);
+    }
+  }
+  std::printf("jittered lattices: %llu bad triangles raw, %llu cleaned; %llu -> %llu triangles\n",
+              (unsigned long long)raw_bad, (unsigned long long)clean_bad, (unsigned long long)raw_tris,
+              (unsigned long long)clean_tris);
+  EXPECT_GT(raw_bad, 0u);  // the test exercises the clean-up
+}
+
+// Cleaned meshes are the same on every backend and thread count.
+TEST(MeshCleanupCapi, Deterministic) {
+  Points p = nbmc_test::sphere(0, 0, 0, 6, 1);
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u(-0.2, 0.2);
+  for (double& x : p) x += u(rng);
+  nbmc_params prm = nbmc_test::params(1);
+  const nbmc_test::Result ref = nbmc_test::reconstruct(p, prm, NBMC_BACKEND_SERIAL, 1);
+  ASSERT_EQ(ref.status, NBMC_OK);
+  for (int threads : {1, 2, 4}) {
+    const nbmc_test::Result r = nbmc_test::reconstruct(p, prm, NBMC_BACKEND_OPENMP, threads);
+    ASSERT_EQ(r.status, NBMC_OK);
+    EXPECT_EQ(r.mesh.positions, ref.mesh.positions) << threads;
+    EXPECT_EQ(r.mesh.normals, ref.mesh.normals) << threads;
+    EXPECT_EQ(r.mesh.triangles, ref.mesh.triangles) << threads;
+  }
+}
+
+// A caller built against 0.1 passes the shorter nbmc_params and nbmc_stats:
+// accepted, with the clean-up on (the default) and only its fields written.
+TEST(MeshCleanupCapi, OldStructSizes) {
+  Context c;
+  nbmc_params prm = nbmc_test::params(1);
+  prm.struct_size = uint32_t(offsetof(nbmc_params, cleanup));
+  prm.cleanup = 0;  // beyond the caller's struct: ignored
+  Points p = nbmc_test::sphere(0, 0, 0, 4, 1);
+  nbmc_mesh* m = c.run(p, prm);
+  nbmc_stats st;
+  nbmc_stats_init(&st);
+  std::memset(&st.raw_triangle_count, 0xab, sizeof st.raw_triangle_count);
+  st.struct_size = uint32_t(offsetof(nbmc_stats, raw_triangle_count));
+  ASSERT_EQ(nbmc_context_stats(c.ctx, &st), NBMC_OK);
+  EXPECT_EQ(st.struct_size, offsetof(nbmc_stats, raw_triangle_count));
+  EXPECT_EQ(st.triangle_count, nbmc_mesh_triangle_count(m));
+  std::uint64_t untouched;
+  std::memset(&untouched, 0xab, sizeof untouched);
+  EXPECT_EQ(st.raw_triangle_count, untouched);
+  nbmc_stats full;
+  nbmc_stats_init(&full);
+  ASSERT_EQ(nbmc_context_stats(c.ctx, &full), NBMC_OK);
+  EXPECT_GE(full.raw_triangle_count, full.triangle_count);
+  nbmc_mesh_destroy(m);
+  prm.struct_size = uint32_t(offsetof(nbmc_params, cleanup)) - 8;
+  nbmc_mesh* bad = nullptr;
+  EXPECT_EQ(nbmc_context_reconstruct(c.ctx, &prm, &bad), NBMC_ERROR_INVALID_ARGUMENT);
+  EXPECT_EQ(bad, nullptr);
+}
+
+// Taubin smoothing keeps a lattice sphere's radius (within 0.1 r) and volume,
+// keeps the mesh closed, and gives unit normals.
+TEST(MeshSmoothCapi, SphereKeepsItsRadius) {
+  Context c;
+  const double radius = 8;
+  Points p = nbmc_test::sphere(0, 0, 0, radius, 1);
+  nbmc_params prm = nbmc_test::params(1);
+  nbmc_mesh* raw = c.run(p, prm);
+  prm.smooth_iterations = 10;
+  nbmc_mesh* m = c.run(p, prm);
+  nbmc_stats st;
+  nbmc_stats_init(&st);
+  ASSERT_EQ(nbmc_context_stats(c.ctx, &st), NBMC_OK);
+  const nbmc_mesh_check_result a = check(raw), b = check(m);
+  EXPECT_TRUE(good(b));
+  EXPECT_EQ(a.triangle_count, b.triangle_count);
+  EXPECT_NEAR(st.smoothing_volume_change, b.volume / a.volume - 1, 1e-4);
+  EXPECT_LT(std::fabs(st.smoothing_volume_change), 0.01);
+  EXPECT_GT(st.stage_seconds[NBMC_STAGE_POSTPROCESS], 0);
+  const nbmc_test::Mesh s = copy(m), r0 = copy(raw);
+  auto mean_radius = [](const nbmc_test::Mesh& x) {
+    double sum = 0;
+    for (std::size_t v = 0; v < x.vertex_count(); ++v)
+      sum += std::sqrt(double(x.positions[3 * v]) * x.positions[3 * v] +
+                       double(x.positions[3 * v + 1]) * x.positions[3 * v + 1] +
+                       double(x.positions[3 * v + 2]) * x.positions[3 * v + 2]);
+    return sum / double(x.vertex_count());
+  };
+  EXPECT_NEAR(mean_radius(s), mean_radius(r0), 0.1);
+  for (std::size_t v = 0; v < s.vertex_count(); ++v) {
+    const double l = std::sqrt(double(s.normals[3 * v]) * s.normals[3 * v] +
+                               double(s.normals[3 * v + 1]) * s.normals[3 * v + 1] +
+                               double(s.normals[3 * v + 2]) * s.normals[3 * v + 2]);
+    ASSERT_NEAR(l, 1.0, 1e-5);
+    // Outward: along the position on a sphere.
+    const double d = s.normals[3 * v] * s.positions[3 * v] + s.normals[3 * v + 1] * s.positions[3 * v + 1] +
+                     s.normals[3 * v + 2] * s.positions[3 * v + 2];
+    ASSERT_GT(d, 0);
+  }
+  nbmc_mesh_destroy(raw);
+  nbmc_mesh_destroy(m);
+  prm.smooth_iterations = -1;
+  nbmc_mesh* bad = nullptr;
+  EXPECT_EQ(nbmc_context_reconstruct(c.ctx, &prm, &bad), NBMC_ERROR_INVALID_PARAMETER);
+}
+
+}  // namespace
