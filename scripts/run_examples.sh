@@ -14,12 +14,13 @@
 #
 # Everything is written under a fresh temporary directory (NBMC_EXAMPLES_OUT
 # chooses another). Exits non-zero if any step fails; a summary comes last.
-# Needs cmake, a C compiler, pkg-config, gfortran and cargo (Rust may use std only).
+# Needs cmake, a C compiler, pkg-config, gfortran and cargo (Rust 1.63 or newer,
+# e.g. Debian 12's `cargo` package; the crates use std only).
 set -uo pipefail
 
 ROOT=$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)
 PREFIX=${1:-$ROOT/build/install}
-case "$PREFIX" in -h|--help) sed -n '3,17p' "$0"; exit 0 ;; esac
+case "$PREFIX" in -h|--help) sed -n '3,18p' "$0"; exit 0 ;; esac
 PREFIX=$(cd "$PREFIX" 2>/dev/null && pwd) || { echo "run_examples.sh: no such prefix: ${1:-$ROOT/build/install} (run scripts/setup.sh first)" >&2; exit 2; }
 JOBS=${NBMC_JOBS:-2}
 DATA=$ROOT/examples/data/double_dam_break_4732.xyz
@@ -96,10 +97,21 @@ c_pkgconfig() {
   check_ply "$OUT/c-make.ply"
 }
 
+# "1.63.0" from "rustc 1.63.0 (...)" / "cargo 1.65.0 (...)" -> 1063
+minor_of() { "$1" --version 2>/dev/null | awk '{split($2, v, "."); print v[1] * 1000 + v[2]}'; }
+
 need_cargo() {
-  if ! command -v cargo >/dev/null 2>&1; then
+  # The crates need rustc >= 1.63 and cargo >= 1.64 (workspace inheritance):
+  # Debian 12's `cargo` package (cargo 1.65, rustc 1.63) is enough.
+  if ! command -v cargo >/dev/null 2>&1 || ! command -v rustc >/dev/null 2>&1; then
     echo "cargo is not installed: the Rust examples (examples/rust) need cargo and rustc;" >&2
-    echo "install a Rust toolchain (1.77 or newer) and run this script again." >&2
+    echo "install Debian's 'cargo' package (or any Rust 1.63 or newer) and run this script again." >&2
+    return 1
+  fi
+  local rc cg
+  rc=$(minor_of rustc); cg=$(minor_of cargo)
+  if [ "${rc:-0}" -lt 1063 ] || [ "${cg:-0}" -lt 1064 ]; then
+    echo "the Rust examples need rustc 1.63 and cargo 1.64 or newer; found: $(rustc --version), $(cargo --version)" >&2
     return 1
   fi
   export NBMC_DIR=$PREFIX CARGO_TARGET_DIR=$OUT/cargo-target NBMC_SYS_VERBOSE=1
@@ -108,7 +120,7 @@ need_cargo() {
 
 rust_tests() {
   need_cargo
-  cargo --version
+  cargo --version; rustc --version
   cargo test --offline --locked --workspace --no-fail-fast
 }
 

@@ -9,9 +9,10 @@
 //!
 //! Use the `nbmc` crate for a safe API.
 #![allow(non_camel_case_types)]
-#![no_std]
 
-use core::ffi::{c_char, c_void};
+// std::os::raw rather than core::ffi (and no #![no_std]): core::ffi::c_char
+// needs Rust 1.64, and the crates build with Debian 12's rustc 1.63.
+use std::os::raw::{c_char, c_void};
 
 // ------------------------------------------------------------------ version
 pub const NBMC_VERSION_MAJOR: u32 = 0;

@@ -13,7 +13,7 @@
 //!    types match; the callback typedef is compared the same way.
 use nbmc_sys::*;
 use std::collections::{BTreeMap, BTreeSet};
-use std::mem::{align_of, offset_of, size_of, MaybeUninit};
+use std::mem::{align_of, size_of, MaybeUninit};
 use std::path::PathBuf;
 use std::process::Command;
 
@@ -86,6 +86,10 @@ fn field_size<T>(_: *const T) -> usize {
     size_of::<T>()
 }
 
+fn field_offset<S, T>(base: *const S, field: *const T) -> usize {
+    field as usize - base as usize
+}
+
 macro_rules! layout {
     ($t:ident { $($f:ident),* $(,)? }) => {{
         let u = MaybeUninit::<$t>::uninit();
@@ -95,7 +99,10 @@ macro_rules! layout {
             size: size_of::<$t>(),
             align: align_of::<$t>(),
             // SAFETY: addr_of! on a field of an uninitialised value reads nothing.
-            fields: vec![$((stringify!($f), offset_of!($t, $f), field_size(unsafe { std::ptr::addr_of!((*p).$f) }))),*],
+            // (Offsets by address difference, not offset_of!: that needs Rust
+            // 1.77 and the crates build with Debian 12's 1.63.)
+            fields: vec![$((stringify!($f), field_offset(p, unsafe { std::ptr::addr_of!((*p).$f) }),
+                            field_size(unsafe { std::ptr::addr_of!((*p).$f) }))),*],
         }
     }};
 }
@@ -193,8 +200,14 @@ fn header_constants(h: &str) -> BTreeSet<String> {
     let mut out = BTreeSet::new();
     for line in strip_c_comments(h).lines() {
         let l = line.trim_start();
-        let Some(l) = l.strip_prefix('#') else { continue };
-        let Some(l) = l.trim_start().strip_prefix("define") else { continue };
+        let l = match l.strip_prefix('#') {
+            Some(v) => v,
+            None => continue,
+        };
+        let l = match l.trim_start().strip_prefix("define") {
+            Some(v) => v,
+            None => continue,
+        };
         let l = l.trim_start();
         let name: String = l.chars().take_while(|&c| is_ident(c)).collect();
         let function_like = l[name.len()..].starts_with('(');
@@ -231,7 +244,10 @@ fn header_structs(h: &str) -> BTreeMap<String, Vec<String>> {
     let mut rest = text.as_str();
     while let Some(i) = rest.find("typedef struct") {
         rest = &rest[i + "typedef struct".len()..];
-        let (Some(brace), Some(semi)) = (rest.find('{'), rest.find(';')) else { break };
+        let (brace, semi) = match (rest.find('{'), rest.find(';')) {
+            (Some(a), Some(b)) => (a, b),
+            _ => break,
+        };
         if brace > semi {
             continue; // opaque: typedef struct X X;
         }
@@ -306,7 +322,10 @@ fn rust_functions() -> Vec<RustFn> {
         let end = rest.find("\n}").expect("unterminated extern block");
         for decl in rest[..end].split(';') {
             let decl = decl.split_whitespace().collect::<Vec<_>>().join(" ");
-            let Some(d) = decl.strip_prefix("pub fn ") else { continue };
+            let d = match decl.strip_prefix("pub fn ") {
+                Some(v) => v,
+                None => continue,
+            };
             let open = d.find('(').unwrap();
             let close = d.rfind(')').unwrap();
             let ret = d[close + 1..].trim().strip_prefix("->").map_or("()", str::trim);
@@ -326,10 +345,19 @@ fn rust_callbacks() -> Vec<RustFn> {
     let mut out = Vec::new();
     let src = LIB_RS.split_whitespace().collect::<Vec<_>>().join(" ");
     for decl in src.split(';') {
-        let Some(i) = decl.find("pub type ") else { continue };
+        let i = match decl.find("pub type ") {
+            Some(v) => v,
+            None => continue,
+        };
         let d = &decl[i + "pub type ".len()..];
-        let Some((name, ty)) = d.split_once('=') else { continue };
-        let Some(f) = ty.trim().strip_prefix("Option<unsafe extern \"C\" fn(") else { continue };
+        let (name, ty) = match d.split_once('=') {
+            Some(v) => v,
+            None => continue,
+        };
+        let f = match ty.trim().strip_prefix("Option<unsafe extern \"C\" fn(") {
+            Some(v) => v,
+            None => continue,
+        };
         let close = f.rfind(')').unwrap();
         let ret = f[close + 1..].trim().trim_end_matches('>').trim();
         let ret = ret.strip_prefix("->").map_or("()", str::trim);

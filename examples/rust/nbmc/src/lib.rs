@@ -36,11 +36,17 @@
 //! to get the data, or [`Mesh::device_arrays`] for the raw device pointers.
 //! Other backends answer the device calls with
 //! [`Error::BACKEND_UNAVAILABLE`].
+
+// Unsafe operations inside an `unsafe fn` keep their own `unsafe` blocks;
+// with this lint rustc 1.63 (Debian 12) does not call them unnecessary.
+#![warn(unsafe_op_in_unsafe_fn)]
+
 use nbmc_sys as sys;
 use std::any::Any;
-use std::ffi::{c_void, CStr, CString};
+use std::ffi::{CStr, CString};
 use std::fmt;
 use std::marker::PhantomData;
+use std::os::raw::{c_char, c_void};
 use std::panic::{self, AssertUnwindSafe};
 use std::path::Path;
 use std::ptr::{self, NonNull};
@@ -94,7 +100,7 @@ impl std::error::Error for Error {}
 pub type Result<T> = std::result::Result<T, Error>;
 
 /// Copies a static or context-owned C string.
-fn c_str(p: *const std::ffi::c_char) -> String {
+fn c_str(p: *const c_char) -> String {
     if p.is_null() {
         String::new()
     } else {
@@ -104,7 +110,7 @@ fn c_str(p: *const std::ffi::c_char) -> String {
     }
 }
 
-fn static_str(p: *const std::ffi::c_char) -> &'static str {
+fn static_str(p: *const c_char) -> &'static str {
     if p.is_null() {
         ""
     } else {
@@ -420,7 +426,10 @@ unsafe extern "C" fn progress_trampoline(user: *mut c_void, stage: i32, fraction
     if state.panic.is_some() {
         return 1;
     }
-    let Some(stage) = Stage::from_raw(stage) else { return 0 };
+    let stage = match Stage::from_raw(stage) {
+        Some(v) => v,
+        None => return 0,
+    };
     match panic::catch_unwind(AssertUnwindSafe(|| (state.callback)(stage, fraction))) {
         Ok(true) => 0,
         Ok(false) => 1,
