@@ -40,6 +40,14 @@ mesh::PostprocessStats postprocess_mesh(const nbmc_params& params, HostMesh& m, 
     ps.volume_before_smoothing = s.volume_before;
     ps.volume_after_smoothing = s.volume_after;
     ps.volume_change = s.volume_before != 0 ? s.volume_after / s.volume_before - 1 : 0;
+    // Smoothing can pull nearly coincident vertices together again (the
+    // clusters the clean-up widened): clean what it made.
+    if (params.cleanup) {
+      const mesh::CleanupResult c = mesh::cleanup_mesh(m.positions, m.normals, m.triangles);
+      ps.collapses += c.collapses;
+      ps.flips += c.flips;
+      ps.bad_after = c.bad_after;
+    }
   }
   const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   st.vertices = m.vertex_count();

@@ -176,8 +176,9 @@ TEST(MeshCleanupCapi, Deterministic) {
   }
 }
 
-// A caller built against 0.1 passes the shorter nbmc_params and nbmc_stats:
-// accepted, with the clean-up on (the default) and only its fields written.
+// A caller built before the post-processing fields were appended passes the
+// shorter nbmc_params and nbmc_stats: accepted, with the clean-up on (the
+// default) and only its fields written.
 TEST(MeshCleanupCapi, OldStructSizes) {
   Context c;
   nbmc_params prm = nbmc_test::params(1);
