@@ -2,6 +2,7 @@
 #include "sequence.hpp"
 
 #include "io/error.hpp"
+#include "io/mesh.hpp"
 #include "io/particles.hpp"
 #include "report.hpp"
 
@@ -9,6 +10,7 @@
 #include <charconv>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <system_error>
 
@@ -94,17 +96,34 @@ std::string number(double v) {
   return buf;
 }
 
+// An .h5 output with {} in its name: all frames go into one HDF5 file (the
+// name without {} and a separator next to it), one group "frame_<n>" each.
+// A pattern naming the group itself ('all.h5:/step_{}') is left as it is.
+void frames_into_one_hdf5(const std::string& output, std::vector<Frame>& frames) {
+  const std::string plain = replace_braces(output, "");
+  try {
+    if (nbmc::io::mesh_format(plain) != "h5" || nbmc::io::mesh_output_file(plain) != plain) return;
+  } catch (const nbmc::io::Error&) {
+    return; // reported when the first frame is written
+  }
+  std::string file = output;
+  const std::size_t at = file.rfind("{}");
+  const std::size_t from = at > 0 && std::strchr("_-.", file[at - 1]) ? at - 1 : at;
+  file = replace_braces(file.erase(from, at + 2 - from), "");
+  const std::size_t slash = file.find_last_of('/');
+  const std::size_t name = slash == std::string::npos ? 0 : slash + 1;
+  if (name < file.size() && file[name] == '.') file.insert(name, "frames"); // 'out/{}.h5' -> 'out/frames.h5'
+  for (Frame& f : frames) f.output = file + ":/frame_" + f.label;
+}
+
 } // namespace
 
 std::string without_braces(const std::string& path) { return replace_braces(path, ""); }
 
-bool output_exists(const std::string& path) {
-  std::error_code ec;
-  return fs::is_regular_file(path, ec);
-}
+bool output_exists(const std::string& path) { return nbmc::io::mesh_output_exists(path); }
 
 void make_parent_folders(const std::string& path) {
-  const fs::path parent = fs::path(path).parent_path();
+  const fs::path parent = fs::path(nbmc::io::mesh_output_file(path)).parent_path();
   if (parent.empty()) return;
   std::error_code ec;
   fs::create_directories(parent, ec); // a failure shows when the mesh is written
@@ -201,6 +220,7 @@ bool plan_sequence(const std::string& input, const std::string& output, const st
       error = matches.empty() ? "no file matches '" + input + "'" : "no file of '" + input + "' is within --frames";
       return false;
     }
+    frames_into_one_hdf5(output, plan.frames);
     plan.is_sequence = true;
     return true;
   }
@@ -254,6 +274,7 @@ bool plan_sequence(const std::string& input, const std::string& output, const st
     fr.output = replace_braces(output, fr.label);
     plan.frames.push_back(std::move(fr));
   }
+  frames_into_one_hdf5(output, plan.frames);
   plan.is_sequence = true;
   return true;
 }

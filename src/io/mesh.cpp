@@ -2,6 +2,7 @@
 #include "io/mesh.hpp"
 
 #include "io/detail.hpp"
+#include "io/mesh_xdmf.hpp"
 #include "io/readers.hpp"
 
 #include <algorithm>
@@ -15,6 +16,7 @@
 #include <cstring>
 
 #include <fcntl.h>
+#include <sys/stat.h>
 #include <unistd.h>
 
 namespace nbmc::io {
@@ -27,6 +29,7 @@ using detail::PlyElement;
 using detail::PlyHeader;
 using detail::PlyProperty;
 using detail::PlyType;
+using detail::xml_escape;
 
 MeshView Mesh::view() const {
   MeshView v;
@@ -75,6 +78,9 @@ public:
   }
   AtomicFile(const AtomicFile&) = delete;
   AtomicFile& operator=(const AtomicFile&) = delete;
+
+  // The temporary name, for writers that open the file themselves (HDF5).
+  const std::string& temp_path() const { return tmp_; }
 
   void write(const char* data, std::size_t n) {
     while (n > 0) {
@@ -448,31 +454,18 @@ void write_vtk(Output& out, const std::string& path, const MeshView& m) {
   }
 }
 
-// ---------------------------------------------------------------- VTU
-std::string xml_escape(const std::string& s) {
-  std::string out;
-  for (char c : s) {
-    switch (c) {
-    case '<': out += "&lt;"; break;
-    case '>': out += "&gt;"; break;
-    case '&': out += "&amp;"; break;
-    case '"': out += "&quot;"; break;
-    default: {
-      const unsigned char u = static_cast<unsigned char>(c);
-      out += (u < 0x20) ? '_' : c;
-    }
-    }
-  }
-  return out;
-}
-
+// ---------------------------------------------------------------- VTU, VTP
 void put_u64_le(Output& out, std::uint64_t v) {
   char b[8];
   for (int i = 0; i < 8; ++i) b[i] = static_cast<char>((v >> (8 * i)) & 0xff);
   out.put(b, 8);
 }
 
-void write_vtu(Output& out, const MeshView& m) {
+// VTK XML with raw appended data (UInt64 headers, uncompressed): an
+// UnstructuredGrid of triangles (.vtu) or PolyData with the triangles as
+// Polys (.vtp). Both share points, point data, connectivity and offsets;
+// only the .vtu has cell types.
+void write_vtk_xml(Output& out, const MeshView& m, bool polydata) {
   const std::uint64_t nv = m.vertex_count, nt = m.triangle_count;
   // Appended blocks in order: points, normals, attributes, connectivity,
   // offsets, types; each is a UInt64 byte count and the little-endian data.
@@ -502,16 +495,21 @@ void write_vtu(Output& out, const MeshView& m) {
     pdata += "      </PointData>\n";
   }
   // (One statement each: the offsets depend on the order of the calls.)
-  std::string cells = "      <Cells>\n";
+  const std::string section = polydata ? "Polys" : "Cells";
+  std::string cells = "      <" + section + ">\n";
   cells += array("connectivity", "Int64", 1, 24 * nt);
   cells += array("offsets", "Int64", 1, 8 * nt);
-  cells += array("types", "UInt8", 1, nt);
-  cells += "      </Cells>\n";
-  std::string head = "<?xml version=\"1.0\"?>\n<VTKFile type=\"UnstructuredGrid\" version=\"1.0\" "
-                     "byte_order=\"LittleEndian\" header_type=\"UInt64\">\n  <UnstructuredGrid>\n";
-  head += "    <Piece NumberOfPoints=\"" + std::to_string(nv) + "\" NumberOfCells=\"" + std::to_string(nt) + "\">\n";
+  if (!polydata) cells += array("types", "UInt8", 1, nt);
+  cells += "      </" + section + ">\n";
+  const std::string type = polydata ? "PolyData" : "UnstructuredGrid";
+  std::string head = "<?xml version=\"1.0\"?>\n<VTKFile type=\"" + type + "\" version=\"1.0\" "
+                     "byte_order=\"LittleEndian\" header_type=\"UInt64\">\n  <" + type + ">\n";
+  head += "    <Piece NumberOfPoints=\"" + std::to_string(nv) + "\" ";
+  head += polydata ? "NumberOfVerts=\"0\" NumberOfLines=\"0\" NumberOfStrips=\"0\" NumberOfPolys=\""
+                    : "NumberOfCells=\"";
+  head += std::to_string(nt) + "\">\n";
   head += pdata + points + cells;
-  head += "    </Piece>\n  </UnstructuredGrid>\n  <AppendedData encoding=\"raw\">\n   _";
+  head += "    </Piece>\n  </" + type + ">\n  <AppendedData encoding=\"raw\">\n   _";
   out.put(head);
 
   const bool swap = !host_is_little_endian();
@@ -530,23 +528,15 @@ void write_vtu(Output& out, const MeshView& m) {
     floats(tmp.data(), tmp.size());
   }
   put_u64_le(out, 24 * nt);
-  for (std::uint64_t i = 0; i < 3 * nt; ++i) {
-    char* p = out.room(8);
-    const std::uint64_t v = m.triangles[i];
-    for (int b = 0; b < 8; ++b) p[b] = static_cast<char>((v >> (8 * b)) & 0xff);
-    out.advance(8);
-  }
+  for (std::uint64_t i = 0; i < 3 * nt; ++i) put_u64_le(out, m.triangles[i]);
   put_u64_le(out, 8 * nt);
-  for (std::uint64_t i = 0; i < nt; ++i) {
-    char* p = out.room(8);
-    const std::uint64_t v = 3 * (i + 1);
-    for (int b = 0; b < 8; ++b) p[b] = static_cast<char>((v >> (8 * b)) & 0xff);
-    out.advance(8);
-  }
-  put_u64_le(out, nt);
-  for (std::uint64_t i = 0; i < nt; ++i) {
-    *out.room(1) = 5; // VTK_TRIANGLE
-    out.advance(1);
+  for (std::uint64_t i = 0; i < nt; ++i) put_u64_le(out, 3 * (i + 1));
+  if (!polydata) {
+    put_u64_le(out, nt);
+    for (std::uint64_t i = 0; i < nt; ++i) {
+      *out.room(1) = 5; // VTK_TRIANGLE
+      out.advance(1);
+    }
   }
   out.put("\n  </AppendedData>\n</VTKFile>\n");
 }
@@ -684,28 +674,78 @@ void write_glb(Output& out, const std::string& path, const MeshView& m) {
 
 } // namespace
 
+namespace {
+// "out/s.h5:/frame_3" -> "out/s.h5", "/frame_3"; other paths stay whole.
+void split_output(const std::string& path, std::string& file, std::string& group) {
+  file = path;
+  group.clear();
+  detail::split_hdf5_path(path, false, file, group);
+}
+
+// The mesh into an HDF5 file (a new file, or a group of an existing one),
+// then the XDMF descriptor of everything the file holds.
+void write_h5(const std::string& path, const MeshView& m, const std::function<bool()>& cancelled) {
+  std::string file, group;
+  split_output(path, file, group);
+  if (group.empty() || group == "/") {
+    AtomicFile tmp(file);
+    detail::write_hdf5_mesh(tmp.temp_path(), file, "/", true, m, cancelled);
+    tmp.commit();
+  } else {
+    detail::write_hdf5_mesh(file, file, group, false, m, cancelled);
+  }
+  std::string xdmf = file.substr(0, file.size() - detail::lower_extension(file).size()) + ".xdmf";
+  if (xdmf == file) xdmf += ".xdmf"; // never over the HDF5 file itself
+  const std::size_t slash = file.find_last_of('/');
+  const std::string ref = slash == std::string::npos ? file : file.substr(slash + 1); // next to the .xdmf
+  const std::string text = detail::xdmf_for_hdf5(file, file, ref);
+  AtomicFile x(xdmf);
+  x.write(text.data(), text.size());
+  x.commit();
+}
+} // namespace
+
 std::string mesh_format(const std::string& path, const std::string& format) {
-  static const char* kSupported = "supported: .ply, .obj, .vtk, .vtu, .glb";
+  static const char* kSupported = "supported: .ply, .obj, .vtk, .vtu, .vtp, .glb, .h5";
+  static const char* kNames[] = {"ply", "obj", "vtk", "vtu", "vtp", "glb", "h5"};
   if (!format.empty()) {
     std::string f = detail::to_lower(format);
     if (!f.empty() && f[0] == '.') f.erase(0, 1);
-    if (f == "ply" || f == "obj" || f == "vtk" || f == "vtu" || f == "glb") return f;
-    detail::fail_arg(path, "unknown mesh format '" + format + "' (supported: ply, obj, vtk, vtu, glb)");
+    if (f == "hdf5") f = "h5";
+    for (const char* n : kNames)
+      if (f == n) return f;
+    detail::fail_arg(path, "unknown mesh format '" + format + "' (supported: ply, obj, vtk, vtu, vtp, glb, h5)");
   }
+  std::string file, group;
+  split_output(path, file, group);
+  if (!group.empty()) return "h5";
   const std::string ext = detail::lower_extension(path);
-  if (ext == ".ply") return "ply";
-  if (ext == ".obj") return "obj";
-  if (ext == ".vtk") return "vtk";
-  if (ext == ".vtu") return "vtu";
-  if (ext == ".glb") return "glb";
+  if (ext == ".hdf5") return "h5";
+  for (const char* n : kNames)
+    if (ext.size() > 1 && ext.compare(1, std::string::npos, n) == 0) return n;
   if (ext.empty()) fail(path, std::string("no file extension to tell the mesh format (") + kSupported + ")");
   fail(path, "unknown mesh extension '" + ext + "' (" + kSupported + ")");
+}
+
+std::string mesh_output_file(const std::string& path) {
+  std::string file, group;
+  split_output(path, file, group);
+  return file;
+}
+
+bool mesh_output_exists(const std::string& path) {
+  std::string file, group;
+  split_output(path, file, group);
+  if (!group.empty()) return detail::hdf5_mesh_exists(file, group);
+  struct stat st {};
+  return ::stat(path.c_str(), &st) == 0 && S_ISREG(st.st_mode);
 }
 
 void write_mesh(const std::string& path, const MeshView& m, const std::string& format,
                 const std::function<bool()>& cancelled) {
   const std::string f = mesh_format(path, format);
   check(path, m);
+  if (f == "h5") return write_h5(path, m, cancelled);
   AtomicFile file(path);
   Output out(file, path, cancelled);
   if (f == "ply")
@@ -714,8 +754,8 @@ void write_mesh(const std::string& path, const MeshView& m, const std::string& f
     write_obj(out, m);
   else if (f == "vtk")
     write_vtk(out, path, m);
-  else if (f == "vtu")
-    write_vtu(out, m);
+  else if (f == "vtu" || f == "vtp")
+    write_vtk_xml(out, m, f == "vtp");
   else
     write_glb(out, path, m);
   out.flush();

@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: MIT
 // nbmc::io — triangle mesh writers (binary PLY, Wavefront OBJ, legacy VTK,
-// VTK XML .vtu, glTF 2.0 binary .glb) and readers for the PLY, VTK and VTU
-// meshes written here.
+// VTK XML .vtu and .vtp, glTF 2.0 binary .glb, HDF5 + XDMF) and readers for
+// the PLY, VTK, VTU and VTP meshes written here.
 //
 // Writers create a temporary file next to the destination and rename it into
 // place once complete, so an interrupted or failed run never leaves a
@@ -31,8 +31,8 @@ struct MeshView {
   std::uint64_t triangle_count = 0;
   // Per-vertex attributes (each with vertex_count items), written where the
   // format allows: PLY (extra vertex properties; vectors as <name>_x, _y, _z),
-  // VTK and VTU (point data), glTF (custom attributes "_<NAME>"). OBJ has no
-  // place for them.
+  // VTK, VTU and VTP (point data), glTF (custom attributes "_<NAME>"), HDF5
+  // (float64 datasets under attributes/). OBJ has no place for them.
   const Attribute* attributes = nullptr;
   std::size_t attribute_count = 0;
 };
@@ -57,6 +57,14 @@ struct Mesh {
 //    POLYGONS, POINT_DATA with NORMALS "Normals" and SCALARS / VECTORS;
 //  - "vtu": VTK XML UnstructuredGrid, raw appended data (UInt64 headers,
 //    uncompressed), Float32 points and point data, Int64 cells;
+//  - "vtp": VTK XML PolyData, the same with the triangles as <Polys>;
+//  - "h5" (also ".hdf5"): HDF5 datasets positions, triangles, normals and
+//    attributes/<name> (layout in mesh_xdmf.hpp) plus an XDMF descriptor
+//    next to the file (same name, ".xdmf"). "file.h5:/group" writes the mesh
+//    into that group of the file (created, or opened and the group replaced)
+//    and the descriptor becomes a temporal collection of the file's mesh
+//    groups (time: the number at the end of the group name) — how sequences
+//    are written. A whole file is written atomically; a group is not;
 //  - "glb": glTF 2.0 binary: POSITION (with min/max), NORMAL (unit length),
 //    UNSIGNED_INT indices, attributes as "_<NAME>" accessors.
 // Triangle indices are checked against vertex_count.
@@ -65,9 +73,16 @@ struct Mesh {
 void write_mesh(const std::string& path, const MeshView& m, const std::string& format = "",
                 const std::function<bool()>& cancelled = {});
 
-// The format write_mesh would use: "ply", "obj", "vtk", "vtu" or "glb";
-// throws Error otherwise.
+// The format write_mesh would use: "ply", "obj", "vtk", "vtu", "vtp", "glb"
+// or "h5"; throws Error otherwise.
 std::string mesh_format(const std::string& path, const std::string& format = "");
+
+// The file write_mesh(path) writes: path, or "file.h5" for "file.h5:/group".
+std::string mesh_output_file(const std::string& path);
+
+// Whether the mesh write_mesh(path) would write exists: a regular file, or
+// for "file.h5:/group" a mesh in that group of the file.
+bool mesh_output_exists(const std::string& path);
 
 // Reads a triangle mesh from a PLY file (any of the three encodings): vertex
 // x, y, z and optionally nx, ny, nz; face list "vertex_indices" (or
