@@ -5,6 +5,7 @@
 // clean-up on randomly pinched spheres (never opens or breaks the mesh).
 #include "../src/core/mesh_check.hpp"
 #include "../src/core/mesh_cleanup.hpp"
+#include "../src/core/mesh_smooth.hpp"
 
 #include <gtest/gtest.h>
 
@@ -294,6 +295,45 @@ TEST(MeshCleanup, RandomPinchesNeverOpenTheMesh) {
               (unsigned long long)bad_in, (unsigned long long)bad_out, (unsigned long long)removed,
               (unsigned long long)total, (unsigned long long)moves, (unsigned long long)flips,
               (unsigned long long)collapses);
+}
+
+// Taubin smoothing: a sphere keeps its size (its vertices stay within 1% of
+// the radius), normals become the unit face normals; a droplet of a few
+// vertices, which lambda|mu would shrink to a point, keeps its volume.
+TEST(MeshSmooth, SphereAndDroplet) {
+  TestMesh m = icosphere(3);
+  TestMesh drop = tetrahedron();
+  const std::uint32_t base = std::uint32_t(m.p.size() / 3);
+  for (float x : drop.p) m.p.push_back(x + 5);
+  for (std::uint32_t v : drop.t) m.t.push_back(v + base);
+  m.n.assign(m.p.size(), 0.0f);
+  const std::vector<float> p0 = m.p;
+  const auto r = nbmc::mesh::smooth_mesh(m.p, m.n, m.t, 10);
+  const CheckResult c = m.check();
+  EXPECT_TRUE(c.closed && c.manifold && c.oriented);
+  EXPECT_EQ(c.degenerate_triangles + c.sliver_triangles, 0u);
+  EXPECT_NEAR(r.volume_after, r.volume_before, 0.01 * r.volume_before);
+  for (std::size_t v = 0; v < base; ++v) {
+    const double l = std::sqrt(double(m.p[3 * v]) * m.p[3 * v] + double(m.p[3 * v + 1]) * m.p[3 * v + 1] +
+                               double(m.p[3 * v + 2]) * m.p[3 * v + 2]);
+    ASSERT_NEAR(l, 1.0, 0.01) << v;
+    const double n = std::sqrt(double(m.n[3 * v]) * m.n[3 * v] + double(m.n[3 * v + 1]) * m.n[3 * v + 1] +
+                               double(m.n[3 * v + 2]) * m.n[3 * v + 2]);
+    ASSERT_NEAR(n, 1.0, 1e-5);
+    ASSERT_GT(m.n[3 * v] * m.p[3 * v] + m.n[3 * v + 1] * m.p[3 * v + 1] + m.n[3 * v + 2] * m.p[3 * v + 2], 0.9f);
+  }
+  // The tetrahedron's volume (1/6) is restored (lambda|mu only shrinks it
+  // about its centroid, so it is back where it was).
+  const CheckResult t = check_mesh(m.p.data() + 3 * base, 4, drop.t.data(), 4);
+  EXPECT_NEAR(t.volume, 1.0 / 6, 1e-4);
+  for (std::size_t i = 3 * base; i < m.p.size(); ++i) EXPECT_NEAR(m.p[i], p0[i], 1e-4);
+  // Zero iterations: positions unchanged, normals recomputed.
+  TestMesh z = icosphere(1);
+  z.n.assign(z.p.size(), 0.0f);
+  const std::vector<float> zp = z.p;
+  nbmc::mesh::smooth_mesh(z.p, z.n, z.t, 0);
+  EXPECT_EQ(z.p, zp);
+  EXPECT_GT(z.n[0] * z.p[0] + z.n[1] * z.p[1] + z.n[2] * z.p[2], 0.9f);
 }
 
 }  // namespace

@@ -8,8 +8,9 @@
 // inflating step x += mu * L(x), with L(x)_i the mean of (x_j - x_i) over the
 // vertices j joined to i by an edge (uniform weights). lambda = 0.5 and
 // mu = -0.53 give the pass-band frequency k_pb = 1/lambda + 1/mu = 0.113
-// (Taubin recommends 0.01-0.1 ... 0.1): low frequencies (the shape) pass,
-// the marching-cubes staircase is damped, and the volume barely shrinks.
+// (Taubin suggests 0.01 to 0.1): low frequencies (the shape) pass, the
+// marching-cubes staircase is damped, and the volume barely shrinks.
+// Droplets of a few vertices would shrink: see restore_small_components.
 #pragma once
 
 #include "mesh_check.hpp"
@@ -80,6 +81,59 @@ inline void face_normals_to_vertices(const float* positions, std::size_t nv, con
   }
 }
 
+// Taubin's analysis holds for shapes much larger than an edge; a droplet of
+// a few vertices is all "high frequency" and shrinks by about half per
+// iteration (a tetrahedron by 0.57). Components whose enclosed volume
+// changed by more than this fraction are scaled about their centroid back to
+// their volume (a component turned inside out gets its old positions back);
+// the others, the bulk of a fluid, are left as smoothed.
+constexpr double kSmoothRestoreVolume = 0.01;
+
+// x: smoothed positions (double), before: the positions before smoothing.
+inline void restore_small_components(const float* before, std::vector<double>& x, const std::uint32_t* tri,
+                                     std::size_t nt, std::size_t nv) {
+  detail::UnionFind uf(nv);
+  for (std::size_t t = 0; t < nt; ++t) {
+    uf.unite(tri[3 * t], tri[3 * t + 1]);
+    uf.unite(tri[3 * t], tri[3 * t + 2]);
+  }
+  std::vector<std::uint32_t> root(nv);
+  std::vector<double> count(nv, 0), c_old(3 * nv, 0), c_new(3 * nv, 0), v_old(nv, 0), v_new(nv, 0);
+  for (std::size_t v = 0; v < nv; ++v) {
+    const std::uint32_t r = root[v] = uf.find(std::uint32_t(v));
+    count[r] += 1;
+    for (int a = 0; a < 3; ++a) {
+      c_old[3 * r + a] += before[3 * v + a];
+      c_new[3 * r + a] += x[3 * v + a];
+    }
+  }
+  for (std::size_t v = 0; v < nv; ++v)
+    if (count[v] > 0)
+      for (int a = 0; a < 3; ++a) {
+        c_old[3 * v + a] /= count[v];
+        c_new[3 * v + a] /= count[v];
+      }
+  auto at = [](const std::vector<double>& c, std::uint32_t r) { return Vec3{c[3 * r], c[3 * r + 1], c[3 * r + 2]}; };
+  auto xs = [&](std::uint32_t v) { return Vec3{x[3 * v], x[3 * v + 1], x[3 * v + 2]}; };
+  for (std::size_t t = 0; t < nt; ++t) {
+    const std::uint32_t* i = tri + 3 * t;
+    const std::uint32_t r = root[i[0]];
+    const Vec3 co = at(c_old, r), cn = at(c_new, r);
+    v_old[r] += dot(load(before, i[0]) - co, cross(load(before, i[1]) - co, load(before, i[2]) - co)) / 6;
+    v_new[r] += dot(xs(i[0]) - cn, cross(xs(i[1]) - cn, xs(i[2]) - cn)) / 6;
+  }
+  for (std::size_t v = 0; v < nv; ++v) {
+    const std::uint32_t r = root[v];
+    if (!(v_old[r] > 0) || std::fabs(v_new[r] / v_old[r] - 1) <= kSmoothRestoreVolume) continue;
+    if (!(v_new[r] > 0)) {
+      for (int a = 0; a < 3; ++a) x[3 * v + a] = before[3 * v + a];
+      continue;
+    }
+    const double s = std::cbrt(v_old[r] / v_new[r]);
+    for (int a = 0; a < 3; ++a) x[3 * v + a] = c_new[3 * r + a] + s * (x[3 * v + a] - c_new[3 * r + a]);
+  }
+}
+
 struct SmoothResult {
   double volume_before = 0, volume_after = 0;  // enclosed volumes (see check_mesh)
 };
@@ -121,6 +175,7 @@ SmoothResult smooth_mesh(FloatVec& positions, FloatVec& normals, const IndexVec&
       step(lambda);
       step(mu);
     }
+    restore_small_components(positions.data(), x, triangles.data(), nt, nv);
     for (std::size_t i = 0; i < x.size(); ++i) positions[i] = float(x[i]);
   }
   r.volume_after = volume();
