@@ -106,13 +106,14 @@ TEST(MeshCheckCapi, Shapes) {
     }
 }
 
-// Random-jittered lattices (small shapes, many seeds, cells r and r/2):
+// Random-jittered lattices (small shapes, 60 seeds, cells r and r/2; the
+// 1000-seed version on pinched spheres is in test_mesh_postprocess.cpp):
 // the clean-up never opens or breaks the mesh, removes every bad triangle
 // the raw mesh has, and at most 1% of the triangles.
 TEST(MeshCleanupCapi, JitteredLatticesStayClosed) {
   Context c;
   std::uint64_t raw_bad = 0, clean_bad = 0, raw_tris = 0, clean_tris = 0;
-  for (unsigned seed = 1; seed <= 120; ++seed) {
+  for (unsigned seed = 1; seed <= 60; ++seed) {
     std::mt19937 rng(seed);
     std::uniform_real_distribution<double> u(-1, 1);
     const double radius = 2.5 + 2 * (u(rng) + 1);

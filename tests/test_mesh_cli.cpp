@@ -1,0 +1,90 @@
+// SPDX-License-Identifier: MIT
+// The command line's mesh post-processing options: --check (text and JSON
+// reports), --no-cleanup, --smooth.
+#include "cli_fixture.hpp"
+
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <string>
+
+namespace {
+
+namespace fs = std::filesystem;
+using nbmc_test::contains;
+using nbmc_test::quote;
+using nbmc_test::slurp;
+
+const std::string kFrame = std::string(NBMC_DATA_DIR) + "/xyz/splashsurf_dambreak_f23_24389.xyz";
+
+// The number after "key": in a JSON text, as a string ("" if absent); the
+// first occurrence after `after` (an object's key) when given.
+std::string json_value(const std::string& json, const std::string& key, const std::string& after = "") {
+  std::size_t pos = after.empty() ? 0 : json.find("\"" + after + "\"");
+  if (pos == std::string::npos) return "";
+  pos = json.find("\"" + key + "\"", pos);
+  if (pos == std::string::npos) return "";
+  pos = json.find(':', pos) + 1;
+  while (pos < json.size() && json[pos] == ' ') ++pos;
+  std::size_t end = pos;
+  while (end < json.size() && json[end] != ',' && json[end] != '}' && json[end] != '\n') ++end;
+  return json.substr(pos, end - pos);
+}
+
+class MeshCliTest : public nbmc_test::CliFixture {
+ protected:
+  MeshCliTest() : CliFixture("nbmc_mesh_cli_") {}
+};
+
+TEST_F(MeshCliTest, CheckCleanupSmooth) {
+  if (!fs::exists(kFrame)) GTEST_SKIP() << kFrame << " not found";
+  const std::string base = "reconstruct " + quote(kFrame) + " -o " + quote(path("m.ply")) +
+                           " --spacing 0.05 --progress never --check";
+  // Text report: the check's section, the post-processing line and stage.
+  nbmc_test::CliResult r = run(base);
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  for (const char* s : {"mesh check: closed yes, manifold yes, oriented yes", "cleaned up (93,296 triangles before)",
+                        "postprocess", "euler_characteristic", "min_angle_degrees", "volume"})
+    EXPECT_TRUE(contains(r.out, s)) << s << "\n" << r.out;
+
+  // JSON: raw mesh (--no-cleanup) against the default.
+  r = run(base + " --no-cleanup --json " + quote(path("raw.json")) + " -q");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const std::string raw = slurp(path("raw.json"));
+  r = run(base + " --json " + quote(path("clean.json")) + " -q");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const std::string clean = slurp(path("clean.json"));
+  EXPECT_EQ(json_value(raw, "cleanup"), "false") << raw;
+  EXPECT_EQ(json_value(clean, "cleanup"), "true") << clean;
+  for (const std::string* j : {&raw, &clean}) {
+    EXPECT_EQ(json_value(*j, "closed", "mesh_check"), "true") << *j;
+    EXPECT_EQ(json_value(*j, "manifold", "mesh_check"), "true");
+    EXPECT_EQ(json_value(*j, "oriented", "mesh_check"), "true");
+    EXPECT_EQ(json_value(*j, "euler_characteristic", "mesh_check"), "74");
+    EXPECT_EQ(json_value(*j, "raw_triangle_count"), "93296");
+  }
+  EXPECT_NE(json_value(raw, "sliver_triangle_count", "mesh_check"), "0");
+  EXPECT_EQ(json_value(clean, "sliver_triangle_count", "mesh_check"), "0");
+  EXPECT_EQ(json_value(clean, "degenerate_triangle_count", "mesh_check"), "0");
+  EXPECT_EQ(json_value(clean, "triangle_count", "mesh_check"), json_value(clean, "triangle_count", "counts"));
+  EXPECT_EQ(json_value(raw, "triangle_count", "counts"), "93296");
+  EXPECT_FALSE(contains(clean, "\"smoothing\"")) << clean;
+
+  // Smoothing: reported volume change, still a clean closed mesh.
+  r = run(base + " --smooth 5 --json " + quote(path("smooth.json")) + " -q");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const std::string smooth = slurp(path("smooth.json"));
+  EXPECT_EQ(json_value(smooth, "iterations", "smoothing"), "5") << smooth;
+  const double dv = std::stod(json_value(smooth, "volume_change", "smoothing"));
+  EXPECT_LT(std::abs(dv), 0.01);
+  EXPECT_NE(dv, 0.0);
+  EXPECT_EQ(json_value(smooth, "closed", "mesh_check"), "true");
+  EXPECT_EQ(json_value(smooth, "sliver_triangle_count", "mesh_check"), "0");
+
+  // Bad values are usage errors.
+  r = run(base + " --smooth -1");
+  EXPECT_EQ(r.exit_code, 2) << r.out << r.err;
+}
+
+}  // namespace
