@@ -1,13 +1,18 @@
 // SPDX-License-Identifier: MIT
 // The mesh post-processing section of include/nbmc.h: nbmc_mesh_check, and
 // the clean-up / smoothing hook of nbmc_context_reconstruct. Everything runs
-// on the host, serially, for every backend (device meshes are copied).
+// on the host, serially, for every backend (device meshes are copied to the
+// host and back).
 #include "capi_mesh.hpp"
 
 #include "backends.hpp"
 #include "core/mesh_check.hpp"
 #include "core/mesh_cleanup.hpp"
 #include "core/mesh_smooth.hpp"
+
+#if defined(KOKKOS_ENABLE_CUDA)
+#include <cuda_runtime.h>
+#endif
 
 #include <chrono>
 #include <cstring>
@@ -23,11 +28,10 @@ void check_postprocess_params(const nbmc_params& params) {
                                                   std::to_string(params.smooth_iterations) + ")");
 }
 
-mesh::PostprocessStats postprocess_mesh(const nbmc_params& params, HostMesh& m, RunStats& st) {
-  mesh::PostprocessStats ps;
-  ps.raw_triangles = m.triangle_count();
-  if (m.on_device || (!params.cleanup && params.smooth_iterations <= 0)) return ps;
-  const auto t0 = std::chrono::steady_clock::now();
+namespace {
+
+// The post-processing of a mesh in host memory.
+void postprocess_host(const nbmc_params& params, HostMesh& m, mesh::PostprocessStats& ps) {
   if (params.cleanup) {
     const mesh::CleanupResult c = mesh::cleanup_mesh(m.positions, m.normals, m.triangles);
     ps.collapses = c.collapses;
@@ -49,6 +53,44 @@ mesh::PostprocessStats postprocess_mesh(const nbmc_params& params, HostMesh& m, 
       ps.bad_after = c.bad_after;
     }
   }
+}
+
+// A mesh left in GPU memory: copied to the host, post-processed there, and
+// copied back into its own device arrays (the counts only shrink).
+void postprocess_device(const nbmc_params& params, HostMesh& m, mesh::PostprocessStats& ps) {
+  if (m.triangle_count() == 0) return;
+  HostMesh h;
+  h.positions.resize(3 * m.vertex_count());
+  h.normals.resize(m.d_normals ? h.positions.size() : 0);
+  h.triangles.resize(3 * m.triangle_count());
+  download_mesh(m, h.positions.data(), h.normals.empty() ? nullptr : h.normals.data(), h.triangles.data());
+  postprocess_host(params, h, ps);
+#if defined(KOKKOS_ENABLE_CUDA)
+  auto put = [](void* dst, const void* src, std::size_t bytes, const char* what) {
+    if (bytes && cudaMemcpy(dst, src, bytes, cudaMemcpyHostToDevice) != cudaSuccess) {
+      cudaGetLastError();
+      throw Error(NBMC_ERROR_INTERNAL, std::string("copying the post-processed mesh's ") + what + " to the GPU failed");
+    }
+  };
+  put(m.d_positions, h.positions.data(), h.positions.size() * sizeof(float), "positions");
+  if (m.d_normals) put(m.d_normals, h.normals.data(), h.normals.size() * sizeof(float), "normals");
+  put(m.d_triangles, h.triangles.data(), h.triangles.size() * sizeof(std::uint32_t), "triangles");
+  m.d_vertices = h.positions.size() / 3;
+  m.d_triangles_count = h.triangles.size() / 3;
+#else
+  throw Error(NBMC_ERROR_BACKEND_UNAVAILABLE, "the CUDA backend is not compiled in");
+#endif
+}
+
+}  // namespace
+
+mesh::PostprocessStats postprocess_mesh(const nbmc_params& params, HostMesh& m, RunStats& st) {
+  mesh::PostprocessStats ps;
+  ps.raw_triangles = m.triangle_count();
+  if (!params.cleanup && params.smooth_iterations <= 0) return ps;
+  const auto t0 = std::chrono::steady_clock::now();
+  if (m.on_device) postprocess_device(params, m, ps);
+  else postprocess_host(params, m, ps);
   const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   st.vertices = m.vertex_count();
   st.triangles = m.triangle_count();

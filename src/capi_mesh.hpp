@@ -16,8 +16,8 @@ void check_postprocess_params(const nbmc_params& params);
 
 // Cleans (params.cleanup) and smooths (params.smooth_iterations) the mesh on
 // the host, serially (the result depends only on the mesh), and updates the
-// counts and the NBMC_STAGE_POSTPROCESS time in st. Meshes left in device
-// memory are returned as they are.
+// counts and the NBMC_STAGE_POSTPROCESS time in st. A mesh left in device
+// memory is copied to the host for it and back into its device arrays.
 mesh::PostprocessStats postprocess_mesh(const nbmc_params& params, HostMesh& mesh, RunStats& st);
 
 }  // namespace nbmc
