@@ -245,6 +245,12 @@ typedef struct nbmc_params {
   int32_t reserved0;
   double bbox_min[3];
   double bbox_max[3];
+  /* Appended with the mesh post-processing (see "Mesh post-processing"
+     below): a caller built against a header without them passes the shorter
+     struct, and these fields keep their defaults. */
+  int32_t cleanup;          /* non-zero (default): remove degenerate and sliver triangles by edge
+                               collapses and flips; 0: the raw marching-cubes mesh */
+  int32_t smooth_iterations; /* Taubin lambda|mu smoothing steps after the clean-up; default 0 */
 } nbmc_params;
 
 /* Fills *params with the defaults (spacing is 0 and must be set). */
@@ -277,6 +283,11 @@ typedef struct nbmc_stats {
   double total_seconds;
   double grid_origin[3];
   double cell_size;                /* absolute */
+  /* Appended with the mesh post-processing (NBMC_STAGE_POSTPROCESS): a caller
+     built against a header without them passes the shorter struct and gets
+     the fields it has. */
+  uint64_t raw_triangle_count;     /* triangles of the marching-cubes mesh, before the clean-up */
+  double smoothing_volume_change;  /* enclosed volume after smoothing / before - 1; 0 without */
 } nbmc_stats;
 
 NBMC_API void nbmc_stats_init(nbmc_stats* stats);
@@ -356,6 +367,74 @@ NBMC_API const char* nbmc_last_error(void);
  * finalised at process exit. Returns NBMC_OK, or NBMC_ERROR_INVALID_ARGUMENT
  * while contexts are alive. */
 NBMC_API int32_t nbmc_kokkos_finalize(void);
+
+/* ------------------------------------------------------ mesh post-processing */
+/* nbmc_context_reconstruct post-processes the mesh on the host, for every
+ * backend, after the pipeline (a mesh left in GPU memory with
+ * NBMC_MEMORY_DEVICE is copied to the host for it and back into its device
+ * arrays), serially, so the result depends only on the raw mesh (same on
+ * every backend and thread count):
+ *  - clean-up (nbmc_params.cleanup, default on): every degenerate or sliver
+ *    triangle (as defined for nbmc_mesh_check) is repaired by collapsing one of
+ *    its edges or flipping its longest edge, keeping the mesh closed, manifold
+ *    and oriented (link condition checked before each collapse; no triangle
+ *    turns by 60 degrees or more; good triangles stay good). Those that no
+ *    repair can fix without folding the surface stay.
+ *  - smoothing (nbmc_params.smooth_iterations, default 0): Taubin's lambda|mu
+ *    filter (lambda = 0.5, mu = -0.53, uniform weights), each iteration one
+ *    lambda and one mu step; a component whose volume changed by more than
+ *    1% (a droplet of a few vertices, which the filter shrinks) is scaled
+ *    back to its volume about its centroid; normals are then recomputed from
+ *    the faces, and with the clean-up on, it runs once more.
+ * The time goes to stage NBMC_STAGE_POSTPROCESS of nbmc_stats, and the vertex
+ * and triangle counts there are those of the returned mesh. */
+#define NBMC_STAGE_POSTPROCESS 7  /* mesh clean-up and smoothing (host) */
+
+/* Topology and quality of a mesh (nbmc_mesh_check). Definitions:
+ *  - an edge is a pair of vertices joined by at least one triangle; boundary:
+ *    one triangle; non-manifold: three or more; misoriented: two triangles
+ *    that run along it in the same direction;
+ *  - a non-manifold vertex has triangles that form more than one fan around
+ *    it (two surfaces touching at a point);
+ *  - degenerate: area below 1e-12 times the square of the largest side of the
+ *    mesh's bounding box, or a vertex repeated; sliver: not degenerate, with
+ *    an angle below 1 degree;
+ *  - components: sets of triangles connected through shared edges. */
+typedef struct nbmc_mesh_check_result {
+  uint32_t struct_size;               /* sizeof(nbmc_mesh_check_result) */
+  int32_t closed;                     /* 1: every edge has exactly two triangles */
+  int32_t manifold;                   /* 1: no non-manifold edge or vertex */
+  int32_t oriented;                   /* 1: no misoriented edge */
+  uint64_t vertex_count;
+  uint64_t triangle_count;
+  uint64_t edge_count;
+  uint64_t boundary_edge_count;
+  uint64_t nonmanifold_edge_count;
+  uint64_t misoriented_edge_count;
+  uint64_t nonmanifold_vertex_count;
+  uint64_t unreferenced_vertex_count; /* vertices no triangle uses */
+  uint64_t degenerate_triangle_count;
+  uint64_t sliver_triangle_count;
+  uint64_t component_count;
+  int64_t euler_characteristic;       /* V - E + F, V counting the vertices triangles use
+                                         (2 per closed sphere-like component) */
+  double volume;                      /* enclosed volume (divergence theorem): positive when the
+                                         triangles are counter-clockwise seen from outside; taken
+                                         about the bounding box centre (matters if not closed) */
+  double area;                        /* total triangle area */
+  double min_angle_degrees;           /* smallest angle of a non-degenerate triangle (0 if none) */
+} nbmc_mesh_check_result;
+
+/* Fills *result with zeros and struct_size. */
+NBMC_API void nbmc_mesh_check_result_init(nbmc_mesh_check_result* result);
+
+/* Checks mesh (a device mesh is copied to the host first) and fills *result
+ * (initialise it with nbmc_mesh_check_result_init). Serial, on the host, a
+ * few hundred milliseconds per million triangles; the mesh is only read, so
+ * several threads may check one mesh at once. Returns NBMC_OK, or
+ * NBMC_ERROR_INVALID_ARGUMENT for a NULL pointer or a struct_size below
+ * sizeof(nbmc_mesh_check_result), NBMC_ERROR_OUT_OF_MEMORY. */
+NBMC_API int32_t nbmc_mesh_check(const nbmc_mesh* mesh, nbmc_mesh_check_result* result);
 
 #ifdef __cplusplus
 } /* extern "C" */

@@ -5,6 +5,7 @@
 #include "nbmc.h"
 
 #include "backends.hpp"
+#include "capi_mesh.hpp"
 #include "context.hpp"
 
 #include <algorithm>
@@ -14,6 +15,7 @@
 [[maybe_unused]] static int omp_get_max_threads() { return 1; }
 #endif
 #include <cmath>
+#include <cstddef>
 #include <cstring>
 #include <new>
 #include <sstream>
@@ -83,6 +85,7 @@ const char* nbmc_status_string(int32_t status) {
 const char* nbmc_stage_name(int32_t stage) {
   static const char* const names[NBMC_STAGE_COUNT] = {"upload", "neighbourhood", "surface particles", "band",
                                                       "field", "triangulation", "output"};
+  if (stage == NBMC_STAGE_POSTPROCESS) return "postprocess";
   return stage >= 0 && stage < NBMC_STAGE_COUNT ? names[stage] : nullptr;
 }
 
@@ -319,6 +322,7 @@ void nbmc_params_init(nbmc_params* p) {
   p->color_threshold = 0.75;
   p->neighbour_threshold = 25;
   p->compute_normals = 1;
+  p->cleanup = 1;
 }
 
 int32_t nbmc_context_reconstruct(nbmc_context* ctx, const nbmc_params* params, nbmc_mesh** mesh) {
@@ -327,10 +331,18 @@ int32_t nbmc_context_reconstruct(nbmc_context* ctx, const nbmc_params* params, n
   NBMC_CAPI_BEGIN(ctx)
   if (!params) throw Error(NBMC_ERROR_INVALID_ARGUMENT, "nbmc_context_reconstruct: params is NULL");
   if (!mesh) throw Error(NBMC_ERROR_INVALID_ARGUMENT, "nbmc_context_reconstruct: mesh is NULL");
-  if (params->struct_size < sizeof(nbmc_params))
+  // Callers built before `cleanup` was appended pass the shorter struct;
+  // the fields it lacks keep their defaults.
+  if (params->struct_size < offsetof(nbmc_params, cleanup))
     throw Error(NBMC_ERROR_INVALID_ARGUMENT, "nbmc_context_reconstruct: params->struct_size is " +
                                                  std::to_string(params->struct_size) +
                                                  "; fill the struct with nbmc_params_init()");
+  nbmc_params full;
+  nbmc_params_init(&full);
+  std::memcpy(&full, params, std::min<std::size_t>(params->struct_size, sizeof full));
+  full.struct_size = sizeof full;
+  params = &full;
+  nbmc::check_postprocess_params(full);
   if (ctx->particles.empty() && ctx->device_particles.count == 0)
     throw Error(NBMC_ERROR_NO_PARTICLES, "nbmc_context_reconstruct: no particles uploaded");
   const nbmc::Params p = nbmc::resolve_params(*params);
@@ -338,6 +350,7 @@ int32_t nbmc_context_reconstruct(nbmc_context* ctx, const nbmc_params* params, n
   auto m = std::make_unique<nbmc_mesh>();
   nbmc::RunStats st;
   nbmc::run_backend(*ctx, p, m->mesh, st);
+  ctx->postprocess = nbmc::postprocess_mesh(full, m->mesh, st);
   ctx->stats = st;
   ctx->has_stats = true;
   *mesh = m.release();
@@ -355,8 +368,14 @@ int32_t nbmc_context_stats(const nbmc_context* ctx, nbmc_stats* s) {
   if (!ctx) return NBMC_ERROR_INVALID_ARGUMENT;
   auto* c = const_cast<nbmc_context*>(ctx);
   if (!s) return fail(c, NBMC_ERROR_INVALID_ARGUMENT, "nbmc_context_stats: stats is NULL");
-  if (s->struct_size < sizeof(nbmc_stats))
+  // A caller built before the post-processing fields were appended passes
+  // the shorter struct; it gets the fields it has.
+  if (s->struct_size < offsetof(nbmc_stats, raw_triangle_count))
     return fail(c, NBMC_ERROR_INVALID_ARGUMENT, "nbmc_context_stats: fill the struct with nbmc_stats_init()");
+  nbmc_stats* const caller = s;
+  const std::size_t caller_size = std::min<std::size_t>(s->struct_size, sizeof(nbmc_stats));
+  nbmc_stats full;
+  s = &full;
   if (!ctx->has_stats)
     return fail(c, NBMC_ERROR_NO_PARTICLES, "nbmc_context_stats: no reconstruction has succeeded on this context yet");
   c->last_error.clear();
@@ -380,6 +399,10 @@ int32_t nbmc_context_stats(const nbmc_context* ctx, nbmc_stats* s) {
   for (int i = 0; i < NBMC_STAGE_SLOTS; ++i) s->stage_seconds[i] = st.stage[i];
   s->total_seconds = st.total;
   s->cell_size = st.cell;
+  s->raw_triangle_count = ctx->postprocess.raw_triangles;
+  s->smoothing_volume_change = ctx->postprocess.volume_change;
+  std::memcpy(caller, &full, caller_size);
+  caller->struct_size = uint32_t(caller_size);
   return NBMC_OK;
 }
 

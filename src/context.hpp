@@ -6,6 +6,7 @@
 
 #include "../backends/kokkos/common.hpp"
 #include "../backends/kokkos/pipeline.hpp"
+#include "core/mesh_postprocess.hpp"
 
 #include <memory>
 #include <new>
@@ -42,6 +43,7 @@ struct nbmc_context {
   nbmc::MemoryTracker memory;
   std::uint64_t peak_memory = 0;
   nbmc::RunStats stats;
+  nbmc::mesh::PostprocessStats postprocess;  // of the last reconstruction (capi_mesh.cpp)
   bool has_stats = false;
 };
 

@@ -110,6 +110,7 @@ module nbmc
   integer(c_int32_t), parameter, public :: NBMC_STAGE_OUTPUT            = 6
   integer(c_int32_t), parameter, public :: NBMC_STAGE_COUNT             = 7
   integer(c_int32_t), parameter, public :: NBMC_STAGE_SLOTS             = 16
+  integer(c_int32_t), parameter, public :: NBMC_STAGE_POSTPROCESS       = 7
 
   ! ---------------------------------------------------------------- handles
   ! The component is public for calls this module does not wrap; leave it
@@ -153,6 +154,8 @@ module nbmc
     integer(c_int32_t) :: reserved0 = 0
     real(c_double)     :: bbox_min(3) = 0
     real(c_double)     :: bbox_max(3) = 0
+    integer(c_int32_t) :: cleanup = 0             ! appended (post-processing)
+    integer(c_int32_t) :: smooth_iterations = 0
   end type nbmc_params
 
   type, bind(c), public :: nbmc_stats
@@ -174,6 +177,8 @@ module nbmc
     real(c_double)     :: total_seconds = 0
     real(c_double)     :: grid_origin(3) = 0
     real(c_double)     :: cell_size = 0
+    integer(c_int64_t) :: raw_triangle_count = 0  ! appended (post-processing)
+    real(c_double)     :: smoothing_volume_change = 0
   end type nbmc_stats
 
   ! Signature of a progress callback (nbmc_progress_fn); pass c_funloc(f).

@@ -12,7 +12,7 @@ import ctypes.util
 import os
 import sys
 from ctypes import (CFUNCTYPE, POINTER, Structure, c_char_p, c_double, c_int32,
-                    c_uint32, c_uint64, c_void_p)
+                    c_int64, c_uint32, c_uint64, c_void_p)
 from pathlib import Path
 from typing import List, Optional
 
@@ -61,6 +61,7 @@ STAGE_TRIANGULATION = 5
 STAGE_OUTPUT = 6
 STAGE_COUNT = 7
 STAGE_SLOTS = 16
+STAGE_POSTPROCESS = 7
 
 
 # ----------------------------------------------------------------- structs
@@ -96,6 +97,9 @@ class Params(Structure):
         ("reserved0", c_int32),
         ("bbox_min", c_double * 3),
         ("bbox_max", c_double * 3),
+        # appended with the mesh post-processing (nbmc_params_init writes them)
+        ("cleanup", c_int32),
+        ("smooth_iterations", c_int32),
     ]
 
 
@@ -119,6 +123,33 @@ class Stats(Structure):
         ("total_seconds", c_double),
         ("grid_origin", c_double * 3),
         ("cell_size", c_double),
+        # appended with the mesh post-processing
+        ("raw_triangle_count", c_uint64),
+        ("smoothing_volume_change", c_double),
+    ]
+
+
+class MeshCheckResult(Structure):
+    _fields_ = [
+        ("struct_size", c_uint32),
+        ("closed", c_int32),
+        ("manifold", c_int32),
+        ("oriented", c_int32),
+        ("vertex_count", c_uint64),
+        ("triangle_count", c_uint64),
+        ("edge_count", c_uint64),
+        ("boundary_edge_count", c_uint64),
+        ("nonmanifold_edge_count", c_uint64),
+        ("misoriented_edge_count", c_uint64),
+        ("nonmanifold_vertex_count", c_uint64),
+        ("unreferenced_vertex_count", c_uint64),
+        ("degenerate_triangle_count", c_uint64),
+        ("sliver_triangle_count", c_uint64),
+        ("component_count", c_uint64),
+        ("euler_characteristic", c_int64),
+        ("volume", c_double),
+        ("area", c_double),
+        ("min_angle_degrees", c_double),
     ]
 
 
@@ -162,6 +193,8 @@ _SIGNATURES = {
     "nbmc_mesh_write": (c_int32, [_mesh_p, c_char_p, c_char_p]),
     "nbmc_last_error": (c_char_p, []),
     "nbmc_kokkos_finalize": (c_int32, []),
+    "nbmc_mesh_check_result_init": (None, [POINTER(MeshCheckResult)]),
+    "nbmc_mesh_check": (c_int32, [_mesh_p, POINTER(MeshCheckResult)]),
 }
 
 _NAMES = ("libnbmc.so.0", "libnbmc.so") if sys.platform.startswith("linux") else (

@@ -84,6 +84,8 @@ struct Options {
   std::string method, field, backend;
   std::vector<double> bbox;
   bool no_normals = false;
+  bool no_cleanup = false;  // --no-cleanup
+  bool check = false;       // --check
   bool quiet = false;
   std::string progress = "auto";
   bool json = false;
@@ -384,6 +386,12 @@ int reconstruct(Options& o) {
   st = nbmc_context_stats(ctx.get(), &report.stats);
   if (st != NBMC_OK) return library_error(st, nbmc_context_last_error(ctx.get()));
   report.params = o.params;
+  if (o.check) {
+    nbmc_mesh_check_result_init(&report.check);
+    st = nbmc_mesh_check(mesh.get(), &report.check);
+    if (st != NBMC_OK) return library_error(st, "nbmc_mesh_check failed");
+    report.has_check = true;
+  }
   if (cli::interrupted()) return cancelled(progress);
 
   // Write the mesh.
@@ -442,16 +450,19 @@ int main(int argc, char** argv) {
       "reconstruct", "Reconstruct the surface of a particle file and write a triangle mesh.");
   rec->footer(
       "Lengths are multiples of the spacing unless stated. The mesh format follows OUT's extension (.ply: binary "
-      "PLY, .obj: Wavefront OBJ, .vtk: legacy VTK, .vtu: VTK XML, .glb: glTF binary). Sequences: "
+      "PLY, .obj: Wavefront OBJ, .vtk: legacy VTK, .vtu/.vtp: VTK XML, .glb: glTF binary, .h5: HDF5 with an "
+      ".xdmf descriptor). Sequences: "
       "'frames/f_{}.bgeo' -o 'out/s_{}.ply' reconstructs every matching file in numeric order; a multi-step "
-      "H5Part file with -o 'out/s_{}.glb' every step. Exit codes: 0 ok, 1 error (or a failed frame), 2 usage, "
+      "H5Part file with -o 'out/s_{}.glb' every step; -o 'out/s_{}.h5' writes all frames into out/s.h5 (one "
+      "group each) with a temporal out/s.xdmf. Exit codes: 0 ok, 1 error (or a failed frame), 2 usage, "
       "130 cancelled (Ctrl-C).");
   rec->add_option("input", o.input,
                   "Particle file (.xyz .ply .vtk .vtu .vtp .bgeo[.gz] .h5part .h5 .hdf5; FILE.h5:/object); "
                   "{} in the name: a numbered sequence")
       ->required()
       ->option_text("IN");
-  rec->add_option("-o,--output", o.output, "Mesh to write (.ply .obj .vtk .vtu .glb); {} in the name: per frame")
+  rec->add_option("-o,--output", o.output,
+                  "Mesh to write (.ply .obj .vtk .vtu .vtp .glb .h5); {} in the name: per frame")
       ->required()
       ->option_text("OUT");
   auto* sp = rec->add_option("--spacing", o.spacing, "Particle spacing r (absolute); this or --particle-radius")
@@ -484,6 +495,14 @@ int main(int argc, char** argv) {
                   "Fewer neighbours than this within the surface radius: surface particle")
       ->capture_default_str();
   rec->add_flag("--no-normals", o.no_normals, "Do not compute vertex normals");
+  rec->add_flag("--no-cleanup", o.no_cleanup,
+                "Keep the raw marching-cubes mesh (no removal of degenerate and sliver triangles)");
+  rec->add_option("--smooth", p.smooth_iterations,
+                  "Taubin smoothing iterations after the clean-up (lambda 0.5, mu -0.53)")
+      ->check(CLI::Range(0, 100000))
+      ->capture_default_str();
+  rec->add_flag("--check", o.check,
+                "Check the mesh (closed, manifold, oriented, bad triangles, components, volume) and report it");
   rec->add_option("--bbox", o.bbox, "Only reconstruct inside this box (absolute)")
       ->expected(6)
       ->option_text("XMIN YMIN ZMIN XMAX YMAX ZMAX");
@@ -539,6 +558,7 @@ int main(int argc, char** argv) {
   p.field = value_of(kFields, o.field);
   o.desc.backend = value_of(kBackends, o.backend);
   if (o.no_normals) p.compute_normals = 0;
+  if (o.no_cleanup) p.cleanup = 0;
   if (!o.bbox.empty()) {
     p.use_bbox = 1;
     for (int i = 0; i < 3; ++i) {
@@ -562,7 +582,7 @@ int main(int argc, char** argv) {
       } catch (const nbmc::io::Error&) {
       }
       if (fmt == "obj") {
-        std::fputs("nbmc: error: OBJ has no place for vertex attributes; write .ply, .vtk, .vtu or .glb with "
+        std::fputs("nbmc: error: OBJ has no place for vertex attributes; write .ply, .vtk, .vtu, .vtp, .glb or .h5 with "
                    "--attributes\n",
                    stderr);
         return 2;

@@ -57,6 +57,7 @@ std::vector<std::pair<std::string, double>> timings(const Report& r) {
   std::vector<std::pair<std::string, double>> rows;
   rows.emplace_back("read", r.read_seconds);
   for (int i = 0; i < NBMC_STAGE_COUNT; ++i) rows.emplace_back(stage_label(i), r.stats.stage_seconds[i]);
+  rows.emplace_back(stage_label(NBMC_STAGE_POSTPROCESS), r.stats.stage_seconds[NBMC_STAGE_POSTPROCESS]);
   rows.emplace_back("write", r.write_seconds);
   return rows;
 }
@@ -71,8 +72,26 @@ std::vector<std::pair<const char*, std::uint64_t>> counts(const nbmc_stats& s) {
           {"triangulated_cell_count", s.triangulated_cell_count},
           {"vertex_count", s.vertex_count},
           {"triangle_count", s.triangle_count},
+          {"raw_triangle_count", s.raw_triangle_count},
           {"neighbour_evaluations", s.neighbour_evaluations}};
 }
+
+// The mesh check's counts, by their JSON names.
+std::vector<std::pair<const char*, std::uint64_t>> check_counts(const nbmc_mesh_check_result& c) {
+  return {{"vertex_count", c.vertex_count},
+          {"triangle_count", c.triangle_count},
+          {"edge_count", c.edge_count},
+          {"boundary_edge_count", c.boundary_edge_count},
+          {"nonmanifold_edge_count", c.nonmanifold_edge_count},
+          {"misoriented_edge_count", c.misoriented_edge_count},
+          {"nonmanifold_vertex_count", c.nonmanifold_vertex_count},
+          {"unreferenced_vertex_count", c.unreferenced_vertex_count},
+          {"degenerate_triangle_count", c.degenerate_triangle_count},
+          {"sliver_triangle_count", c.sliver_triangle_count},
+          {"component_count", c.component_count}};
+}
+
+const char* yes_no(std::int32_t v) { return v ? "yes" : "no"; }
 
 const char* method_name(std::int32_t m) { return m == NBMC_METHOD_ZB05 ? "zb05" : "ssp07"; }
 const char* field_name(std::int32_t f) {
@@ -145,6 +164,12 @@ std::string format_report(const Report& r) {
   }
   line("backend", r.backend);
   line("method", std::string(method_name(r.params.method)) + ", " + field_name(r.params.field) + " field");
+  line("mesh", (r.params.cleanup ? "cleaned up (" + grouped(s.raw_triangle_count) + " triangles before)"
+                                  : std::string("raw (no clean-up)")) +
+                   (r.params.smooth_iterations > 0
+                        ? ", " + std::to_string(r.params.smooth_iterations) + " smoothing iterations (volume " +
+                              printf_string("%+.3f%%", 100.0 * s.smoothing_volume_change) + ")"
+                        : std::string()));
   line("spacing", printf_string("%g", r.params.spacing) + " (cell size " + printf_string("%g", s.cell_size) + ")");
   line("grid", grouped(s.grid_dims[0]) + " x " + grouped(s.grid_dims[1]) + " x " + grouped(s.grid_dims[2]) +
                    " vertices, origin (" + printf_string("%g", s.grid_origin[0]) + ", " +
@@ -178,6 +203,24 @@ std::string format_report(const Report& r) {
     std::snprintf(buf, sizeof buf, "  %-20s %16s\n", name, grouped(v).c_str());
     o += buf;
   }
+  if (r.has_check) {
+    const nbmc_mesh_check_result& c = r.check;
+    o += "\nmesh check: closed " + std::string(yes_no(c.closed)) + ", manifold " + yes_no(c.manifold) +
+         ", oriented " + yes_no(c.oriented) + "\n";
+    for (const auto& [name, v] : check_counts(c)) {
+      std::snprintf(buf, sizeof buf, "  %-26s %16s\n", name, grouped(v).c_str());
+      o += buf;
+    }
+    std::snprintf(buf, sizeof buf, "  %-26s %16lld\n", "euler_characteristic",
+                  static_cast<long long>(c.euler_characteristic));
+    o += buf;
+    std::snprintf(buf, sizeof buf, "  %-26s %16.6g\n", "volume", c.volume);
+    o += buf;
+    std::snprintf(buf, sizeof buf, "  %-26s %16.6g\n", "area", c.area);
+    o += buf;
+    std::snprintf(buf, sizeof buf, "  %-26s %16.4f\n", "min_angle_degrees", c.min_angle_degrees);
+    o += buf;
+  }
   o += "\npeak memory: nbmc " + mib(s.peak_memory_bytes) + ", process RSS " + mib(r.peak_rss_bytes) + "\n";
   return o;
 }
@@ -208,6 +251,8 @@ std::string format_json(const Report& r) {
   o += ", \"field\": " + json_string(field_name(p.field));
   o += ", \"neighbour_threshold\": " + std::to_string(p.neighbour_threshold);
   o += std::string(", \"compute_normals\": ") + (p.compute_normals ? "true" : "false");
+  o += std::string(", \"cleanup\": ") + (p.cleanup ? "true" : "false");
+  o += ", \"smooth_iterations\": " + std::to_string(p.smooth_iterations);
   if (p.use_bbox) {
     o += ", \"bbox\": [";
     for (int i = 0; i < 6; ++i) o += (i ? ", " : "") + json_number(i < 3 ? p.bbox_min[i] : p.bbox_max[i - 3]);
@@ -238,6 +283,18 @@ std::string format_json(const Report& r) {
     first = false;
   }
   o += "},\n";
+  if (p.smooth_iterations > 0)
+    o += "  \"smoothing\": {\"iterations\": " + std::to_string(p.smooth_iterations) +
+         ", \"volume_change\": " + json_number(s.smoothing_volume_change) + "},\n";
+  if (r.has_check) {
+    const nbmc_mesh_check_result& c = r.check;
+    o += std::string("  \"mesh_check\": {\"closed\": ") + (c.closed ? "true" : "false") +
+         ", \"manifold\": " + (c.manifold ? "true" : "false") + ", \"oriented\": " + (c.oriented ? "true" : "false");
+    for (const auto& [name, v] : check_counts(c)) o += std::string(", \"") + name + "\": " + std::to_string(v);
+    o += ", \"euler_characteristic\": " + std::to_string(c.euler_characteristic) +
+         ", \"volume\": " + json_number(c.volume) + ", \"area\": " + json_number(c.area) +
+         ", \"min_angle_degrees\": " + json_number(c.min_angle_degrees) + "},\n";
+  }
   o += "  \"memory\": {\"peak_memory_bytes\": " + std::to_string(s.peak_memory_bytes) +
        ", \"peak_rss_bytes\": " + std::to_string(r.peak_rss_bytes) + "}\n";
   o += "}\n";

@@ -24,6 +24,8 @@ struct Report {
   bool normals = false;  // the mesh has normals
   std::vector<std::string> attributes; // interpolated onto the vertices
   double interpolate_seconds = 0;
+  bool has_check = false;             // --check
+  nbmc_mesh_check_result check{};     // of the written mesh
   double read_seconds = 0;
   double write_seconds = 0;
   double total_seconds = 0; // wall clock of the whole command

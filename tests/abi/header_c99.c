@@ -66,7 +66,9 @@ int main(void) {
   CHECK(strcmp(nbmc_status_string(100000), "unknown status") == 0);
   for (s = 0; s < NBMC_STAGE_COUNT; ++s) CHECK(nbmc_stage_name(s) != NULL);
   CHECK(nbmc_stage_name(-1) == NULL);
-  CHECK(nbmc_stage_name(NBMC_STAGE_COUNT) == NULL);
+  /* The post-processing stage (host) comes after the pipeline's stages. */
+  CHECK(strcmp(nbmc_stage_name(NBMC_STAGE_POSTPROCESS), "postprocess") == 0);
+  CHECK(nbmc_stage_name(NBMC_STAGE_POSTPROCESS + 1) == NULL);
   CHECK(nbmc_backend_available(NBMC_BACKEND_SERIAL) == 1);
   CHECK(nbmc_backend_available(NBMC_BACKEND_AUTO) == 1);
   CHECK(nbmc_backend_available(-1) == 0);

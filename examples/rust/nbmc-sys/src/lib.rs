@@ -68,6 +68,7 @@ pub const NBMC_STAGE_TRIANGULATION: i32 = 5;
 pub const NBMC_STAGE_OUTPUT: i32 = 6;
 pub const NBMC_STAGE_COUNT: i32 = 7;
 pub const NBMC_STAGE_SLOTS: usize = 16;
+pub const NBMC_STAGE_POSTPROCESS: i32 = 7;
 
 // ------------------------------------------------------------- opaque types
 /// `nbmc_context`: never constructed in Rust, only pointed to.
@@ -119,6 +120,9 @@ pub struct nbmc_params {
     pub reserved0: i32,
     pub bbox_min: [f64; 3],
     pub bbox_max: [f64; 3],
+    // appended with the mesh post-processing
+    pub cleanup: i32,
+    pub smooth_iterations: i32,
 }
 
 #[repr(C)]
@@ -142,6 +146,33 @@ pub struct nbmc_stats {
     pub total_seconds: f64,
     pub grid_origin: [f64; 3],
     pub cell_size: f64,
+    // appended with the mesh post-processing
+    pub raw_triangle_count: u64,
+    pub smoothing_volume_change: f64,
+}
+
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct nbmc_mesh_check_result {
+    pub struct_size: u32,
+    pub closed: i32,
+    pub manifold: i32,
+    pub oriented: i32,
+    pub vertex_count: u64,
+    pub triangle_count: u64,
+    pub edge_count: u64,
+    pub boundary_edge_count: u64,
+    pub nonmanifold_edge_count: u64,
+    pub misoriented_edge_count: u64,
+    pub nonmanifold_vertex_count: u64,
+    pub unreferenced_vertex_count: u64,
+    pub degenerate_triangle_count: u64,
+    pub sliver_triangle_count: u64,
+    pub component_count: u64,
+    pub euler_characteristic: i64,
+    pub volume: f64,
+    pub area: f64,
+    pub min_angle_degrees: f64,
 }
 
 /// `int32_t (*)(void* user, int32_t stage, double fraction)`; `None` is NULL.
@@ -224,4 +255,8 @@ extern "C" {
 
     // Kokkos
     pub fn nbmc_kokkos_finalize() -> i32;
+
+    // mesh post-processing
+    pub fn nbmc_mesh_check_result_init(result: *mut nbmc_mesh_check_result);
+    pub fn nbmc_mesh_check(mesh: *const nbmc_mesh, result: *mut nbmc_mesh_check_result) -> i32;
 }

@@ -72,6 +72,7 @@ fn rust_constants() -> BTreeMap<&'static str, i128> {
         NBMC_STAGE_OUTPUT,
         NBMC_STAGE_COUNT,
         NBMC_STAGE_SLOTS,
+        NBMC_STAGE_POSTPROCESS,
     ]
 }
 
@@ -130,7 +131,9 @@ fn rust_layouts() -> Vec<Layout> {
             use_bbox,
             reserved0,
             bbox_min,
-            bbox_max
+            bbox_max,
+            cleanup,
+            smooth_iterations
         }),
         layout!(nbmc_stats {
             struct_size,
@@ -150,7 +153,30 @@ fn rust_layouts() -> Vec<Layout> {
             stage_seconds,
             total_seconds,
             grid_origin,
-            cell_size
+            cell_size,
+            raw_triangle_count,
+            smoothing_volume_change
+        }),
+        layout!(nbmc_mesh_check_result {
+            struct_size,
+            closed,
+            manifold,
+            oriented,
+            vertex_count,
+            triangle_count,
+            edge_count,
+            boundary_edge_count,
+            nonmanifold_edge_count,
+            misoriented_edge_count,
+            nonmanifold_vertex_count,
+            unreferenced_vertex_count,
+            degenerate_triangle_count,
+            sliver_triangle_count,
+            component_count,
+            euler_characteristic,
+            volume,
+            area,
+            min_angle_degrees
         }),
     ]
 }
