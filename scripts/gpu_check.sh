@@ -30,7 +30,7 @@ step() { echo; echo "== $*"; }
 if want build; then
   step "build (Kokkos CUDA + nbmc CUDA variant)"
   t0=$(date +%s)
-  NBMC_CUDA_CMAKE_ARGS="-DNBMC_BUILD_TESTS=OFF -DNBMC_BUILD_CLI=OFF ${NBMC_CUDA_CMAKE_ARGS:-}" \
+  NBMC_CUDA_CMAKE_ARGS="-DNBMC_BUILD_TESTS=OFF ${NBMC_CUDA_CMAKE_ARGS:-}" \
     NBMC_JOBS=${NBMC_JOBS:-$(nproc)} "$ROOT/scripts/setup.sh" --cuda-only >"$OUT/build.log" 2>&1 ||
     { tail -50 "$OUT/build.log"; exit 1; }
   echo "built in $(( $(date +%s) - t0 )) s"

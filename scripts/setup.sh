@@ -56,7 +56,8 @@ as_root() {
 
 # ---------------------------------------------------------------- 1. packages
 APT_PACKAGES=(build-essential cmake ninja-build pkg-config zlib1g-dev libhdf5-dev
-              libgtest-dev libcli11-dev gfortran patch xz-utils)
+              libgtest-dev libcli11-dev gfortran patch xz-utils
+              libopenmpi-dev openmpi-bin cargo)
 install_packages() {
   [ "$SKIP_APT" = 1 ] && return 0
   command -v dpkg-query >/dev/null || { say "not a Debian system: skipping apt"; return 0; }
@@ -168,10 +169,15 @@ if [ "$WITH_CUDA" = 1 ]; then build_kokkos cuda; KOKKOS_CUDA=$KOKKOS_PREFIX; fi
 if [ "$CUDA_ONLY" = 0 ]; then
   build_nbmc "$BUILD" "$KOKKOS_OPENMP" -DNBMC_BUILD_CLI=ON -DNBMC_BUILD_TESTS=ON -DNBMC_BUILD_BENCH=ON
   say "nbmc installed in $BUILD/install (command: $BUILD/install/bin/nbmc)"
+  # The Python package, for Debian's /usr/bin/python3 (offline: no downloads).
+  if [ "${NBMC_SKIP_PYTHON:-0}" != 1 ]; then
+    NBMC_SKIP_APT=$SKIP_APT "$ROOT/scripts/setup_python.sh" "$BUILD/install"
+  fi
 fi
 if [ "$WITH_CUDA" = 1 ]; then
-  # The CUDA variant: library, benchmark and GPU checks. Tests and CLI need
-  # Debian's GoogleTest/CLI11, which GPU machines may lack: NBMC_CUDA_CMAKE_ARGS.
+  # The CUDA variant: library, CLI (CLI11 from third_party/ when the system
+  # has none), benchmark and GPU checks. Tests need Debian's GoogleTest, which
+  # GPU machines may lack: NBMC_CUDA_CMAKE_ARGS=-DNBMC_BUILD_TESTS=OFF.
   build_nbmc "${NBMC_CUDA_BUILD_DIR:-$ROOT/build-cuda}" "$KOKKOS_CUDA" \
     -DCMAKE_CXX_COMPILER="$KOKKOS_SRC/bin/nvcc_wrapper" ${NBMC_CUDA_CMAKE_ARGS:-}
   say "CUDA variant built in ${NBMC_CUDA_BUILD_DIR:-$ROOT/build-cuda}"

@@ -13,3 +13,6 @@ if [ -x "$ROOT/scripts/run_examples.sh" ]; then
   echo "== consumers (C, Rust, Fortran)"
   "$ROOT/scripts/run_examples.sh" "$BUILD/install"
 fi
+echo "== Python package (pytest)"
+"$ROOT/scripts/test_python.sh" "$BUILD/install"
+
