@@ -436,6 +436,71 @@ NBMC_API void nbmc_mesh_check_result_init(nbmc_mesh_check_result* result);
  * sizeof(nbmc_mesh_check_result), NBMC_ERROR_OUT_OF_MEMORY. */
 NBMC_API int32_t nbmc_mesh_check(const nbmc_mesh* mesh, nbmc_mesh_check_result* result);
 
+/* ------------------------------------------------------------------------
+ * Subdomains: one frame reconstructed in pieces (docs/scale-out.md).
+ *
+ * The frame's cells are split into nx * ny * nz boxes; each is reconstructed
+ * with its particles and a ghost layer wide enough that every vertex it
+ * computes sees what it would see in the whole frame, one box after another
+ * on the context's backend (so at most one box's working memory is held on
+ * the GPU), and the pieces are stitched. The mesh is the same as without
+ * subdomains, bit for bit (positions, normals, triangle order). Particles in
+ * device memory are copied to the host first; a device mesh
+ * (NBMC_MEMORY_DEVICE) is copied back to the device after stitching. Only
+ * the narrow-band field can be split (NBMC_FIELD_DENSE/SCATTER give
+ * NBMC_ERROR_INVALID_PARAMETER).
+ * ---------------------------------------------------------------------- */
+#define NBMC_SUBDOMAINS_AUTO (-1)
+
+/* nx, ny, nz >= 1 (1, 1, 1: no split, the default), or nx ==
+ * NBMC_SUBDOMAINS_AUTO (ny, nz ignored): split only when the estimated memory
+ * of the frame exceeds 60% of the memory budget (nbmc_context_set_memory_budget;
+ * on a CUDA context without one, 80% of the GPU's free memory), into as many
+ * subdomains as the estimate asks, and further if one still exceeds the
+ * budget. Applies to the following reconstructions. Returns NBMC_OK or
+ * NBMC_ERROR_INVALID_ARGUMENT. */
+NBMC_API int32_t nbmc_context_set_subdomains(nbmc_context* ctx, int32_t nx, int32_t ny, int32_t nz);
+
+typedef struct nbmc_subdomain_stats {
+  uint32_t struct_size;      /* sizeof(nbmc_subdomain_stats) */
+  int32_t parts[3];          /* subdomains per axis; 1, 1, 1 when the frame was not split */
+  uint64_t count;            /* parts[0] * parts[1] * parts[2]; 0 when not split */
+  uint32_t automatic;        /* 1 if NBMC_SUBDOMAINS_AUTO chose the split */
+  uint32_t reserved;
+  double ghost_width;        /* ghost layer beyond a subdomain's cells (absolute, largest axis) */
+  uint64_t ghost_particles;  /* particles read as ghosts, summed over the subdomains */
+  uint64_t reruns;           /* subdomain runs repeated because a neighbour's band grew into them */
+  uint64_t exchanged_cells;  /* band cells passed between subdomains */
+  uint64_t shared_vertices;  /* vertices on shared faces, merged by the stitching */
+  uint64_t budget_bytes;     /* the budget NBMC_SUBDOMAINS_AUTO sized for (0: explicit split) */
+  double stitch_seconds;
+} nbmc_subdomain_stats;
+
+typedef struct nbmc_subdomain_entry {
+  uint32_t struct_size;      /* sizeof(nbmc_subdomain_entry) */
+  int32_t coord[3];          /* position in the subdomain grid */
+  int64_t cell_lo[3];        /* owned marching-cubes cells [cell_lo, cell_hi) */
+  int64_t cell_hi[3];
+  uint64_t particles;        /* particles in its cells */
+  uint64_t ghost_particles;  /* particles it read from around its cells */
+  uint64_t vertex_count;     /* of its piece (shared vertices counted in each piece) */
+  uint64_t triangle_count;
+  uint32_t runs;             /* 1, or more when it ran again */
+  int32_t rank;              /* the MPI rank that ran it (0 without MPI) */
+  double seconds;
+} nbmc_subdomain_entry;
+
+/* Fill *out with zeros and struct_size. */
+NBMC_API void nbmc_subdomain_stats_init(nbmc_subdomain_stats* out);
+NBMC_API void nbmc_subdomain_entry_init(nbmc_subdomain_entry* out);
+
+/* How the last successful reconstruction was split. NBMC_ERROR_NO_PARTICLES
+ * before any succeeded. */
+NBMC_API int32_t nbmc_context_subdomain_stats(const nbmc_context* ctx, nbmc_subdomain_stats* out);
+/* Subdomain i (0 <= i < count) of the last successful reconstruction;
+ * NBMC_ERROR_INVALID_ARGUMENT when i is out of range. */
+NBMC_API int32_t nbmc_context_subdomain_entry(const nbmc_context* ctx, uint64_t i, nbmc_subdomain_entry* out);
+
 #ifdef __cplusplus
 } /* extern "C" */
 #endif

@@ -1,5 +1,6 @@
 // SPDX-License-Identifier: MIT
 #include "backends.hpp"
+#include "subdomains.hpp"
 
 #include <Kokkos_Core.hpp>
 
@@ -304,8 +305,8 @@ Params resolve_params(const nbmc_params& in) {
   require(p.surface_radius <= 2 * p.influence_radius,
           "surface_radius may be at most twice the influence radius (got " + num(p.surface_radius) + " and " +
               num(p.influence_radius) + ")");
-  p.method = in.method;
-  p.field = in.field;
+  p.method = Method(in.method);
+  p.field = FieldKind(in.field);
   p.t_low = in.t_low;
   p.t_high = in.t_high;
   p.color_threshold = in.color_threshold;
@@ -383,7 +384,8 @@ void run_backend(nbmc_context& ctx, const Params& p, HostMesh& mesh, RunStats& s
     in.count = ctx.particles.size() / 3;
   }
   const bool mesh_on_device = ctx.mesh_memory == NBMC_MEMORY_DEVICE;
-  auto job = [&]() {
+  // One reconstruction (a frame, or a subdomain of one) on the context's backend.
+  auto run_one = [&](const ParticleInput& in, const Params& p, bool mesh_on_device, HostMesh& mesh, RunStats& st) {
     switch (ctx.backend) {
       case NBMC_BACKEND_SERIAL: reconstruct_serial(in, p, ctx.memory, progress, mesh, st); break;
       case NBMC_BACKEND_OPENMP: {
@@ -412,6 +414,30 @@ void run_backend(nbmc_context& ctx, const Params& p, HostMesh& mesh, RunStats& s
       case NBMC_BACKEND_CUDA: reconstruct_cuda(in, p, ctx.memory, progress, mesh_on_device, mesh, st, ctx.device_id); break;
       default: throw Error(NBMC_ERROR_BACKEND_UNAVAILABLE, "backend not available");
     }
+  };
+  ctx.subdomain_report = SubdomainReport();
+  auto job = [&]() {
+    if (ctx.subdomains.split()) {
+      // Subdomains work on host positions: particles in device memory are
+      // copied to the host first (the GPU then holds one subdomain at a time).
+      ParticleVector host;
+      const double* xyz = in.xyz;
+      if (in.on_device) {
+        host.resize(3 * in.count);
+        download_particles(in.xyz, in.count, host.data());
+        xyz = host.data();
+      }
+      std::uint64_t budget = ctx.memory.budget;
+      if (!budget && ctx.backend == NBMC_BACKEND_CUDA) budget = cuda_free_memory() / 10 * 8;
+      const RunRegion run = [&](const ParticleInput& part, const Params& q, HostMesh& m, RunStats& s) {
+        run_one(part, q, false, m, s);
+      };
+      if (reconstruct_subdomains(ctx.subdomains, budget, xyz, in.count, p, run, mesh, st, ctx.subdomain_report)) {
+        if (mesh_on_device) move_mesh_to_device(mesh);
+        return;
+      }
+    }
+    run_one(in, p, mesh_on_device, mesh, st);
   };
   kokkos_thread().run(job);
   ctx.peak_memory = ctx.memory.peak.load();

@@ -57,5 +57,11 @@ void release_host_particles(nbmc_context& ctx);
 double* prepare_host_particles(nbmc_context& ctx, std::size_t n);
 // Copies the arrays of a device mesh into host buffers (any may be NULL).
 void download_mesh(const HostMesh& m, float* positions, float* normals, std::uint32_t* triangles);
+// Copies count particles (3 doubles each) from the CUDA device to the host.
+void download_particles(const void* device_xyz, std::size_t count, double* host);
+// Replaces a host mesh by a copy in one device allocation (NBMC_MEMORY_DEVICE).
+void move_mesh_to_device(HostMesh& m);
+// Free memory of the current CUDA device (0 without CUDA).
+std::uint64_t cuda_free_memory();
 
 }  // namespace nbmc

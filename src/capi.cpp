@@ -451,3 +451,98 @@ int32_t nbmc_kokkos_finalize(void) {
 }
 
 }  // extern "C"
+
+extern "C" {
+
+void nbmc_subdomain_stats_init(nbmc_subdomain_stats* out) {
+  if (!out) return;
+  std::memset(out, 0, sizeof(*out));
+  out->struct_size = sizeof(nbmc_subdomain_stats);
+  out->parts[0] = out->parts[1] = out->parts[2] = 1;
+}
+
+void nbmc_subdomain_entry_init(nbmc_subdomain_entry* out) {
+  if (!out) return;
+  std::memset(out, 0, sizeof(*out));
+  out->struct_size = sizeof(nbmc_subdomain_entry);
+}
+
+int32_t nbmc_context_set_subdomains(nbmc_context* ctx, int32_t nx, int32_t ny, int32_t nz) {
+  if (!ctx) return NBMC_ERROR_INVALID_ARGUMENT;
+  nbmc::SubdomainSetting s;
+  if (nx == NBMC_SUBDOMAINS_AUTO) {
+    s.automatic = true;
+  } else {
+    const int32_t n[3] = {nx, ny, nz};
+    for (int a = 0; a < 3; ++a)
+      if (n[a] < 1 || n[a] > 4096)
+        return fail(ctx, NBMC_ERROR_INVALID_ARGUMENT,
+                    "nbmc_context_set_subdomains: subdomains per axis must be 1 to 4096 (got " + std::to_string(nx) +
+                        " x " + std::to_string(ny) + " x " + std::to_string(nz) + ")");
+    if (std::int64_t(nx) * ny * nz > 1000000)
+      return fail(ctx, NBMC_ERROR_INVALID_ARGUMENT, "nbmc_context_set_subdomains: more than a million subdomains");
+    for (int a = 0; a < 3; ++a) s.parts[a] = n[a];
+  }
+  ctx->subdomains = s;
+  ctx->last_error.clear();
+  return NBMC_OK;
+}
+
+int32_t nbmc_context_subdomain_stats(const nbmc_context* ctx, nbmc_subdomain_stats* out) {
+  if (!ctx) return NBMC_ERROR_INVALID_ARGUMENT;
+  auto* c = const_cast<nbmc_context*>(ctx);
+  if (!out || out->struct_size < sizeof(nbmc_subdomain_stats))
+    return fail(c, NBMC_ERROR_INVALID_ARGUMENT,
+                "nbmc_context_subdomain_stats: out is NULL or not filled by nbmc_subdomain_stats_init()");
+  if (!ctx->has_stats)
+    return fail(c, NBMC_ERROR_NO_PARTICLES, "nbmc_context_subdomain_stats: no reconstruction has succeeded yet");
+  const nbmc::SubdomainReport& r = ctx->subdomain_report;
+  nbmc_subdomain_stats_init(out);
+  if (r.used) {
+    for (int a = 0; a < 3; ++a) out->parts[a] = r.parts[a];
+    out->count = r.count;
+  }
+  out->automatic = r.automatic ? 1 : 0;
+  out->ghost_width = r.ghost_width;
+  out->ghost_particles = r.ghost_particles;
+  out->reruns = r.reruns;
+  out->exchanged_cells = r.exchanged_cells;
+  out->shared_vertices = r.shared_vertices;
+  out->budget_bytes = r.budget_bytes;
+  out->stitch_seconds = r.stitch_seconds;
+  c->last_error.clear();
+  return NBMC_OK;
+}
+
+int32_t nbmc_context_subdomain_entry(const nbmc_context* ctx, uint64_t i, nbmc_subdomain_entry* out) {
+  if (!ctx) return NBMC_ERROR_INVALID_ARGUMENT;
+  auto* c = const_cast<nbmc_context*>(ctx);
+  if (!out || out->struct_size < sizeof(nbmc_subdomain_entry))
+    return fail(c, NBMC_ERROR_INVALID_ARGUMENT,
+                "nbmc_context_subdomain_entry: out is NULL or not filled by nbmc_subdomain_entry_init()");
+  if (!ctx->has_stats)
+    return fail(c, NBMC_ERROR_NO_PARTICLES, "nbmc_context_subdomain_entry: no reconstruction has succeeded yet");
+  const auto& entries = ctx->subdomain_report.entries;
+  if (i >= entries.size())
+    return fail(c, NBMC_ERROR_INVALID_ARGUMENT,
+                "nbmc_context_subdomain_entry: index " + std::to_string(i) + " out of range (" +
+                    std::to_string(entries.size()) + " subdomains)");
+  const nbmc::SubdomainEntry& e = entries[std::size_t(i)];
+  nbmc_subdomain_entry_init(out);
+  for (int a = 0; a < 3; ++a) {
+    out->coord[a] = e.coord[a];
+    out->cell_lo[a] = e.cell_lo[a];
+    out->cell_hi[a] = e.cell_hi[a];
+  }
+  out->particles = e.particles;
+  out->ghost_particles = e.ghost_particles;
+  out->vertex_count = e.vertices;
+  out->triangle_count = e.triangles;
+  out->runs = std::uint32_t(e.runs);
+  out->rank = e.rank;
+  out->seconds = e.seconds;
+  c->last_error.clear();
+  return NBMC_OK;
+}
+
+}  // extern "C"

@@ -6,6 +6,7 @@
 
 #include "../backends/kokkos/common.hpp"
 #include "../backends/kokkos/pipeline.hpp"
+#include "core/decomposition.hpp"
 #include "core/mesh_postprocess.hpp"
 
 #include <memory>
@@ -43,6 +44,8 @@ struct nbmc_context {
   nbmc::MemoryTracker memory;
   std::uint64_t peak_memory = 0;
   nbmc::RunStats stats;
+  nbmc::SubdomainSetting subdomains;       // nbmc_context_set_subdomains
+  nbmc::SubdomainReport subdomain_report;  // of the last reconstruction
   nbmc::mesh::PostprocessStats postprocess;  // of the last reconstruction (capi_mesh.cpp)
   bool has_stats = false;
 };

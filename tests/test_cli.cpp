@@ -223,3 +223,32 @@ TEST_F(CliTest, MemoryBudget) {
   EXPECT_EQ(r.exit_code, 0) << r.err;
   EXPECT_TRUE(fs::exists(path("budget.ply")));
 }
+
+// --subdomains: the same file as the whole frame, the split in the report and
+// the JSON; malformed values are usage errors.
+TEST_F(CliTest, SubdomainsGiveTheSameFile) {
+  const std::string frame = std::string(NBMC_SOURCE_DIR) + "/examples/data/double_dam_break_4732.xyz";
+  const std::string base = "reconstruct " + quote(frame) + " --particle-radius 0.025 --progress never";
+  Result whole = run(base + " -o " + quote(path("whole.ply")));
+  ASSERT_EQ(whole.exit_code, 0) << whole.err;
+  Result split = run(base + " -o " + quote(path("split.ply")) + " --subdomains 3x2x2 --json " +
+                     quote(path("split.json")));
+  ASSERT_EQ(split.exit_code, 0) << split.err;
+  EXPECT_EQ(slurp(path("whole.ply")), slurp(path("split.ply")));
+  EXPECT_TRUE(contains(split.out, "subdomains: 3 x 2 x 2")) << split.out;
+  const std::string json = slurp(path("split.json"));
+  EXPECT_TRUE(contains(json, "\"subdomains\": {\"grid\": [3, 2, 2]")) << json;
+  EXPECT_EQ(json_uint(json, "count"), 12);
+  // auto with a budget the frame fits: not split.
+  Result fits = run(base + " -o " + quote(path("auto.ply")) + " --subdomains auto --memory-budget 2G --json " +
+                    quote(path("auto.json")));
+  ASSERT_EQ(fits.exit_code, 0) << fits.err;
+  EXPECT_FALSE(contains(slurp(path("auto.json")), "\"subdomains\""));
+  EXPECT_EQ(slurp(path("whole.ply")), slurp(path("auto.ply")));
+  for (const char* bad : {"0", "2x2", "x", "-1x1x1", "autox", "2x2x2x2", "99999"}) {
+    Result r = run(base + " -o " + quote(path("bad.ply")) + " --subdomains " + bad);
+    EXPECT_EQ(r.exit_code, 2) << bad;
+    EXPECT_TRUE(contains(r.err, "--subdomains")) << r.err;
+  }
+  EXPECT_FALSE(fs::exists(path("bad.ply")));
+}

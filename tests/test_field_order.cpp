@@ -113,7 +113,7 @@ Params make_params(double r, double cell, int method) {
   p.band_width = 2 * r;
   p.surface_radius = 2 * r;
   p.iso_radius = r;
-  p.method = method;
+  p.method = nbmc::Method(method);
   return p;
 }
 

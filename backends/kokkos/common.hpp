@@ -17,52 +17,10 @@
 #include <stdexcept>
 #include <string>
 
+#include "../../src/core/grid.hpp"
+#include "../../src/core/params.hpp"
+
 namespace nbmc {
-
-// Status carried by exceptions thrown inside the pipeline; the C API maps it.
-// A std::allocator that leaves new elements uninitialised, for large arrays
-// whose every element is written right after (particle uploads, meshes): no
-// zeroing pass, and the pages are first touched where they are filled.
-template <class T>
-struct NoInitAllocator : std::allocator<T> {
-  template <class U>
-  struct rebind {
-    using other = NoInitAllocator<U>;
-  };
-  NoInitAllocator() = default;
-  template <class U>
-  NoInitAllocator(const NoInitAllocator<U>&) noexcept {}
-  template <class U>
-  void construct(U* p) noexcept {
-    ::new (static_cast<void*>(p)) U;
-  }
-  template <class U, class... A>
-  void construct(U* p, A&&... a) {
-    ::new (static_cast<void*>(p)) U(std::forward<A>(a)...);
-  }
-};
-struct Error : std::runtime_error {
-  int32_t status;
-  Error(int32_t s, const std::string& msg) : std::runtime_error(msg), status(s) {}
-};
-
-// Parameters with every length in absolute units (see nbmc_params).
-struct Params {
-  double spacing = 0;          // r
-  double cell_size = 0;        // c
-  double influence_radius = 0; // R
-  double band_width = 0;       // half width of the band box
-  double surface_radius = 0;   // neighbourhood radius of the surface test
-  double iso_radius = 0;       // r-bar
-  int method = 0;              // NBMC_METHOD_*
-  int field = 0;               // NBMC_FIELD_*
-  double t_low = 0.4, t_high = 3.5;
-  double color_threshold = 0.75;
-  int neighbour_threshold = 25;
-  bool normals = true;
-  bool use_bbox = false;
-  double bbox_min[3] = {0, 0, 0}, bbox_max[3] = {0, 0, 0};
-};
 
 // Counts the bytes nbmc allocates per context (host and device together).
 struct MemoryTracker {
@@ -162,29 +120,8 @@ class Buffer {
 };
 
 // ------------------------------------------------------------ Morton keys
-// 21 bits per axis, 63-bit keys (bit 63 stays clear: ~0 marks empty slots).
-KOKKOS_INLINE_FUNCTION std::uint64_t spread3(std::uint64_t v) {
-  v &= 0x1fffffULL;
-  v = (v | (v << 32)) & 0x1f00000000ffffULL;
-  v = (v | (v << 16)) & 0x1f0000ff0000ffULL;
-  v = (v | (v << 8)) & 0x100f00f00f00f00fULL;
-  v = (v | (v << 4)) & 0x10c30c30c30c30c3ULL;
-  v = (v | (v << 2)) & 0x1249249249249249ULL;
-  return v;
-}
-KOKKOS_INLINE_FUNCTION std::uint64_t compact3(std::uint64_t v) {
-  v &= 0x1249249249249249ULL;
-  v = (v ^ (v >> 2)) & 0x10c30c30c30c30c3ULL;
-  v = (v ^ (v >> 4)) & 0x100f00f00f00f00fULL;
-  v = (v ^ (v >> 8)) & 0x1f0000ff0000ffULL;
-  v = (v ^ (v >> 16)) & 0x1f00000000ffffULL;
-  v = (v ^ (v >> 32)) & 0x1fffffULL;
-  return v;
-}
-KOKKOS_INLINE_FUNCTION std::uint64_t morton3(std::uint32_t x, std::uint32_t y, std::uint32_t z) {
-  return spread3(x) | (spread3(y) << 1) | (spread3(z) << 2);
-}
-constexpr std::uint32_t kMaxAxisCells = (1u << 21) - 2;  // Morton limit per axis
+// 21 bits per axis, 63-bit keys (bit 63 stays clear: ~0 marks empty slots):
+// morton3, spread3, compact3 in src/core/grid.hpp.
 constexpr std::uint64_t kEmptyKey = ~std::uint64_t(0);
 
 KOKKOS_INLINE_FUNCTION std::uint64_t hash64(std::uint64_t k) {

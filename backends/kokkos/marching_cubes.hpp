@@ -140,7 +140,7 @@ McResult classify_cells(const ExecSpace& space, const BandView<typename ExecSpac
       KOKKOS_LAMBDA(const std::size_t w, const int bit, const std::int64_t self) {
         std::int64_t i, j, k, idx[8];
         band.vertex(w, bit, i, j, k);
-        if (!cell_corners(band, i, j, k, self, idx)) return;
+        if (!band.owns_cell(i, j, k) || !cell_corners(band, i, j, k, self, idx)) return;
         int cs = 0;
         for (int c = 0; c < 8; ++c) cs |= (phi(idx[c]) < 0.f ? 1 : 0) << c;
         if (cs == 0 || cs == 255) return;
@@ -179,7 +179,7 @@ KOKKOS_INLINE_FUNCTION int leaks_at(const BandView<MemSpace>& band, const Kokkos
                                     std::int64_t i, std::int64_t j, std::int64_t k, std::int64_t self,
                                     std::int64_t out[18]) {
   std::int64_t idx[8];
-  if (!cell_corners(band, i, j, k, self, idx)) return 0;
+  if (!band.owns_cell(i, j, k) || !cell_corners(band, i, j, k, self, idx)) return 0;
   int cs = 0;
   for (int c = 0; c < 8; ++c) cs |= (phi(idx[c]) < 0.f ? 1 : 0) << c;
   if (cs == 0 || cs == 255) return 0;
@@ -333,8 +333,11 @@ void compute_vertices(const ExecSpace& space, const BandView<typename ExecSpace:
                       const Kokkos::View<const std::uint32_t*, typename ExecSpace::memory_space>& info,
                       const Kokkos::View<const std::uint32_t*, typename ExecSpace::memory_space>& vert_offset,
                       const Kokkos::View<float*, typename ExecSpace::memory_space>& positions,
-                      const Kokkos::View<float*, typename ExecSpace::memory_space>& normals, bool with_normals) {
+                      const Kokkos::View<float*, typename ExecSpace::memory_space>& normals, bool with_normals,
+                      const Kokkos::View<std::uint64_t*, typename ExecSpace::memory_space>& keys = {},
+                      const Kokkos::View<std::uint8_t*, typename ExecSpace::memory_space>& axes = {}) {
   ScopedRegion region("nbmc::marching_cubes::vertices");
+  const bool with_keys = keys.extent(0) > 0;  // a subdomain's piece: where each vertex goes in the frame
   const double o0 = g.origin[0], o1 = g.origin[1], o2 = g.origin[2], c = g.cell;
   const float inv_c = float(1.0 / g.cell);
   for_each_band_vertex(
@@ -356,6 +359,10 @@ void compute_vertices(const ExecSpace& space, const BandView<typename ExecSpace:
               positions(3 * out) = float(o0 + (double(i) + double(t) * double(di)) * c);
               positions(3 * out + 1) = float(o1 + (double(j) + double(t) * double(dj)) * c);
               positions(3 * out + 2) = float(o2 + (double(k) + double(t) * double(dk)) * c);
+              if (with_keys) {
+                keys(out) = band_order_key(i, j, k);
+                axes(out) = std::uint8_t(a);
+              }
               if (with_normals) {
                 float n[3];
                 for (int b = 0; b < 3; ++b) {
@@ -389,8 +396,10 @@ void compute_triangles(const ExecSpace& space, const BandView<typename ExecSpace
                        const Kokkos::View<const std::uint32_t*, typename ExecSpace::memory_space>& info,
                        const Kokkos::View<const std::uint32_t*, typename ExecSpace::memory_space>& vert_offset,
                        const Kokkos::View<const std::uint32_t*, typename ExecSpace::memory_space>& tri_offset,
-                       const Kokkos::View<std::uint32_t*, typename ExecSpace::memory_space>& triangles) {
+                       const Kokkos::View<std::uint32_t*, typename ExecSpace::memory_space>& triangles,
+                       const Kokkos::View<std::uint64_t*, typename ExecSpace::memory_space>& cell_keys = {}) {
   ScopedRegion region("nbmc::marching_cubes::triangles");
+  const bool with_keys = cell_keys.extent(0) > 0;  // per triangle: its cell's place in the frame
   constexpr int W = 3 * mc::kMaxTriangles;
   for_each_band_vertex(
       space, "nbmc::marching_cubes::triangles", band, n_words,
@@ -409,6 +418,8 @@ void compute_triangles(const ExecSpace& space, const BandView<typename ExecSpace
           const std::uint32_t below = (info(owner) >> 8) & ((1u << axis) - 1u);
           triangles(3 * out + t) = vert_offset(owner) + std::uint32_t(popcount64(below));
         }
+        if (with_keys)
+          for (int t = 0; t < nt; ++t) cell_keys(out + std::uint64_t(t)) = band_order_key(i, j, k);
       });
   space.fence();
 }

@@ -23,6 +23,12 @@ template <class MemSpace>
 struct Band {
   std::size_t n_blocks = 0;
   std::uint64_t n_vertices = 0;
+  // A subdomain's limits (whole grid otherwise): the band stays inside the
+  // vertex box [clip_lo, clip_hi]; only cells in [own_lo, own_hi) (minimum
+  // corners) are triangulated or scanned for leaks.
+  std::int64_t clip_lo[3] = {0, 0, 0}, clip_hi[3] = {kNoLimit, kNoLimit, kNoLimit};
+  std::int64_t own_lo[3] = {0, 0, 0}, own_hi[3] = {kNoLimit, kNoLimit, kNoLimit};
+  static constexpr std::int64_t kNoLimit = std::int64_t(1) << 40;
   Buffer<std::uint64_t, MemSpace> block_keys;   // sorted Morton keys of the blocks
   HashMapStorage<MemSpace> blocks;              // key -> block index
   Buffer<std::uint64_t, MemSpace> words;        // 8 per block
@@ -34,6 +40,12 @@ struct BandView {
   Kokkos::View<const std::uint64_t*, MemSpace> block_keys, words, word_offset;
   HashMap<MemSpace> blocks;
   std::int64_t dims[3];
+  std::int64_t own_lo[3], own_hi[3];
+
+  // Whether this band's subdomain triangulates the cell with minimum corner (i, j, k).
+  KOKKOS_INLINE_FUNCTION bool owns_cell(std::int64_t i, std::int64_t j, std::int64_t k) const {
+    return i >= own_lo[0] && i < own_hi[0] && j >= own_lo[1] && j < own_hi[1] && k >= own_lo[2] && k < own_hi[2];
+  }
 
   KOKKOS_INLINE_FUNCTION static int word_of(std::int64_t lx, std::int64_t ly, std::int64_t lz) {
     return int((lx >> 2) | ((ly >> 2) << 1) | ((lz >> 2) << 2));
@@ -83,7 +95,11 @@ BandView<MemSpace> view_of(const Band<MemSpace>& b, const Grid& g) {
   v.words = b.words.view();
   v.word_offset = b.word_offset.view();
   v.blocks = b.blocks.map;
-  for (int a = 0; a < 3; ++a) v.dims[a] = g.dims[a];
+  for (int a = 0; a < 3; ++a) {
+    v.dims[a] = g.dims[a];
+    v.own_lo[a] = b.own_lo[a];
+    v.own_hi[a] = b.own_hi[a];
+  }
   return v;
 }
 
@@ -176,16 +192,19 @@ void build_narrow_band(const ExecSpace& space, MemoryTracker& tracker, const Gri
   ScopedRegion region("nbmc::narrow_band");
   const float inv_c = float(1.0 / g.cell);
   const float bw = float(p.band_width);
-  const std::int64_t d0 = g.dims[0] - 1, d1 = g.dims[1] - 1, d2 = g.dims[2] - 1;
+  // The grid, or a subdomain's vertex box (band.clip_*, set by the caller).
+  const std::int64_t d0 = std::min(g.dims[0] - 1, band.clip_hi[0]), d1 = std::min(g.dims[1] - 1, band.clip_hi[1]),
+                     d2 = std::min(g.dims[2] - 1, band.clip_hi[2]);
+  const std::int64_t m0 = band.clip_lo[0], m1 = band.clip_lo[1], m2 = band.clip_lo[2];
 
   // Vertex box of particle i, clamped to the grid; false if empty.
   auto box = KOKKOS_LAMBDA(std::size_t i, std::int64_t lo[3], std::int64_t hi[3])->bool {
-    const std::int64_t dmax[3] = {d0, d1, d2};
+    const std::int64_t dmax[3] = {d0, d1, d2}, dmin[3] = {m0, m1, m2};
     for (int a = 0; a < 3; ++a) {
       const float x = pos(std::size_t(a) * n + i);
       lo[a] = std::int64_t(Kokkos::Experimental::ceil((x - bw) * inv_c));
       hi[a] = std::int64_t(Kokkos::Experimental::floor((x + bw) * inv_c));
-      if (lo[a] < 0) lo[a] = 0;
+      if (lo[a] < dmin[a]) lo[a] = dmin[a];
       if (hi[a] > dmax[a]) hi[a] = dmax[a];
       if (lo[a] > hi[a]) return false;
     }
@@ -272,10 +291,21 @@ void extend_band(const ExecSpace& space, MemoryTracker& tracker, const Grid& g,
   auto block_key = [](std::int64_t i, std::int64_t j, std::int64_t k) {
     return morton3(std::uint32_t(i >> 3), std::uint32_t(j >> 3), std::uint32_t(k >> 3));
   };
+  // Corners inside the grid and the band's vertex box.
+  auto inside = [&](std::int64_t i, std::int64_t j, std::int64_t k) {
+    return i < g.dims[0] && j < g.dims[1] && k < g.dims[2] && i >= old.clip_lo[0] && j >= old.clip_lo[1] &&
+           k >= old.clip_lo[2] && i <= old.clip_hi[0] && j <= old.clip_hi[1] && k <= old.clip_hi[2];
+  };
+  for (int a = 0; a < 3; ++a) {
+    band.clip_lo[a] = old.clip_lo[a];
+    band.clip_hi[a] = old.clip_hi[a];
+    band.own_lo[a] = old.own_lo[a];
+    band.own_hi[a] = old.own_hi[a];
+  }
   for (std::size_t c = 0; c + 2 < cells.size(); c += 3)
     for (int q = 0; q < 8; ++q) {
       const std::int64_t i = cells[c] + (q & 1), j = cells[c + 1] + ((q >> 1) & 1), k = cells[c + 2] + (q >> 2);
-      if (i < g.dims[0] && j < g.dims[1] && k < g.dims[2]) keys.push_back(block_key(i, j, k));
+      if (inside(i, j, k)) keys.push_back(block_key(i, j, k));
     }
   std::sort(keys.begin(), keys.end());
   keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
@@ -287,7 +317,7 @@ void extend_band(const ExecSpace& space, MemoryTracker& tracker, const Grid& g,
   for (std::size_t c = 0; c + 2 < cells.size(); c += 3)
     for (int q = 0; q < 8; ++q) {
       const std::int64_t i = cells[c] + (q & 1), j = cells[c + 1] + ((q >> 1) & 1), k = cells[c + 2] + (q >> 2);
-      if (i >= g.dims[0] || j >= g.dims[1] || k >= g.dims[2]) continue;
+      if (!inside(i, j, k)) continue;
       const std::size_t b = std::size_t(std::lower_bound(keys.begin(), keys.end(), block_key(i, j, k)) - keys.begin());
       const std::int64_t lx = i & 7, ly = j & 7, lz = k & 7;
       words[b * 8 + BandView<MemSpace>::word_of(lx, ly, lz)] |= std::uint64_t(1) << BandView<MemSpace>::bit_of(lx, ly, lz);

@@ -81,14 +81,10 @@ inline bool operator<(const SortRecord& a, const SortRecord& b) {
   return a.index < b.index;
 }
 
-// Neighbour-cell coordinate of a relative position. With a bounding box, kept
-// particles may lie up to R outside the grid: they go to the boundary cell.
-// That is exact for the searches, since a vertex whose cell range stops short
-// of the boundary cell is farther than R from anything beyond it.
-KOKKOS_INLINE_FUNCTION std::uint32_t neighbour_cell(double x, double inv, std::int64_t dim) {
-  const double c = x * inv;
-  return std::uint32_t(c <= 0 ? 0.0 : (c >= double(dim - 1) ? double(dim - 1) : c));
-}
+// Neighbour cells: neighbour_cell() in src/core/grid.hpp. With a bounding box,
+// kept particles may lie up to R outside the grid: they go to the boundary
+// cell. That is exact for the searches, since a vertex whose cell range stops
+// short of the boundary cell is farther than R from anything beyond it.
 
 // Relative position as stored: float, with -0 made +0 so that equal
 // coordinates compare (and sort by their bits) as equal everywhere.

@@ -4,14 +4,14 @@
 #pragma once
 
 #include "common.hpp"
-#include "field_ssp07.hpp"
-#include "field_zb05.hpp"
+#include "field_methods.hpp"
 #include "grid.hpp"
 #include "marching_cubes.hpp"
 #include "narrow_band.hpp"
 #include "neighbourhood.hpp"
 #include "scalar_field.hpp"
 #include "surface_particles.hpp"
+#include "../../src/core/piece.hpp"
 
 #include <cmath>
 #include <cstdlib>
@@ -37,12 +37,27 @@ struct HostMesh {
   std::uint64_t triangle_count() const { return on_device ? d_triangles_count : triangles.size() / 3; }
 };
 
+// A subdomain's part of a frame (src/subdomains.cpp): the frame's grid, the
+// vertex box its band stays in, the cells it owns (triangulates), cells the
+// band must contain from the start (grown by its neighbours), and what comes
+// back besides the mesh.
+struct Region {
+  Grid grid;
+  std::int64_t vert_lo[3] = {0, 0, 0}, vert_hi[3] = {0, 0, 0};  // inclusive
+  std::int64_t cell_lo[3] = {0, 0, 0}, cell_hi[3] = {0, 0, 0};  // half-open
+  std::vector<std::int64_t> seeds;  // cells (minimum corners, x y z triples)
+  Piece* piece = nullptr;           // receives the vertex and triangle keys
+  std::vector<std::int64_t> grown;  // out: the cells the band growth added
+};
+
 // The particles of a reconstruction: absolute positions, 3 doubles each, in
-// host memory or (on_device) in the memory of the CUDA execution space.
+// host memory or (on_device) in the memory of the CUDA execution space; with
+// a region, one subdomain's particles and ghosts (host memory).
 struct ParticleInput {
   const double* xyz = nullptr;
   std::size_t count = 0;
   bool on_device = false;
+  Region* region = nullptr;
 };
 
 #if defined(KOKKOS_ENABLE_CUDA)
@@ -88,6 +103,11 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
   const std::size_t count = in.count;
   if (host_memory && (in.on_device || mesh_on_device))
     throw Error(7, "device memory needs the CUDA backend");
+  Region* const region_in = in.region;
+  if (region_in && (in.on_device || mesh_on_device || p.use_bbox || p.field != FieldKind::NarrowBand))
+    throw Error(9, "a subdomain takes host particles, a host mesh, no clipping box and the narrow band");
+  // Bounds are needed unless the grid is given (a subdomain) or the box sets it.
+  const bool need_bounds = !p.use_bbox && !region_in;
   ScopedRegion region("nbmc::reconstruct");
   Kokkos::Timer total, timer;
   auto lap = [&](int stage) {
@@ -143,7 +163,7 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
               c += inside ? 1 : 0;
             });
       }
-    } else {
+    } else if (need_bounds) {
       for (int a = 0; a < 3; ++a) {
         Kokkos::MinMaxScalar<double> mm;
         Kokkos::parallel_reduce(
@@ -162,7 +182,7 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
     for (std::size_t i = 0; i < count; ++i)
       if (box.contains(xyz[3 * i], xyz[3 * i + 1], xyz[3 * i + 2])) keep.push_back(std::uint32_t(i));
     n_used = keep.size();
-  } else {
+  } else if (need_bounds) {
     for (std::size_t i = 0; i < count; ++i)
       for (int a = 0; a < 3; ++a) {
         const double x = xyz[3 * i + a];
@@ -177,7 +197,7 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
       hi[a] = p.bbox_max[a];
     }
   }
-  const Grid g = make_grid(lo, hi, p);
+  const Grid g = region_in ? region_in->grid : make_grid(lo, hi, p);
   st.particles = n_used;
   st.grid_vertices = g.vertex_count();
   for (int a = 0; a < 3; ++a) {
@@ -196,12 +216,12 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
     // the surface flags and the cells.
     const std::uint64_t sort_bytes = host_memory ? sizeof(SortRecord) : 3 * sizeof(float) + 8 + 2 * (8 + 4);
     std::uint64_t need = n * (sort_bytes + 3 * sizeof(float) + sizeof(std::uint32_t) + 1) + n / 2 * 24;
-    if (p.field != 0) {
+    if (p.field != FieldKind::NarrowBand) {
       const std::uint64_t nv = g.vertex_count();
       need += nv * 14;  // field value, cell info, vertex numbering, bitmap
-      if (p.field == 2) need += nv * 4 * (p.method == 1 ? FieldZB05::N : FieldSSP07::N);
+      if (p.field == FieldKind::Scatter) need += nv * 4 * std::uint64_t(field_state_floats(p.method));
     }
-    tracker.require(need, p.field == 0 ? "the neighbourhood" : "the dense baseline grid (estimated)");
+    tracker.require(need, p.field == FieldKind::NarrowBand ? "the neighbourhood" : "the dense baseline grid (estimated)");
   }
 
   // ---------------------------------------------------------- neighbourhood
@@ -221,13 +241,52 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
 
   // ------------------------------------------------ surface particles, band
   Band<MemSpace> band;
-  if (p.field == 0 /*NBMC_FIELD_NARROW_BAND*/) {
+  if (p.field == FieldKind::NarrowBand) {
     Buffer<std::uint8_t, MemSpace> flags(tracker, "surface_particles::flags", nbh.n);
     st.surface_particles = mark_surface_particles(
         space, nb, Kokkos::View<const std::uint64_t*, MemSpace>(nbh.cell_keys.view()), nbh.n_cells, p, g, flags.view());
+    if (region_in) {
+      // A subdomain counts the surface particles in its own cells only, so
+      // that the counts of all subdomains add up to the frame's.
+      const auto pos = nbh.pos.view();
+      const auto fl = flags.view();
+      const std::size_t n = nbh.n;
+      const float inv_c = float(1.0 / g.cell);
+      std::int64_t lo_c[3], hi_c[3];
+      for (int a = 0; a < 3; ++a) {
+        lo_c[a] = region_in->cell_lo[a];
+        hi_c[a] = region_in->cell_hi[a];
+      }
+      const std::int64_t l0 = lo_c[0], l1 = lo_c[1], l2 = lo_c[2], h0 = hi_c[0], h1 = hi_c[1], h2 = hi_c[2];
+      std::uint64_t owned = 0;
+      Kokkos::parallel_reduce(
+          "nbmc::surface_particles::owned", Kokkos::RangePolicy<ExecSpace>(space, 0, n),
+          KOKKOS_LAMBDA(const std::size_t i, std::uint64_t& acc) {
+            if (!fl(i)) return;
+            const std::int64_t ci = std::int64_t(Kokkos::Experimental::floor(pos(i) * inv_c)),
+                               cj = std::int64_t(Kokkos::Experimental::floor(pos(n + i) * inv_c)),
+                               ck = std::int64_t(Kokkos::Experimental::floor(pos(2 * n + i) * inv_c));
+            acc += (ci >= l0 && ci < h0 && cj >= l1 && cj < h1 && ck >= l2 && ck < h2) ? 1 : 0;
+          },
+          owned);
+      st.surface_particles = owned;
+    }
     lap(2);
+    if (region_in)
+      for (int a = 0; a < 3; ++a) {
+        band.clip_lo[a] = region_in->vert_lo[a];
+        band.clip_hi[a] = region_in->vert_hi[a];
+        band.own_lo[a] = region_in->cell_lo[a];
+        band.own_hi[a] = region_in->cell_hi[a];
+      }
     build_narrow_band(space, tracker, g, p, Kokkos::View<const float*, MemSpace>(nbh.pos.view()),
                       Kokkos::View<const std::uint8_t*, MemSpace>(flags.view()), nbh.n, band);
+    if (region_in && !region_in->seeds.empty()) {
+      // Cells its neighbours' band growth added near this subdomain.
+      Band<MemSpace> seeded;
+      extend_band(space, tracker, g, band, region_in->seeds, seeded);
+      band = std::move(seeded);
+    }
   } else {
     lap(2);
     build_dense_band(space, tracker, g, band);
@@ -246,7 +305,7 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
   const std::size_t n_words0 = band.n_blocks * 8;
   auto run_field = [&](auto method) {
     using Method = decltype(method);
-    if (p.field == 2 /*NBMC_FIELD_SCATTER*/) {
+    if (p.field == FieldKind::Scatter) {
       if constexpr (Kokkos::SpaceAccessibility<Kokkos::HostSpace, MemSpace>::accessible) {
         return scatter_field<Method>(space, tracker, Kokkos::View<const float*, Kokkos::HostSpace>(nbh.pos.view()),
                                      nbh.n, bv0, n_words0, g, fc, phi.view(), progress);
@@ -257,13 +316,13 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
     }
     return gather_field<Method>(space, nb, bv0, n_words0, g, fc, phi.view(), progress);
   };
-  st.evaluations = p.method == 1 ? run_field(FieldZB05{}) : run_field(FieldSSP07{});
+  st.evaluations = with_field_method(p.method, run_field);
 
   // Close the band where the surface leaves it (a triangulated cell with a
   // crossed face next to a cell that is not entirely in the band): add that
   // cell's corners, evaluate the new vertices only, repeat. The paper's band
   // has no such guarantee; without it real frames get holes.
-  if (p.field == 0) {
+  if (p.field == FieldKind::NarrowBand) {
     std::vector<std::int64_t> added;  // the cells whose corners the last round added
     for (int round = 0;; ++round) {
       // The first round scans the whole band; later ones only the cells
@@ -291,12 +350,13 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
         return gather_field<decltype(method)>(space, nb, view_of(grown, g), grown.n_blocks * 8, g, fc,
                                               grown_phi.view(), progress, &old_view, old_phi);
       };
-      st.evaluations += p.method == 1 ? grow(FieldZB05{}) : grow(FieldSSP07{});
+      st.evaluations += with_field_method(p.method, grow);
       trace("band growth round", grown.n_vertices);
       band = std::move(grown);
       phi = std::move(grown_phi);
       st.band_growth_rounds = std::uint64_t(round + 1);
       st.band_growth_cells += leaks.size() / 3;
+      if (region_in) region_in->grown.insert(region_in->grown.end(), leaks.begin(), leaks.end());
       added = leaks;
     }
   }
@@ -304,7 +364,7 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
   const BandView<MemSpace> bv = view_of(band, g);
   const std::size_t n_words = band.n_blocks * 8;
   st.band_vertices = band.n_vertices;
-  st.band_blocks = p.field == 0 ? band.n_blocks : 0;
+  st.band_blocks = p.field == FieldKind::NarrowBand ? band.n_blocks : 0;
 
   // ---------------------------------------------------------- triangulation
   const McTables<MemSpace> tables = make_mc_tables(space);
@@ -341,16 +401,30 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
   } counted{tracker, out_bytes};
   tracker.add(out_bytes);
   using Unmanaged = Kokkos::MemoryTraits<Kokkos::Unmanaged>;
+  // A subdomain's piece: the keys that place its vertices and triangles in
+  // the frame's mesh (host memory, like the rest of the piece).
+  Kokkos::View<std::uint64_t*, Kokkos::HostSpace, Unmanaged> hvkeys, htkeys;
+  Kokkos::View<std::uint8_t*, Kokkos::HostSpace, Unmanaged> haxes;
+  if (region_in && region_in->piece) {
+    Piece& pc = *region_in->piece;
+    pc.vertex_keys.resize(r.vertices);
+    pc.vertex_axes.resize(r.vertices);
+    pc.triangle_cells.resize(r.triangles);
+    hvkeys = decltype(hvkeys)(pc.vertex_keys.data(), pc.vertex_keys.size());
+    haxes = decltype(haxes)(pc.vertex_axes.data(), pc.vertex_axes.size());
+    htkeys = decltype(htkeys)(pc.triangle_cells.data(), pc.triangle_cells.size());
+  }
   Kokkos::View<float*, Kokkos::HostSpace, Unmanaged> hpos(mesh.positions.data(), mesh.positions.size());
   Kokkos::View<float*, Kokkos::HostSpace, Unmanaged> hnrm(mesh.normals.data(), mesh.normals.size());
   Kokkos::View<std::uint32_t*, Kokkos::HostSpace, Unmanaged> htri(mesh.triangles.data(), mesh.triangles.size());
   const Kokkos::View<const std::uint32_t*, MemSpace> cinfo = info.view(), cvoff = vert_offset.view();
   if constexpr (std::is_same<MemSpace, Kokkos::HostSpace>::value) {
     compute_vertices(space, bv, n_words, g, cphi, cinfo, cvoff, Kokkos::View<float*, MemSpace>(hpos),
-                     Kokkos::View<float*, MemSpace>(hnrm), p.normals);
+                     Kokkos::View<float*, MemSpace>(hnrm), p.normals, Kokkos::View<std::uint64_t*, MemSpace>(hvkeys),
+                     Kokkos::View<std::uint8_t*, MemSpace>(haxes));
     compute_triangles(space, bv, n_words, tables, cinfo, cvoff,
                       Kokkos::View<const std::uint32_t*, MemSpace>(tri_offset.view()),
-                      Kokkos::View<std::uint32_t*, MemSpace>(htri));
+                      Kokkos::View<std::uint32_t*, MemSpace>(htri), Kokkos::View<std::uint64_t*, MemSpace>(htkeys));
     lap(5);
   } else if (mesh_on_device) {
 #if defined(KOKKOS_ENABLE_CUDA)
@@ -380,10 +454,19 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
     Buffer<float, MemSpace> dpos(tracker, "mesh::positions", hpos.extent(0));
     Buffer<float, MemSpace> dnrm(tracker, "mesh::normals", hnrm.extent(0));
     Buffer<std::uint32_t, MemSpace> dtri(tracker, "mesh::triangles", htri.extent(0));
-    compute_vertices(space, bv, n_words, g, cphi, cinfo, cvoff, dpos.view(), dnrm.view(), p.normals);
+    Buffer<std::uint64_t, MemSpace> dvkeys(tracker, "mesh::vertex_keys", hvkeys.extent(0));
+    Buffer<std::uint8_t, MemSpace> daxes(tracker, "mesh::vertex_axes", haxes.extent(0));
+    Buffer<std::uint64_t, MemSpace> dtkeys(tracker, "mesh::triangle_cells", htkeys.extent(0));
+    compute_vertices(space, bv, n_words, g, cphi, cinfo, cvoff, dpos.view(), dnrm.view(), p.normals, dvkeys.view(),
+                     daxes.view());
     compute_triangles(space, bv, n_words, tables, cinfo, cvoff,
-                      Kokkos::View<const std::uint32_t*, MemSpace>(tri_offset.view()), dtri.view());
+                      Kokkos::View<const std::uint32_t*, MemSpace>(tri_offset.view()), dtri.view(), dtkeys.view());
     lap(5);
+    if (hvkeys.extent(0)) {
+      Kokkos::deep_copy(space, hvkeys, dvkeys.view());
+      Kokkos::deep_copy(space, haxes, daxes.view());
+    }
+    if (htkeys.extent(0)) Kokkos::deep_copy(space, htkeys, dtkeys.view());
     // The host vectors are fresh, uninitialised memory: touch their pages
     // with all host threads first (single-threaded page faults inside the
     // copy cost 20 ms for the 40 MB mesh of the 1.65 M frame at r/2).

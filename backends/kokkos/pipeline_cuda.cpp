@@ -197,4 +197,53 @@ void download_mesh(const HostMesh& m, float* positions, float* normals, std::uin
 #endif
 }
 
+void download_particles(const void* device_xyz, std::size_t count, double* host) {
+#if defined(KOKKOS_ENABLE_CUDA)
+  if (count)
+    cuda_check(cudaMemcpy(host, device_xyz, 3 * count * sizeof(double), cudaMemcpyDeviceToHost),
+               "copying the particles to the host");
+#else
+  (void)device_xyz; (void)count; (void)host;
+  throw Error(7, "the CUDA backend is not compiled in");
+#endif
+}
+
+void move_mesh_to_device(HostMesh& m) {
+#if defined(KOKKOS_ENABLE_CUDA)
+  const std::size_t np = m.positions.size(), nn = m.normals.size(), nt = m.triangles.size();
+  const std::size_t bytes = (np + nn) * sizeof(float) + nt * sizeof(std::uint32_t);
+  HostMesh d;
+  d.device = cuda_allocate(bytes, "the mesh");
+  d.on_device = true;
+  float* base = static_cast<float*>(d.device.get());
+  d.d_positions = np ? base : nullptr;
+  d.d_normals = nn ? base + np : nullptr;
+  d.d_triangles = nt ? reinterpret_cast<std::uint32_t*>(base + np + nn) : nullptr;
+  d.d_vertices = np / 3;
+  d.d_triangles_count = nt / 3;
+  if (np) cuda_check(cudaMemcpy(d.d_positions, m.positions.data(), np * sizeof(float), cudaMemcpyHostToDevice), "mesh positions");
+  if (nn) cuda_check(cudaMemcpy(d.d_normals, m.normals.data(), nn * sizeof(float), cudaMemcpyHostToDevice), "mesh normals");
+  if (nt)
+    cuda_check(cudaMemcpy(d.d_triangles, m.triangles.data(), nt * sizeof(std::uint32_t), cudaMemcpyHostToDevice),
+               "mesh triangles");
+  m = std::move(d);
+#else
+  (void)m;
+  throw Error(7, "the CUDA backend is not compiled in");
+#endif
+}
+
+std::uint64_t cuda_free_memory() {
+#if defined(KOKKOS_ENABLE_CUDA)
+  std::size_t free_b = 0, total_b = 0;
+  if (cudaMemGetInfo(&free_b, &total_b) != cudaSuccess) {
+    cudaGetLastError();
+    return 0;
+  }
+  return free_b;
+#else
+  return 0;
+#endif
+}
+
 }  // namespace nbmc

@@ -95,6 +95,7 @@ struct Options {
   bool resume = false;
   std::int64_t step = -1; // H5Part step of a single-frame run (-1: the first)
   std::string memory_budget;  // --memory-budget, "" = no cap
+  std::string subdomains;     // --subdomains auto|N|NxMxK, "" = whole frame
 };
 
 // --------------------------------------------------------------- helpers
@@ -120,9 +121,38 @@ bool parse_size(const std::string& text, std::uint64_t& bytes) {
   return true;
 }
 
+// --subdomains: "auto" -> {NBMC_SUBDOMAINS_AUTO, 0, 0}; "3" -> {3, 3, 3};
+// "4x2x1" -> {4, 2, 1}. False if malformed.
+bool parse_subdomains(const std::string& text, int parts[3]) {
+  if (lower(text) == "auto") {
+    parts[0] = NBMC_SUBDOMAINS_AUTO;
+    parts[1] = parts[2] = 0;
+    return true;
+  }
+  std::vector<std::string> f;
+  std::size_t start = 0;
+  for (;;) {
+    const std::size_t x = lower(text).find('x', start);
+    f.push_back(text.substr(start, x == std::string::npos ? std::string::npos : x - start));
+    if (x == std::string::npos) break;
+    start = x + 1;
+  }
+  if (f.size() != 1 && f.size() != 3) return false;
+  for (std::size_t a = 0; a < 3; ++a) {
+    const std::string& t = f[f.size() == 1 ? 0 : a];
+    if (t.empty() || t.size() > 4 || t.find_first_not_of("0123456789") != std::string::npos) return false;
+    parts[a] = std::stoi(t);
+    if (parts[a] < 1) return false;
+  }
+  return true;
+}
+
 void apply_memory_budget(nbmc_context* ctx, const Options& o) {
   std::uint64_t bytes = 0;
   if (!o.memory_budget.empty() && parse_size(o.memory_budget, bytes)) nbmc_context_set_memory_budget(ctx, bytes);
+  int parts[3];
+  if (!o.subdomains.empty() && parse_subdomains(o.subdomains, parts))
+    nbmc_context_set_subdomains(ctx, parts[0], parts[1], parts[2]);
 }
 
 struct ContextDeleter {
@@ -386,6 +416,13 @@ int reconstruct(Options& o) {
   st = nbmc_context_stats(ctx.get(), &report.stats);
   if (st != NBMC_OK) return library_error(st, nbmc_context_last_error(ctx.get()));
   report.params = o.params;
+  nbmc_subdomain_stats_init(&report.subdomains);
+  if (nbmc_context_subdomain_stats(ctx.get(), &report.subdomains) == NBMC_OK)
+    for (std::uint64_t i = 0; i < report.subdomains.count; ++i) {
+      nbmc_subdomain_entry e;
+      nbmc_subdomain_entry_init(&e);
+      if (nbmc_context_subdomain_entry(ctx.get(), i, &e) == NBMC_OK) report.subdomain_entries.push_back(e);
+    }
   if (o.check) {
     nbmc_mesh_check_result_init(&report.check);
     st = nbmc_mesh_check(mesh.get(), &report.check);
@@ -513,6 +550,16 @@ int main(int argc, char** argv) {
       ->check([](const std::string& v) {
         std::uint64_t b = 0;
         return parse_size(v, b) ? std::string() : std::string("expected a size such as 4G, 512M or 1000000");
+      });
+  rec->add_option("--subdomains", o.subdomains,
+                  "Reconstruct the frame in subdomains and stitch them (the same mesh, bit for bit): NxMxK, N "
+                  "(= NxNxN), or auto (split only when the frame's estimate exceeds --memory-budget or, on a GPU, "
+                  "its free memory)")
+      ->option_text("auto|NxMxK")
+      ->check([](const std::string& v) {
+        int parts[3];
+        return parse_subdomains(v, parts) ? std::string()
+                                          : std::string("expected auto, N or NxMxK with positive integers, e.g. 2x2x1");
       });
   rec->add_option("--backend", o.backend, "Compute backend")
       ->check(CLI::IsMember(names(kBackends), CLI::ignore_case))

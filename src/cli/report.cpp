@@ -221,6 +221,23 @@ std::string format_report(const Report& r) {
     std::snprintf(buf, sizeof buf, "  %-26s %16.4f\n", "min_angle_degrees", c.min_angle_degrees);
     o += buf;
   }
+  if (r.subdomains.count > 0) {
+    const nbmc_subdomain_stats& d = r.subdomains;
+    o += "\nsubdomains: " + std::to_string(d.parts[0]) + " x " + std::to_string(d.parts[1]) + " x " +
+         std::to_string(d.parts[2]) + (d.automatic ? " (auto, budget " + mib(d.budget_bytes) + ")" : std::string()) +
+         ", ghost layer " + printf_string("%g", d.ghost_width) + ", " + grouped(d.ghost_particles) +
+         " ghost particles, " + grouped(d.shared_vertices) + " shared vertices merged, " + grouped(d.reruns) +
+         " reruns (" + grouped(d.exchanged_cells) + " band cells exchanged), stitched in " +
+         printf_string("%.4f", d.stitch_seconds) + " s\n";
+    o += "  subdomain       cells             particles      ghosts   triangles  runs   seconds\n";
+    for (const nbmc_subdomain_entry& e : r.subdomain_entries) {
+      std::snprintf(buf, sizeof buf, "  %-3d %-3d %-3d  %5lld-%-5lld %11s %11s %11s %4u %9.4f\n", e.coord[0],
+                    e.coord[1], e.coord[2], static_cast<long long>(e.cell_lo[0]),
+                    static_cast<long long>(e.cell_hi[0]), grouped(e.particles).c_str(),
+                    grouped(e.ghost_particles).c_str(), grouped(e.triangle_count).c_str(), e.runs, e.seconds);
+      o += buf;
+    }
+  }
   o += "\npeak memory: nbmc " + mib(s.peak_memory_bytes) + ", process RSS " + mib(r.peak_rss_bytes) + "\n";
   return o;
 }
@@ -294,6 +311,31 @@ std::string format_json(const Report& r) {
     o += ", \"euler_characteristic\": " + std::to_string(c.euler_characteristic) +
          ", \"volume\": " + json_number(c.volume) + ", \"area\": " + json_number(c.area) +
          ", \"min_angle_degrees\": " + json_number(c.min_angle_degrees) + "},\n";
+  }
+  if (r.subdomains.count > 0) {
+    const nbmc_subdomain_stats& d = r.subdomains;
+    o += "  \"subdomains\": {\"grid\": [" + std::to_string(d.parts[0]) + ", " + std::to_string(d.parts[1]) + ", " +
+         std::to_string(d.parts[2]) + "], \"count\": " + std::to_string(d.count) +
+         ", \"automatic\": " + (d.automatic ? "true" : "false") + ", \"budget_bytes\": " +
+         std::to_string(d.budget_bytes) + ", \"ghost_width\": " + json_number(d.ghost_width) +
+         ", \"ghost_particles\": " + std::to_string(d.ghost_particles) + ", \"reruns\": " + std::to_string(d.reruns) +
+         ", \"exchanged_cells\": " + std::to_string(d.exchanged_cells) + ", \"shared_vertices\": " +
+         std::to_string(d.shared_vertices) + ", \"stitch_seconds\": " + json_number(d.stitch_seconds) +
+         ", \"per_subdomain\": [";
+    bool first_entry = true;
+    for (const nbmc_subdomain_entry& e : r.subdomain_entries) {
+      o += std::string(first_entry ? "" : ", ") + "{\"coord\": [" + std::to_string(e.coord[0]) + ", " +
+           std::to_string(e.coord[1]) + ", " + std::to_string(e.coord[2]) + "], \"cells\": [[" +
+           std::to_string(e.cell_lo[0]) + ", " + std::to_string(e.cell_lo[1]) + ", " + std::to_string(e.cell_lo[2]) +
+           "], [" + std::to_string(e.cell_hi[0]) + ", " + std::to_string(e.cell_hi[1]) + ", " +
+           std::to_string(e.cell_hi[2]) + "]], \"particles\": " + std::to_string(e.particles) +
+           ", \"ghost_particles\": " + std::to_string(e.ghost_particles) + ", \"vertices\": " +
+           std::to_string(e.vertex_count) + ", \"triangles\": " + std::to_string(e.triangle_count) +
+           ", \"runs\": " + std::to_string(e.runs) + ", \"rank\": " + std::to_string(e.rank) +
+           ", \"seconds\": " + json_number(e.seconds) + "}";
+      first_entry = false;
+    }
+    o += "]},\n";
   }
   o += "  \"memory\": {\"peak_memory_bytes\": " + std::to_string(s.peak_memory_bytes) +
        ", \"peak_rss_bytes\": " + std::to_string(r.peak_rss_bytes) + "}\n";

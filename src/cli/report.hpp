@@ -21,6 +21,8 @@ struct Report {
   std::uint64_t particle_count = 0;
   nbmc_params params{};  // as passed (spacing absolute)
   nbmc_stats stats{};    // of the reconstruction
+  nbmc_subdomain_stats subdomains{};  // count 0: the frame was not split
+  std::vector<nbmc_subdomain_entry> subdomain_entries;
   bool normals = false;  // the mesh has normals
   std::vector<std::string> attributes; // interpolated onto the vertices
   double interpolate_seconds = 0;

@@ -1,0 +1,30 @@
+// SPDX-License-Identifier: MIT
+// The one place where a field method (Method) becomes a kernel type: every
+// stage that evaluates the field calls with_field_method(p.method, f) and
+// gets f(FieldSSP07{}) or f(FieldZB05{}). A new method is a new file
+// field_<name>.hpp with its kernel type and one case here.
+#pragma once
+
+#include "common.hpp"
+#include "field_ssp07.hpp"
+#include "field_zb05.hpp"
+
+namespace nbmc {
+namespace Details {
+
+template <class F>
+auto with_field_method(Method m, F&& f) {
+  switch (m) {
+    case Method::ZB05: return f(FieldZB05{});
+    case Method::SSP07: break;
+  }
+  return f(FieldSSP07{});
+}
+
+// Floats of per-vertex state a method's scatter baseline keeps.
+inline int field_state_floats(Method m) {
+  return with_field_method(m, [](auto k) { return int(decltype(k)::N); });
+}
+
+}  // namespace Details
+}  // namespace nbmc

@@ -1,0 +1,75 @@
+// SPDX-License-Identifier: MIT
+// Resolved parameters of a reconstruction and the error type of the core:
+// plain C++ (no Kokkos, no MPI), shared by the Kokkos stages, the subdomain
+// runner and the MPI layer.
+#pragma once
+
+#include "nbmc.h"
+
+#include <cstdint>
+#include <memory>
+#include <new>
+#include <stdexcept>
+#include <string>
+#include <utility>
+
+namespace nbmc {
+
+// Status carried by exceptions thrown inside the pipeline; the C API maps it.
+struct Error : std::runtime_error {
+  int32_t status;
+  Error(int32_t s, const std::string& msg) : std::runtime_error(msg), status(s) {}
+};
+
+// A std::allocator that leaves new elements uninitialised, for large arrays
+// whose every element is written right after (particle uploads, meshes): no
+// zeroing pass, and the pages are first touched where they are filled.
+template <class T>
+struct NoInitAllocator : std::allocator<T> {
+  template <class U>
+  struct rebind {
+    using other = NoInitAllocator<U>;
+  };
+  NoInitAllocator() = default;
+  template <class U>
+  NoInitAllocator(const NoInitAllocator<U>&) noexcept {}
+  template <class U>
+  void construct(U* p) noexcept {
+    ::new (static_cast<void*>(p)) U;
+  }
+  template <class U, class... A>
+  void construct(U* p, A&&... a) {
+    ::new (static_cast<void*>(p)) U(std::forward<A>(a)...);
+  }
+};
+
+// The field method (the kernel of the scalar field): one value per
+// NBMC_METHOD_*; backends/kokkos/field_methods.hpp maps it to a kernel type.
+enum class Method : int32_t { SSP07 = NBMC_METHOD_SSP07, ZB05 = NBMC_METHOD_ZB05 };
+// Where the field is evaluated: the narrow band (the method of the paper) or
+// one of its baselines.
+enum class FieldKind : int32_t {
+  NarrowBand = NBMC_FIELD_NARROW_BAND,
+  Dense = NBMC_FIELD_DENSE,
+  Scatter = NBMC_FIELD_SCATTER
+};
+
+// Parameters with every length in absolute units (see nbmc_params).
+struct Params {
+  double spacing = 0;          // r
+  double cell_size = 0;        // c
+  double influence_radius = 0; // R
+  double band_width = 0;       // half width of the band box
+  double surface_radius = 0;   // neighbourhood radius of the surface test
+  double iso_radius = 0;       // r-bar
+  Method method = Method::SSP07;
+  FieldKind field = FieldKind::NarrowBand;
+  double t_low = 0.4, t_high = 3.5;
+  double color_threshold = 0.75;
+  int neighbour_threshold = 25;
+  bool normals = true;
+  bool use_bbox = false;
+  double bbox_min[3] = {0, 0, 0}, bbox_max[3] = {0, 0, 0};
+};
+
+}  // namespace nbmc

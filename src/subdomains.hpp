@@ -1,0 +1,59 @@
+// SPDX-License-Identifier: MIT
+// One frame reconstructed as subdomains (docs/scale-out.md): in this process
+// one after another (out-of-core: each fits a memory budget), or spread over
+// MPI ranks (src/mpi/). Every subdomain runs the same pipeline on its
+// particles and ghosts (backends/kokkos/pipeline.hpp, with a Region); the
+// pieces are stitched into the mesh the whole frame gives, bit for bit.
+#pragma once
+
+#include "core/decomposition.hpp"
+#include "core/piece.hpp"
+#include "core/stitch.hpp"
+#include "../backends/kokkos/pipeline.hpp"
+
+#include <array>
+#include <cstdint>
+#include <functional>
+#include <map>
+#include <set>
+#include <vector>
+
+namespace nbmc {
+
+// Runs one subdomain on the context's backend (the caller's dispatch).
+using RunRegion = std::function<void(const ParticleInput& in, const Params& p, HostMesh& mesh, RunStats& st)>;
+
+// Exchange hooks between the processes that share a frame (MPI); in one
+// process both are local.
+struct SubdomainComm {
+  // Sends (subdomain, cell x, y, z) records to the processes running those
+  // subdomains; returns the records addressed to this process's subdomains.
+  std::function<std::vector<std::array<std::int64_t, 4>>(const std::vector<std::array<std::int64_t, 4>>&)> exchange;
+  // Logical OR over the processes.
+  std::function<bool(bool)> any;
+};
+
+// Fills `xyz` with the positions (packed doubles) of the particles and ghosts
+// of the i-th of `mine`.
+using PackParticles = std::function<void(std::size_t i, std::vector<double>& xyz)>;
+
+// Runs the subdomains `mine` of d until no band growth crosses into
+// a subdomain that has not seen it, and returns their pieces (indexed like
+// `mine`). Stats of the runs are added to st; entries filled for `mine`.
+std::vector<Piece> run_subdomain_job(const Decomposition& d, const Params& p, const std::vector<int>& mine,
+                                     const PackParticles& particles,
+                                     const RunRegion& run, const SubdomainComm& comm, RunStats& st,
+                                     SubdomainReport& rep);
+
+// The whole in-process path: splits (or, with `automatic`, decides whether
+// and how to split under budget_bytes), runs, stitches into mesh. Returns
+// false when `automatic` decided not to split (the caller then runs the
+// frame whole).
+bool reconstruct_subdomains(const SubdomainSetting& setting, std::uint64_t budget_bytes, const double* xyz,
+                            std::size_t count, const Params& p, const RunRegion& run, HostMesh& mesh, RunStats& st,
+                            SubdomainReport& rep);
+
+// Merges a subdomain run's stats into the frame's (sums of the work done).
+void add_run_stats(RunStats& total, const RunStats& one);
+
+}  // namespace nbmc
