@@ -501,6 +501,18 @@ NBMC_API int32_t nbmc_context_subdomain_stats(const nbmc_context* ctx, nbmc_subd
  * NBMC_ERROR_INVALID_ARGUMENT when i is out of range. */
 NBMC_API int32_t nbmc_context_subdomain_entry(const nbmc_context* ctx, uint64_t i, nbmc_subdomain_entry* out);
 
+/* ------------------------------------------------------------------------
+ * Pieces of a frame reconstructed over MPI ranks (include/nbmc_mpi.h,
+ * NBMC_MPI_PIECES). Plain accessors: no MPI type is involved.
+ * ---------------------------------------------------------------------- */
+/* Per vertex of a piece: its id in the whole frame's mesh, the same on every
+ * rank whose piece has the vertex (ids run from 0 to
+ * nbmc_mesh_global_vertex_count() - 1). NULL for any other mesh. */
+NBMC_API const uint64_t* nbmc_mesh_global_vertex_ids(const nbmc_mesh* mesh);
+/* Vertices of the whole frame's mesh that the pieces make up; 0 for a mesh
+ * that is not a piece. */
+NBMC_API uint64_t nbmc_mesh_global_vertex_count(const nbmc_mesh* mesh);
+
 #ifdef __cplusplus
 } /* extern "C" */
 #endif

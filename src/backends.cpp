@@ -365,6 +365,48 @@ void run_on_kokkos_thread(nbmc_context& ctx, const std::function<void()>& fn) {
   kokkos_thread().run(fn);
 }
 
+namespace {
+// One reconstruction (a frame, or a subdomain of one) on the context's
+// backend; the caller holds the backend's lock on nbmc's Kokkos thread.
+void dispatch(nbmc_context& ctx, const ParticleInput& in, const Params& p, const Progress& progress,
+            bool mesh_on_device, HostMesh& mesh, RunStats& st) {
+  switch (ctx.backend) {
+    case NBMC_BACKEND_SERIAL: reconstruct_serial(in, p, ctx.memory, progress, mesh, st); break;
+    case NBMC_BACKEND_OPENMP: {
+#if defined(KOKKOS_ENABLE_OPENMP)
+      const int pool = pool_threads();
+      const int hw = int(std::max(1u, std::thread::hardware_concurrency()));
+      const int threads = std::min(pool, ctx.num_threads > 0 ? ctx.num_threads : hw);
+      if (threads >= pool) {
+        reconstruct_openmp(in, p, ctx.memory, progress, mesh, st);
+      } else {
+        std::exception_ptr err;
+        Kokkos::OpenMP::partition_master(
+            [&](int, int) {
+              try {
+                reconstruct_openmp(in, p, ctx.memory, progress, mesh, st);
+              } catch (...) {
+                err = std::current_exception();
+              }
+            },
+            1, threads);
+        if (err) std::rethrow_exception(err);
+      }
+#endif
+      break;
+    }
+    case NBMC_BACKEND_CUDA: reconstruct_cuda(in, p, ctx.memory, progress, mesh_on_device, mesh, st, ctx.device_id); break;
+    default: throw Error(NBMC_ERROR_BACKEND_UNAVAILABLE, "backend not available");
+  }
+}
+
+}  // namespace
+
+void run_region(nbmc_context& ctx, const ParticleInput& in, const Params& p, const Progress& progress, HostMesh& mesh,
+                RunStats& st) {
+  run_on_kokkos_thread(ctx, [&] { dispatch(ctx, in, p, progress, false, mesh, st); });
+}
+
 void run_backend(nbmc_context& ctx, const Params& p, HostMesh& mesh, RunStats& st) {
   Progress progress;
   if (ctx.progress_fn) {
@@ -384,36 +426,8 @@ void run_backend(nbmc_context& ctx, const Params& p, HostMesh& mesh, RunStats& s
     in.count = ctx.particles.size() / 3;
   }
   const bool mesh_on_device = ctx.mesh_memory == NBMC_MEMORY_DEVICE;
-  // One reconstruction (a frame, or a subdomain of one) on the context's backend.
   auto run_one = [&](const ParticleInput& in, const Params& p, bool mesh_on_device, HostMesh& mesh, RunStats& st) {
-    switch (ctx.backend) {
-      case NBMC_BACKEND_SERIAL: reconstruct_serial(in, p, ctx.memory, progress, mesh, st); break;
-      case NBMC_BACKEND_OPENMP: {
-#if defined(KOKKOS_ENABLE_OPENMP)
-        const int pool = pool_threads();
-        const int hw = int(std::max(1u, std::thread::hardware_concurrency()));
-        const int threads = std::min(pool, ctx.num_threads > 0 ? ctx.num_threads : hw);
-        if (threads >= pool) {
-          reconstruct_openmp(in, p, ctx.memory, progress, mesh, st);
-        } else {
-          std::exception_ptr err;
-          Kokkos::OpenMP::partition_master(
-              [&](int, int) {
-                try {
-                  reconstruct_openmp(in, p, ctx.memory, progress, mesh, st);
-                } catch (...) {
-                  err = std::current_exception();
-                }
-              },
-              1, threads);
-          if (err) std::rethrow_exception(err);
-        }
-#endif
-        break;
-      }
-      case NBMC_BACKEND_CUDA: reconstruct_cuda(in, p, ctx.memory, progress, mesh_on_device, mesh, st, ctx.device_id); break;
-      default: throw Error(NBMC_ERROR_BACKEND_UNAVAILABLE, "backend not available");
-    }
+    dispatch(ctx, in, p, progress, mesh_on_device, mesh, st);
   };
   ctx.subdomain_report = SubdomainReport();
   auto job = [&]() {

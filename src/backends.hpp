@@ -3,6 +3,7 @@
 // reconstruction to the execution space of a context.
 #pragma once
 
+#include "collective.h"
 #include "context.hpp"
 
 #include <functional>
@@ -28,6 +29,12 @@ Params resolve_params(const nbmc_params& in);
 void check_domain(const Params& p);
 
 void run_backend(nbmc_context& ctx, const Params& p, HostMesh& mesh, RunStats& st);
+// One subdomain (in.region) or frame on the context's backend, from any thread.
+void run_region(nbmc_context& ctx, const ParticleInput& in, const Params& p, const Progress& progress, HostMesh& mesh,
+                RunStats& st);
+// The frame over the processes of a collective (src/distributed.cpp).
+void reconstruct_collective(nbmc_context& ctx, const nbmc_params& params, const nbmc__collective& hooks,
+                            int32_t output, int32_t root, HostMesh& mesh);
 // Runs fn where the context's backend runs its work (nbmc's Kokkos thread,
 // serialised with the reconstructions of that backend).
 void run_on_kokkos_thread(nbmc_context& ctx, const std::function<void()>& fn);

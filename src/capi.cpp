@@ -5,6 +5,7 @@
 #include "nbmc.h"
 
 #include "backends.hpp"
+#include "collective.h"
 #include "capi_mesh.hpp"
 #include "context.hpp"
 
@@ -188,8 +189,8 @@ static void check_upload(const T* xyz, uint64_t count, uint64_t byte_stride, con
 }
 
 template <class T>
-static int32_t set_particles(nbmc_context* ctx, const T* xyz, uint64_t count, uint64_t byte_stride,
-                             const char* fn) {
+static int32_t set_particles_impl(nbmc_context* ctx, const T* xyz, uint64_t count, uint64_t byte_stride,
+                                  const char* fn) {
   if (!ctx) return NBMC_ERROR_INVALID_ARGUMENT;
   NBMC_CAPI_BEGIN(ctx)
   ctx->particles.clear();  // keeps the (pinned) buffer for the next upload
@@ -229,6 +230,36 @@ static int32_t set_particles(nbmc_context* ctx, const T* xyz, uint64_t count, ui
   NBMC_CAPI_END
 }
 
+
+// A context bound to several processes (libnbmc_mpi) may hold no particles
+// (a rank that owns none), and remembers a failed upload so that the next
+// collective reconstruction fails on every rank instead of leaving this
+// rank's particles out.
+template <class Impl>
+static int32_t collective_upload(nbmc_context* ctx, uint64_t count, const Impl& impl) {
+  if (ctx && ctx->collective) {
+    ctx->pending_status = 0;
+    ctx->pending_error.clear();
+    if (count == 0) {
+      nbmc::release_host_particles(*ctx);
+      ctx->device_particles = nbmc::DeviceParticles();
+      ctx->last_error.clear();
+      return NBMC_OK;
+    }
+  }
+  const int32_t st = impl();
+  if (st != NBMC_OK && ctx && ctx->collective) {
+    ctx->pending_status = st;
+    ctx->pending_error = ctx->last_error;
+  }
+  return st;
+}
+
+template <class T>
+static int32_t set_particles(nbmc_context* ctx, const T* xyz, uint64_t count, uint64_t byte_stride, const char* fn) {
+  return collective_upload(ctx, count, [&] { return set_particles_impl(ctx, xyz, count, byte_stride, fn); });
+}
+
 extern "C" {
 
 int32_t nbmc_context_set_particles_f32(nbmc_context* ctx, const float* xyz, uint64_t count, uint64_t byte_stride) {
@@ -242,8 +273,8 @@ int32_t nbmc_context_set_particles_f64(nbmc_context* ctx, const double* xyz, uin
 }  // extern "C"
 
 template <class T>
-static int32_t set_particles_device(nbmc_context* ctx, const T* xyz, uint64_t count, uint64_t byte_stride,
-                                    const char* fn) {
+static int32_t set_particles_device_impl(nbmc_context* ctx, const T* xyz, uint64_t count, uint64_t byte_stride,
+                                         const char* fn) {
   if (!ctx) return NBMC_ERROR_INVALID_ARGUMENT;
   NBMC_CAPI_BEGIN(ctx)
   nbmc::release_host_particles(*ctx);
@@ -260,6 +291,12 @@ static int32_t set_particles_device(nbmc_context* ctx, const T* xyz, uint64_t co
   ctx->device_particles = std::move(d);
   return NBMC_OK;
   NBMC_CAPI_END
+}
+
+template <class T>
+static int32_t set_particles_device(nbmc_context* ctx, const T* xyz, uint64_t count, uint64_t byte_stride,
+                                    const char* fn) {
+  return collective_upload(ctx, count, [&] { return set_particles_device_impl(ctx, xyz, count, byte_stride, fn); });
 }
 
 extern "C" {
@@ -543,6 +580,65 @@ int32_t nbmc_context_subdomain_entry(const nbmc_context* ctx, uint64_t i, nbmc_s
   out->seconds = e.seconds;
   c->last_error.clear();
   return NBMC_OK;
+}
+
+}  // extern "C"
+
+extern "C" {
+
+int32_t nbmc__context_bind_collective(nbmc_context* ctx, int32_t bound) {
+  if (!ctx) return NBMC_ERROR_INVALID_ARGUMENT;
+  ctx->collective = bound != 0;
+  ctx->pending_status = 0;
+  ctx->pending_error.clear();
+  ctx->last_error.clear();
+  return NBMC_OK;
+}
+
+int32_t nbmc__context_fail(nbmc_context* ctx, int32_t status, const char* message) {
+  return fail(ctx, status, message ? message : "");
+}
+
+int32_t nbmc__reconstruct_collective(nbmc_context* ctx, const nbmc_params* params, const nbmc__collective* c,
+                                     int32_t output, int32_t root, nbmc_mesh** mesh) {
+  if (mesh) *mesh = nullptr;
+  if (!ctx) return NBMC_ERROR_INVALID_ARGUMENT;
+  NBMC_CAPI_BEGIN(ctx)
+  // Argument errors that every rank sees alike (the same call on each).
+  if (!params || !c || !mesh)
+    throw Error(NBMC_ERROR_INVALID_ARGUMENT, "nbmc_mpi_reconstruct: params, mesh or the communicator is NULL");
+  if (params->struct_size < offsetof(nbmc_params, cleanup))
+    throw Error(NBMC_ERROR_INVALID_ARGUMENT, "nbmc_mpi_reconstruct: fill params with nbmc_params_init()");
+  nbmc_params full;
+  nbmc_params_init(&full);
+  std::memcpy(&full, params, std::min<std::size_t>(params->struct_size, sizeof full));
+  full.struct_size = sizeof full;
+  auto m = std::make_unique<nbmc_mesh>();
+  ctx->has_stats = false;
+  nbmc::reconstruct_collective(*ctx, full, *c, output, root, m->mesh);
+  // Clean-up and smoothing work on whole meshes: on the root's stitched
+  // mesh; pieces stay as marching cubes made them (their shared vertices
+  // must stay shared).
+  ctx->postprocess = nbmc::mesh::PostprocessStats();
+  if (output == NBMC__OUTPUT_GATHER && c->rank == root) {
+    nbmc::RunStats& st = ctx->stats;
+    ctx->postprocess = nbmc::postprocess_mesh(full, m->mesh, st);
+  } else if (output == NBMC__OUTPUT_PIECES) {
+    ctx->postprocess.raw_triangles = m->mesh.triangle_count();
+  }
+  ctx->has_stats = true;
+  *mesh = m.release();
+  return NBMC_OK;
+  NBMC_CAPI_END
+}
+
+const uint64_t* nbmc_mesh_global_vertex_ids(const nbmc_mesh* mesh) {
+  if (!mesh || mesh->mesh.global_ids.empty()) return nullptr;
+  return mesh->mesh.global_ids.data();
+}
+
+uint64_t nbmc_mesh_global_vertex_count(const nbmc_mesh* mesh) {
+  return mesh ? mesh->mesh.global_vertex_count : 0;
 }
 
 }  // extern "C"

@@ -45,6 +45,9 @@ struct nbmc_context {
   std::uint64_t peak_memory = 0;
   nbmc::RunStats stats;
   nbmc::SubdomainSetting subdomains;       // nbmc_context_set_subdomains
+  bool collective = false;                 // one of several processes' contexts (libnbmc_mpi)
+  int32_t pending_status = 0;              // collective: the last upload's failure, for every rank to see
+  std::string pending_error;
   nbmc::SubdomainReport subdomain_report;  // of the last reconstruction
   nbmc::mesh::PostprocessStats postprocess;  // of the last reconstruction (capi_mesh.cpp)
   bool has_stats = false;

@@ -75,6 +75,8 @@ std::vector<Piece> run_subdomain_job(const Decomposition& d, const Params& p, co
   for (int round = 0;; ++round) {
     if (round > 1000) throw Error(NBMC_ERROR_INTERNAL, "subdomains: the band growth did not settle after 1000 exchanges");
     std::vector<std::array<std::int64_t, 4>> out;
+    std::exception_ptr failed;
+    try {
     for (std::size_t i = 0; i < m; ++i) {
       if (!dirty[i]) continue;
       dirty[i] = 0;
@@ -136,6 +138,10 @@ std::vector<Piece> run_subdomain_job(const Decomposition& d, const Params& p, co
           if (t != s.index) out.push_back({t, cell[0], cell[1], cell[2]});
       }
     }
+    } catch (...) {
+      failed = std::current_exception();
+    }
+    comm.agree(failed);  // every process fails together, or none
     bool fresh = false;
     for (const auto& r : comm.exchange(out)) {
       const auto it = local.find(int(r[0]));
@@ -170,6 +176,9 @@ void run_split(const int parts[3], const Grid& g, const double* xyz, std::size_t
   SubdomainComm local;
   local.exchange = [](const std::vector<std::array<std::int64_t, 4>>& out) { return out; };
   local.any = [](bool b) { return b; };
+  local.agree = [](std::exception_ptr e) {
+    if (e) std::rethrow_exception(e);
+  };
   rep = SubdomainReport();
   rep.used = true;
   for (int a = 0; a < 3; ++a) rep.parts[a] = d.parts[a];

@@ -12,6 +12,7 @@
 #include "../backends/kokkos/pipeline.hpp"
 
 #include <array>
+#include <exception>
 #include <cstdint>
 #include <functional>
 #include <map>
@@ -31,6 +32,10 @@ struct SubdomainComm {
   std::function<std::vector<std::array<std::int64_t, 4>>(const std::vector<std::array<std::int64_t, 4>>&)> exchange;
   // Logical OR over the processes.
   std::function<bool(bool)> any;
+  // Error agreement: called by every process after each local phase with
+  // what it threw (or null); throws the same error on every process when
+  // any failed. In one process: rethrows.
+  std::function<void(std::exception_ptr)> agree;
 };
 
 // Fills `xyz` with the positions (packed doubles) of the particles and ghosts

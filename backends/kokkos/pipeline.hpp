@@ -33,6 +33,10 @@ struct HostMesh {
   float* d_normals = nullptr;
   std::uint32_t* d_triangles = nullptr;
   std::uint64_t d_vertices = 0, d_triangles_count = 0;
+  // A piece of a frame reconstructed over several processes: per vertex, its
+  // id in the whole mesh (the same on every process that has the vertex).
+  std::vector<std::uint64_t> global_ids;
+  std::uint64_t global_vertex_count = 0;
   std::uint64_t vertex_count() const { return on_device ? d_vertices : positions.size() / 3; }
   std::uint64_t triangle_count() const { return on_device ? d_triangles_count : triangles.size() / 3; }
 };

@@ -62,6 +62,7 @@ STAGE_OUTPUT = 6
 STAGE_COUNT = 7
 STAGE_SLOTS = 16
 STAGE_POSTPROCESS = 7
+SUBDOMAINS_AUTO = -1
 
 
 # ----------------------------------------------------------------- structs
@@ -153,6 +154,39 @@ class MeshCheckResult(Structure):
     ]
 
 
+class SubdomainStats(Structure):
+    _fields_ = [
+        ("struct_size", c_uint32),
+        ("parts", c_int32 * 3),
+        ("count", c_uint64),
+        ("automatic", c_uint32),
+        ("reserved", c_uint32),
+        ("ghost_width", c_double),
+        ("ghost_particles", c_uint64),
+        ("reruns", c_uint64),
+        ("exchanged_cells", c_uint64),
+        ("shared_vertices", c_uint64),
+        ("budget_bytes", c_uint64),
+        ("stitch_seconds", c_double),
+    ]
+
+
+class SubdomainEntry(Structure):
+    _fields_ = [
+        ("struct_size", c_uint32),
+        ("coord", c_int32 * 3),
+        ("cell_lo", c_int64 * 3),
+        ("cell_hi", c_int64 * 3),
+        ("particles", c_uint64),
+        ("ghost_particles", c_uint64),
+        ("vertex_count", c_uint64),
+        ("triangle_count", c_uint64),
+        ("runs", c_uint32),
+        ("rank", c_int32),
+        ("seconds", c_double),
+    ]
+
+
 PROGRESS_FN = CFUNCTYPE(c_int32, c_void_p, c_int32, c_double)
 
 _ctx_p = c_void_p
@@ -195,6 +229,13 @@ _SIGNATURES = {
     "nbmc_kokkos_finalize": (c_int32, []),
     "nbmc_mesh_check_result_init": (None, [POINTER(MeshCheckResult)]),
     "nbmc_mesh_check": (c_int32, [_mesh_p, POINTER(MeshCheckResult)]),
+    "nbmc_context_set_subdomains": (c_int32, [_ctx_p, c_int32, c_int32, c_int32]),
+    "nbmc_subdomain_stats_init": (None, [POINTER(SubdomainStats)]),
+    "nbmc_subdomain_entry_init": (None, [POINTER(SubdomainEntry)]),
+    "nbmc_context_subdomain_stats": (c_int32, [_ctx_p, POINTER(SubdomainStats)]),
+    "nbmc_context_subdomain_entry": (c_int32, [_ctx_p, c_uint64, POINTER(SubdomainEntry)]),
+    "nbmc_mesh_global_vertex_ids": (c_void_p, [_mesh_p]),
+    "nbmc_mesh_global_vertex_count": (c_uint64, [_mesh_p]),
 }
 
 _NAMES = ("libnbmc.so.0", "libnbmc.so") if sys.platform.startswith("linux") else (

@@ -373,7 +373,8 @@ class Context:
 
     def __init__(self, backend: Union[str, int] = "auto", *, threads: Optional[int] = None,
                  device_id: int = 0, progress: Optional[ProgressFn] = None,
-                 memory_budget: Union[int, str, None] = None, mesh_memory: str = "host") -> None:
+                 memory_budget: Union[int, str, None] = None, mesh_memory: str = "host",
+                 subdomains: Union[str, int, Tuple[int, int, int], None] = None) -> None:
         desc = C.ContextDesc()
         lib.nbmc_context_desc_init(byref(desc))
         desc.backend = _enum(BACKENDS, backend, "backend")
@@ -414,6 +415,8 @@ class Context:
             self.memory_budget = memory_budget
         if mesh_memory != "host":
             self.mesh_memory = mesh_memory
+        if subdomains is not None:
+            self.subdomains = subdomains
 
     # -- plumbing
     @property
@@ -468,6 +471,55 @@ class Context:
         with self._lock:
             self._check(lib.nbmc_context_set_memory_budget(self._handle, n))
         self._budget = n
+
+    _subdomains: Union[str, Tuple[int, int, int]] = (1, 1, 1)
+
+    @property
+    def subdomains(self) -> Union[str, Tuple[int, int, int]]:
+        """How reconstructions are split (docs/scale-out.md): ``(nx, ny, nz)``
+        subdomains stitched into the same mesh, bit for bit; ``"auto"``: split
+        only when the frame's estimate exceeds the memory budget (or, on a
+        GPU, its free memory); an int n means (n, n, n). Default (1, 1, 1)."""
+        return self._subdomains
+
+    @subdomains.setter
+    def subdomains(self, value: Union[str, int, Tuple[int, int, int]]) -> None:
+        if isinstance(value, str):
+            if value.lower() != "auto":
+                raise ValueError(f"subdomains must be 'auto', an int or (nx, ny, nz), not {value!r}")
+            parts: Union[str, Tuple[int, int, int]] = "auto"
+            args = (C.SUBDOMAINS_AUTO, 0, 0)
+        else:
+            t = (int(value),) * 3 if isinstance(value, int) else tuple(int(v) for v in value)
+            if len(t) != 3:
+                raise ValueError(f"subdomains needs three counts, got {value!r}")
+            parts = (t[0], t[1], t[2])
+            args = parts
+        with self._lock:
+            self._check(lib.nbmc_context_set_subdomains(self._handle, *args))
+        self._subdomains = parts
+
+    def subdomain_stats(self) -> Dict[str, Any]:
+        """How the last reconstruction was split: counts, ghost particles,
+        reruns, exchanged band cells, shared vertices, and one dict per
+        subdomain (``"per_subdomain"``). ``count`` is 0 when it was not."""
+        st = C.SubdomainStats()
+        lib.nbmc_subdomain_stats_init(byref(st))
+        with self._lock:
+            self._check(lib.nbmc_context_subdomain_stats(self._handle, byref(st)))
+            per = []
+            for i in range(st.count):
+                e = C.SubdomainEntry()
+                lib.nbmc_subdomain_entry_init(byref(e))
+                self._check(lib.nbmc_context_subdomain_entry(self._handle, i, byref(e)))
+                per.append({"coord": tuple(e.coord), "cells": (tuple(e.cell_lo), tuple(e.cell_hi)),
+                            "particles": e.particles, "ghost_particles": e.ghost_particles,
+                            "vertices": e.vertex_count, "triangles": e.triangle_count, "runs": e.runs,
+                            "seconds": e.seconds})
+        return {"parts": tuple(st.parts), "count": st.count, "automatic": bool(st.automatic),
+                "ghost_width": st.ghost_width, "ghost_particles": st.ghost_particles, "reruns": st.reruns,
+                "exchanged_cells": st.exchanged_cells, "shared_vertices": st.shared_vertices,
+                "budget_bytes": st.budget_bytes, "stitch_seconds": st.stitch_seconds, "per_subdomain": per}
 
     _mesh_memory = "host"
 

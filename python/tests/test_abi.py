@@ -57,12 +57,17 @@ int main(void) {
   printf("nbmc_context_desc SIZE %zu 0\n", sizeof(nbmc_context_desc));
   printf("nbmc_params SIZE %zu 0\n", sizeof(nbmc_params));
   printf("nbmc_stats SIZE %zu 0\n", sizeof(nbmc_stats));
+  printf("nbmc_mesh_check_result SIZE %zu 0\n", sizeof(nbmc_mesh_check_result));
+  printf("nbmc_subdomain_stats SIZE %zu 0\n", sizeof(nbmc_subdomain_stats));
+  printf("nbmc_subdomain_entry SIZE %zu 0\n", sizeof(nbmc_subdomain_entry));
   %FIELDS%
   return 0;
 }
 """
 
-STRUCTS = {"nbmc_context_desc": C.ContextDesc, "nbmc_params": C.Params, "nbmc_stats": C.Stats}
+STRUCTS = {"nbmc_context_desc": C.ContextDesc, "nbmc_params": C.Params, "nbmc_stats": C.Stats,
+           "nbmc_mesh_check_result": C.MeshCheckResult, "nbmc_subdomain_stats": C.SubdomainStats,
+           "nbmc_subdomain_entry": C.SubdomainEntry}
 
 
 def test_struct_layouts(header, tmp_path):
@@ -87,7 +92,8 @@ def test_struct_layouts(header, tmp_path):
 
 def test_init_functions_fill_struct_size():
     for cls, init in [(C.ContextDesc, C.lib.nbmc_context_desc_init), (C.Params, C.lib.nbmc_params_init),
-                      (C.Stats, C.lib.nbmc_stats_init)]:
+                      (C.Stats, C.lib.nbmc_stats_init), (C.SubdomainStats, C.lib.nbmc_subdomain_stats_init),
+                      (C.SubdomainEntry, C.lib.nbmc_subdomain_entry_init)]:
         s = cls()
         init(ctypes.byref(s))
         assert s.struct_size == ctypes.sizeof(cls)

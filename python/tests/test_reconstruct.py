@@ -241,3 +241,22 @@ def test_memory_budget_parsing():
         parse_bytes("lots")
     ctx = nbmc.Context(memory_budget="1G")
     assert ctx.memory_budget == 1 << 30
+
+
+def test_subdomains_give_the_same_mesh(points):
+    pts = points
+    whole = nbmc.reconstruct(pts, 0.05, backend="openmp")
+    with nbmc.Context("openmp", subdomains=(2, 2, 1)) as ctx:
+        split = ctx.reconstruct(pts, 0.05)
+        info = ctx.subdomain_stats()
+    assert info["count"] == 4 and len(info["per_subdomain"]) == 4
+    assert sum(e["particles"] for e in info["per_subdomain"]) == len(pts)
+    assert np.array_equal(whole.vertices, split.vertices)
+    assert np.array_equal(whole.triangles, split.triangles)
+    with nbmc.Context("serial") as ctx:
+        with pytest.raises(nbmc.Error):
+            ctx.subdomains = (0, 1, 1)
+        with pytest.raises(ValueError):
+            ctx.subdomains = "sometimes"
+        ctx.subdomains = "auto"
+        assert ctx.subdomains == "auto"

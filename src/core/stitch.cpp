@@ -89,6 +89,8 @@ StitchResult stitch(const std::vector<const Piece*>& pieces,
     const std::size_t s = source[v].second;
     std::memcpy(t.positions + 3 * v, &p.positions[3 * s], 3 * sizeof(float));
     if (normals && t.normals) std::memcpy(t.normals + 3 * v, &p.normals[3 * s], 3 * sizeof(float));
+    if (t.vertex_keys) t.vertex_keys[v] = p.vertex_keys[s];
+    if (t.vertex_axes) t.vertex_axes[v] = p.vertex_axes[s];
   }
   // Pass 2: merge the triangles by cell (each cell belongs to one piece).
   std::fill(next.begin(), next.end(), 0);
@@ -109,6 +111,7 @@ StitchResult stitch(const std::vector<const Piece*>& pieces,
     // The whole run of this cell's triangles.
     do {
       for (int e = 0; e < 3; ++e) t.triangles[3 * at + e] = remap[c.piece][p.triangles[3 * i + e]];
+      if (t.triangle_cells) t.triangle_cells[at] = c.key;
       ++at;
       ++i;
     } while (i < p.triangle_count() && p.triangle_cells[i] == c.key);

@@ -26,6 +26,11 @@ struct StitchTarget {
   float* positions = nullptr;
   float* normals = nullptr;
   std::uint32_t* triangles = nullptr;
+  // Optional: the keys of the merged mesh, which is then a piece itself
+  // (an MPI rank's subdomains merged before the pieces of all ranks are).
+  std::uint64_t* vertex_keys = nullptr;
+  std::uint8_t* vertex_axes = nullptr;
+  std::uint64_t* triangle_cells = nullptr;
 };
 StitchResult stitch(const std::vector<const Piece*>& pieces,
                     const std::function<StitchTarget(std::uint64_t vertices, std::uint64_t triangles)>& out);

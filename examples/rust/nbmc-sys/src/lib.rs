@@ -69,6 +69,7 @@ pub const NBMC_STAGE_OUTPUT: i32 = 6;
 pub const NBMC_STAGE_COUNT: i32 = 7;
 pub const NBMC_STAGE_SLOTS: usize = 16;
 pub const NBMC_STAGE_POSTPROCESS: i32 = 7;
+pub const NBMC_SUBDOMAINS_AUTO: i32 = -1;
 
 // ------------------------------------------------------------- opaque types
 /// `nbmc_context`: never constructed in Rust, only pointed to.
@@ -175,6 +176,39 @@ pub struct nbmc_mesh_check_result {
     pub min_angle_degrees: f64,
 }
 
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct nbmc_subdomain_stats {
+    pub struct_size: u32,
+    pub parts: [i32; 3],
+    pub count: u64,
+    pub automatic: u32,
+    pub reserved: u32,
+    pub ghost_width: f64,
+    pub ghost_particles: u64,
+    pub reruns: u64,
+    pub exchanged_cells: u64,
+    pub shared_vertices: u64,
+    pub budget_bytes: u64,
+    pub stitch_seconds: f64,
+}
+
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct nbmc_subdomain_entry {
+    pub struct_size: u32,
+    pub coord: [i32; 3],
+    pub cell_lo: [i64; 3],
+    pub cell_hi: [i64; 3],
+    pub particles: u64,
+    pub ghost_particles: u64,
+    pub vertex_count: u64,
+    pub triangle_count: u64,
+    pub runs: u32,
+    pub rank: i32,
+    pub seconds: f64,
+}
+
 /// `int32_t (*)(void* user, int32_t stage, double fraction)`; `None` is NULL.
 /// The callback must not unwind: catch panics before returning to C.
 pub type nbmc_progress_fn = Option<unsafe extern "C" fn(user: *mut c_void, stage: i32, fraction: f64) -> i32>;
@@ -259,4 +293,13 @@ extern "C" {
     // mesh post-processing
     pub fn nbmc_mesh_check_result_init(result: *mut nbmc_mesh_check_result);
     pub fn nbmc_mesh_check(mesh: *const nbmc_mesh, result: *mut nbmc_mesh_check_result) -> i32;
+
+    // subdomains, pieces of MPI reconstructions
+    pub fn nbmc_context_set_subdomains(ctx: *mut nbmc_context, nx: i32, ny: i32, nz: i32) -> i32;
+    pub fn nbmc_subdomain_stats_init(out: *mut nbmc_subdomain_stats);
+    pub fn nbmc_subdomain_entry_init(out: *mut nbmc_subdomain_entry);
+    pub fn nbmc_context_subdomain_stats(ctx: *const nbmc_context, out: *mut nbmc_subdomain_stats) -> i32;
+    pub fn nbmc_context_subdomain_entry(ctx: *const nbmc_context, i: u64, out: *mut nbmc_subdomain_entry) -> i32;
+    pub fn nbmc_mesh_global_vertex_ids(mesh: *const nbmc_mesh) -> *const u64;
+    pub fn nbmc_mesh_global_vertex_count(mesh: *const nbmc_mesh) -> u64;
 }

@@ -73,6 +73,7 @@ fn rust_constants() -> BTreeMap<&'static str, i128> {
         NBMC_STAGE_COUNT,
         NBMC_STAGE_SLOTS,
         NBMC_STAGE_POSTPROCESS,
+        NBMC_SUBDOMAINS_AUTO,
     ]
 }
 
@@ -177,6 +178,33 @@ fn rust_layouts() -> Vec<Layout> {
             volume,
             area,
             min_angle_degrees
+        }),
+        layout!(nbmc_subdomain_stats {
+            struct_size,
+            parts,
+            count,
+            automatic,
+            reserved,
+            ghost_width,
+            ghost_particles,
+            reruns,
+            exchanged_cells,
+            shared_vertices,
+            budget_bytes,
+            stitch_seconds
+        }),
+        layout!(nbmc_subdomain_entry {
+            struct_size,
+            coord,
+            cell_lo,
+            cell_hi,
+            particles,
+            ghost_particles,
+            vertex_count,
+            triangle_count,
+            runs,
+            rank,
+            seconds
         }),
     ]
 }

@@ -1,0 +1,588 @@
+// SPDX-License-Identifier: MIT
+// One frame over several processes (MPI ranks), through the collective
+// operations of src/collective.h: libnbmc stays MPI-free. The same code as
+// the in-process subdomains (src/subdomains.cpp) runs on every rank; what is
+// added here is who runs which subdomain, moving particles and band cells
+// between the ranks, the ranks' errors agreed on, and the output (the whole
+// mesh stitched on one rank, or a piece per rank with global vertex ids).
+//
+// Every rank runs the same sequence of collective calls. A local failure is
+// never thrown straight away: it is carried to the next agreement point
+// (agree()), where all ranks learn the lowest failing rank's status and
+// message and throw it together, so no rank is left waiting in a collective.
+#include "collective.h"
+
+#include "backends.hpp"
+#include "capi_mesh.hpp"
+#include "context.hpp"
+#include "subdomains.hpp"
+
+#include <algorithm>
+#include <chrono>
+#include <cstdlib>
+#include <cstring>
+#include <limits>
+#include <map>
+#include <memory>
+#include <numeric>
+#include <string>
+#include <type_traits>
+#include <unordered_map>
+#include <vector>
+
+namespace nbmc {
+namespace {
+
+double now() {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+
+struct Coll {
+  const nbmc__collective& c;
+  int rank() const { return c.rank; }
+  int size() const { return c.size; }
+  static void check(int32_t rc, const char* what) {
+    if (rc != 0)
+      throw Error(NBMC_ERROR_INTERNAL, std::string("MPI communication failed in ") + what + " (code " +
+                                           std::to_string(rc) + ")");
+  }
+  void reduce(std::uint64_t* v, int n, int op) const { check(c.allreduce(c.user, v, n, op), "an allreduce"); }
+  void reduce(double* v, int n, int op) const { check(c.allreduce(c.user, v, n, op), "an allreduce"); }
+  // Byte blocks to every rank; returns what every rank sent here.
+  std::vector<std::vector<char>> alltoall(const std::vector<std::vector<char>>& out) const {
+    std::vector<std::uint64_t> sb(static_cast<std::size_t>(size())), rb(static_cast<std::size_t>(size()));
+    std::vector<char> flat;
+    for (int r = 0; r < size(); ++r) {
+      sb[std::size_t(r)] = out[std::size_t(r)].size();
+      flat.insert(flat.end(), out[std::size_t(r)].begin(), out[std::size_t(r)].end());
+    }
+    void* recv = nullptr;
+    check(c.alltoallv(c.user, flat.data(), sb.data(), &recv, rb.data()), "an all-to-all exchange");
+    std::unique_ptr<char, decltype(&std::free)> hold(static_cast<char*>(recv), &std::free);
+    std::vector<std::vector<char>> in(static_cast<std::size_t>(size()));
+    std::size_t at = 0;
+    for (int r = 0; r < size(); ++r) {
+      in[std::size_t(r)].assign(hold.get() + at, hold.get() + at + rb[std::size_t(r)]);
+      at += rb[std::size_t(r)];
+    }
+    return in;
+  }
+  std::vector<std::vector<char>> gather(const std::vector<char>& mine, int root) const {
+    std::vector<std::uint64_t> rb(static_cast<std::size_t>(size()));
+    void* recv = nullptr;
+    check(c.gatherv(c.user, mine.data(), mine.size(), root, &recv, rb.data()), "a gather");
+    std::unique_ptr<char, decltype(&std::free)> hold(static_cast<char*>(recv), &std::free);
+    std::vector<std::vector<char>> in;
+    if (rank() != root) return in;
+    in.resize(static_cast<std::size_t>(size()));
+    std::size_t at = 0;
+    for (int r = 0; r < size(); ++r) {
+      in[std::size_t(r)].assign(hold.get() + at, hold.get() + at + rb[std::size_t(r)]);
+      at += rb[std::size_t(r)];
+    }
+    return in;
+  }
+  std::string bcast(const std::string& s, int root) const {
+    void* data = rank() == root ? const_cast<char*>(s.data()) : nullptr;
+    std::uint64_t bytes = s.size();
+    check(c.bcast(c.user, &data, &bytes, root), "a broadcast");
+    if (rank() == root) return s;
+    std::unique_ptr<char, decltype(&std::free)> hold(static_cast<char*>(data), &std::free);
+    return std::string(hold.get(), std::size_t(bytes));
+  }
+};
+
+// Status and message of an exception, as the C API maps them.
+void describe(std::exception_ptr e, int32_t& status, std::string& msg) {
+  try {
+    std::rethrow_exception(e);
+  } catch (const Error& x) {
+    status = x.status;
+    msg = x.what();
+  } catch (const std::bad_alloc&) {
+    status = NBMC_ERROR_OUT_OF_MEMORY;
+    msg = "out of memory";
+  } catch (const std::exception& x) {
+    status = NBMC_ERROR_INTERNAL;
+    msg = std::string("internal error: ") + x.what();
+  } catch (...) {
+    status = NBMC_ERROR_INTERNAL;
+    msg = "internal error: unknown exception";
+  }
+}
+
+// The agreement point: the lowest failing rank's error, thrown on all ranks.
+void agree(const Coll& c, std::exception_ptr local) {
+  std::uint64_t first = local ? std::uint64_t(c.rank()) : std::numeric_limits<std::uint64_t>::max();
+  c.reduce(&first, 1, NBMC__MIN_U64);
+  if (first == std::numeric_limits<std::uint64_t>::max()) return;
+  std::string payload;
+  if (std::uint64_t(c.rank()) == first) {
+    int32_t status = 0;
+    std::string msg;
+    describe(local, status, msg);
+    payload.assign(reinterpret_cast<const char*>(&status), sizeof status);
+    payload += msg;
+  }
+  payload = c.bcast(payload, int(first));
+  int32_t status = NBMC_ERROR_INTERNAL;
+  if (payload.size() >= sizeof status) std::memcpy(&status, payload.data(), sizeof status);
+  const std::string msg = payload.size() >= sizeof status ? payload.substr(sizeof status) : std::string();
+  if (msg.rfind("rank ", 0) == 0) throw Error(status, msg);  // already named (an inner agreement)
+  throw Error(status, "rank " + std::to_string(first) + " of " + std::to_string(c.size()) + ": " + msg);
+}
+
+template <class F>
+void step(const Coll& c, F&& f) {
+  std::exception_ptr e;
+  try {
+    f();
+  } catch (...) {
+    e = std::current_exception();
+  }
+  agree(c, e);
+}
+
+// ------------------------------------------------------------ byte packing
+template <class T>
+void put(std::vector<char>& b, const T& v) {
+  static_assert(std::is_trivially_copyable<T>::value, "POD only");
+  const char* p = reinterpret_cast<const char*>(&v);
+  b.insert(b.end(), p, p + sizeof(T));
+}
+template <class V>
+void put_array(std::vector<char>& b, const V& v) {
+  put(b, std::uint64_t(v.size()));
+  const char* p = reinterpret_cast<const char*>(v.data());
+  b.insert(b.end(), p, p + v.size() * sizeof(typename V::value_type));
+}
+struct Reader {
+  const std::vector<char>& b;
+  std::size_t at = 0;
+  template <class T>
+  T get() {
+    if (at + sizeof(T) > b.size()) throw Error(NBMC_ERROR_INTERNAL, "MPI: a message was shorter than announced");
+    T v;
+    std::memcpy(&v, b.data() + at, sizeof(T));
+    at += sizeof(T);
+    return v;
+  }
+  template <class V>
+  void get_array(V& v) {
+    const std::uint64_t n = get<std::uint64_t>();
+    const std::size_t bytes = std::size_t(n) * sizeof(typename V::value_type);
+    if (at + bytes > b.size()) throw Error(NBMC_ERROR_INTERNAL, "MPI: a message was shorter than announced");
+    v.resize(std::size_t(n));
+    if (bytes) std::memcpy(v.data(), b.data() + at, bytes);
+    at += bytes;
+  }
+  bool done() const { return at >= b.size(); }
+};
+
+void pack_piece(std::vector<char>& b, const Piece& p) {
+  put_array(b, p.positions);
+  put_array(b, p.normals);
+  put_array(b, p.triangles);
+  put_array(b, p.vertex_keys);
+  put_array(b, p.vertex_axes);
+  put_array(b, p.triangle_cells);
+}
+Piece unpack_piece(Reader& r) {
+  Piece p;
+  r.get_array(p.positions);
+  r.get_array(p.normals);
+  r.get_array(p.triangles);
+  r.get_array(p.vertex_keys);
+  r.get_array(p.vertex_axes);
+  r.get_array(p.triangle_cells);
+  return p;
+}
+
+// Subdomains to ranks: largest first, each to the least loaded rank (the
+// same on every rank: the loads are global sums).
+std::vector<int> assign(const std::vector<std::uint64_t>& load, int ranks) {
+  std::vector<int> order(load.size());
+  std::iota(order.begin(), order.end(), 0);
+  std::stable_sort(order.begin(), order.end(), [&](int a, int b) { return load[std::size_t(a)] > load[std::size_t(b)]; });
+  std::vector<std::uint64_t> total(std::size_t(ranks), 0);
+  std::vector<int> owner(load.size(), 0);
+  for (int s : order) {
+    const int r = int(std::min_element(total.begin(), total.end()) - total.begin());
+    owner[std::size_t(s)] = r;
+    total[std::size_t(r)] += load[std::size_t(s)] + 1;  // +1: empty subdomains spread too
+  }
+  return owner;
+}
+
+// Global vertex ids of a rank's piece: a vertex belongs to the lowest rank
+// that has it; owners number their vertices after the lower ranks' counts,
+// then tell the other ranks that have a vertex its id.
+void global_ids(const Coll& c, const Decomposition& d, const std::vector<int>& owner, const Piece& piece,
+                std::vector<std::uint64_t>& ids, std::uint64_t& total) {
+  const int me = c.rank(), P = c.size();
+  // A vertex is on an edge whose endpoints are grid vertices; it can be shared
+  // with another rank only if an endpoint lies on the boundary of one of my
+  // subdomains next to a subdomain of another rank.
+  const std::size_t nv = piece.vertex_count();
+  std::vector<std::vector<char>> out(static_cast<std::size_t>(P));
+  std::vector<std::vector<std::uint32_t>> sent(static_cast<std::size_t>(P));  // my vertex indices sent to each rank
+  auto decode = [](std::uint64_t key, std::int64_t v[3]) {
+    const std::uint64_t block = key >> 9;
+    const int word = int((key >> 6) & 7), bit = int(key & 63);
+    v[0] = std::int64_t(compact3(block)) * 8 + (word & 1) * 4 + (bit & 3);
+    v[1] = std::int64_t(compact3(block >> 1)) * 8 + ((word >> 1) & 1) * 4 + ((bit >> 2) & 3);
+    v[2] = std::int64_t(compact3(block >> 2)) * 8 + ((word >> 2) & 1) * 4 + (bit >> 4);
+  };
+  std::vector<char> flag(static_cast<std::size_t>(P));
+  for (std::size_t v = 0; v < nv; ++v) {
+    std::int64_t g[3];
+    decode(piece.vertex_keys[v], g);
+    const int ax = piece.vertex_axes[v];
+    std::fill(flag.begin(), flag.end(), 0);
+    for (const Subdomain& other : d.subdomains) {
+      const int r = owner[std::size_t(other.index)];
+      if (r == me || flag[std::size_t(r)]) continue;
+      // The edge (g, g + e_ax) touches the other subdomain's cells' corners.
+      bool in = true;
+      for (int k = 0; k < 3 && in; ++k) {
+        const std::int64_t lo = g[k], hi = g[k] + (k == ax ? 1 : 0);
+        in = hi >= other.cell_lo[k] && lo <= other.cell_hi[k];
+      }
+      if (in) flag[std::size_t(r)] = 1;
+    }
+    for (int r = 0; r < P; ++r)
+      if (flag[std::size_t(r)]) {
+        put(out[std::size_t(r)], piece.vertex_keys[v]);
+        put(out[std::size_t(r)], std::uint64_t(ax));
+        sent[std::size_t(r)].push_back(std::uint32_t(v));
+      }
+  }
+  const std::vector<std::vector<char>> in = c.alltoall(out);
+  // Which of my vertices a lower rank also has; lookup of my vertices by key.
+  std::unordered_map<std::uint64_t, std::uint32_t> index;  // (key << 2 | axis) -> my vertex
+  index.reserve(std::size_t(nv / 8 + 16));
+  for (int r = 0; r < P; ++r)
+    for (std::uint32_t v : sent[std::size_t(r)]) index[(piece.vertex_keys[v] << 2) | piece.vertex_axes[v]] = v;
+  std::vector<char> foreign(nv, 0);  // owned by a lower rank
+  std::vector<std::vector<std::uint32_t>> asked(static_cast<std::size_t>(P));  // my vertices rank r also has
+  for (int r = 0; r < P; ++r) {
+    Reader rd{in[std::size_t(r)]};
+    while (!rd.done()) {
+      const std::uint64_t key = rd.get<std::uint64_t>(), ax = rd.get<std::uint64_t>();
+      const auto it = index.find((key << 2) | ax);
+      if (it == index.end()) continue;
+      asked[std::size_t(r)].push_back(it->second);
+      if (r < me) foreign[it->second] = 1;
+    }
+  }
+  std::uint64_t owned = 0;
+  for (std::size_t v = 0; v < nv; ++v) owned += foreign[v] ? 0 : 1;
+  std::vector<std::uint64_t> counts(static_cast<std::size_t>(P), 0);
+  counts[std::size_t(me)] = owned;
+  c.reduce(counts.data(), P, NBMC__SUM_U64);
+  std::uint64_t offset = 0;
+  for (int r = 0; r < me; ++r) offset += counts[std::size_t(r)];
+  total = std::accumulate(counts.begin(), counts.end(), std::uint64_t(0));
+  ids.assign(nv, std::numeric_limits<std::uint64_t>::max());
+  std::uint64_t next = offset;
+  for (std::size_t v = 0; v < nv; ++v)
+    if (!foreign[v]) ids[v] = next++;
+  // Owners tell the higher ranks that share a vertex its id.
+  std::vector<std::vector<char>> reply(static_cast<std::size_t>(P));
+  for (int r = me + 1; r < P; ++r)
+    for (std::uint32_t v : asked[std::size_t(r)])
+      if (!foreign[v]) {
+        put(reply[std::size_t(r)], piece.vertex_keys[v]);
+        put(reply[std::size_t(r)], std::uint64_t(piece.vertex_axes[v]));
+        put(reply[std::size_t(r)], ids[v]);
+      }
+  const std::vector<std::vector<char>> answers = c.alltoall(reply);
+  for (int r = 0; r < me; ++r) {
+    Reader rd{answers[std::size_t(r)]};
+    while (!rd.done()) {
+      const std::uint64_t key = rd.get<std::uint64_t>(), ax = rd.get<std::uint64_t>(), id = rd.get<std::uint64_t>();
+      const auto it = index.find((key << 2) | ax);
+      if (it != index.end() && foreign[it->second]) ids[it->second] = std::min(ids[it->second], id);
+    }
+  }
+  for (std::size_t v = 0; v < nv; ++v)
+    if (ids[v] == std::numeric_limits<std::uint64_t>::max())
+      throw Error(NBMC_ERROR_INTERNAL, "MPI: a shared vertex got no global id from its owner");
+}
+
+}  // namespace
+
+// The collective reconstruction (see collective.h).
+void reconstruct_collective(nbmc_context& ctx, const nbmc_params& full, const nbmc__collective& hooks,
+                            int32_t output, int32_t root, HostMesh& mesh) {
+  const Coll c{hooks};
+  const double t_start = now();
+  Params p;
+  // 1. Parameters, and what each rank's upload left (agreed: a rank whose
+  //    particles were rejected fails the call on every rank).
+  step(c, [&] {
+    if (!ctx.pending_error.empty()) throw Error(ctx.pending_status, ctx.pending_error);
+    check_postprocess_params(full);
+    p = resolve_params(full);
+    check_domain(p);
+    if (p.field != FieldKind::NarrowBand)
+      throw Error(NBMC_ERROR_INVALID_PARAMETER, "MPI reconstruction needs the narrow-band field");
+    if (output != NBMC__OUTPUT_GATHER && output != NBMC__OUTPUT_PIECES)
+      throw Error(NBMC_ERROR_INVALID_ARGUMENT, "unknown MPI output mode " + std::to_string(output));
+    if (root < 0 || root >= c.size())
+      throw Error(NBMC_ERROR_INVALID_ARGUMENT, "root rank " + std::to_string(root) + " is not in the communicator");
+  });
+  // 2. Host copies of this rank's particles; the frame's bounds and grid.
+  ParticleVector host;
+  const double* xyz = nullptr;
+  std::size_t count = 0;
+  step(c, [&] {
+    if (ctx.device_particles.count) {
+      count = ctx.device_particles.count;
+      host.resize(3 * count);
+      run_on_kokkos_thread(ctx, [&] { download_particles(ctx.device_particles.data.get(), count, host.data()); });
+      xyz = host.data();
+    } else {
+      count = ctx.particles.size() / 3;
+      xyz = ctx.particles.data();
+    }
+  });
+  double box[6];
+  particle_bounds(xyz, count, box, box + 3);
+  for (int a = 0; a < 3; ++a) box[3 + a] = -box[3 + a];
+  c.reduce(box, 6, NBMC__MIN_F64);
+  for (int a = 0; a < 3; ++a) box[3 + a] = -box[3 + a];
+  std::uint64_t total_particles = count;
+  c.reduce(&total_particles, 1, NBMC__SUM_U64);
+  if (total_particles == 0) throw Error(NBMC_ERROR_NO_PARTICLES, "no rank has particles");
+  Grid g;
+  Decomposition d;
+  step(c, [&] {
+    g = frame_grid(box, box + 3, p);
+    int parts[3] = {ctx.subdomains.parts[0], ctx.subdomains.parts[1], ctx.subdomains.parts[2]};
+    std::uint64_t pieces = std::uint64_t(c.size());
+    if (ctx.subdomains.automatic && ctx.memory.budget) {
+      const double usable = 0.6 * double(ctx.memory.budget);
+      pieces = std::max<std::uint64_t>(
+          pieces, std::uint64_t(std::ceil(double(estimate_bytes(p, total_particles)) / usable * 1.25)));
+    }
+    if (ctx.subdomains.automatic || parts[0] * parts[1] * parts[2] == 1) choose_parts(g, pieces, parts);
+    d = decompose(g, p, parts);
+  });
+  // 3. Who runs which subdomain: loads are the particles (ghosts included).
+  std::vector<std::vector<std::uint32_t>> sel;
+  std::vector<std::uint64_t> load(d.count(), 0);
+  step(c, [&] {
+    sel = select_particles(d, p, xyz, count);
+    for (std::size_t s = 0; s < d.count(); ++s) load[s] = sel[s].size();
+  });
+  c.reduce(load.data(), int(load.size()), NBMC__SUM_U64);
+  const std::vector<int> owner = assign(load, c.size());
+  std::vector<int> mine;
+  std::map<int, std::size_t> local;
+  for (std::size_t s = 0; s < d.count(); ++s)
+    if (owner[s] == c.rank()) {
+      local[int(s)] = mine.size();
+      mine.push_back(int(s));
+    }
+  // 4. Particles to the ranks of their subdomains.
+  std::vector<std::vector<double>> parts_xyz(mine.size());
+  {
+    std::vector<std::vector<char>> out(static_cast<std::size_t>(c.size()));
+    step(c, [&] {
+      for (std::size_t s = 0; s < d.count(); ++s) {
+        if (sel[s].empty()) continue;
+        std::vector<char>& b = out[std::size_t(owner[s])];
+        put(b, std::uint64_t(s));
+        put(b, std::uint64_t(sel[s].size()));
+        for (std::uint32_t i : sel[s]) b.insert(b.end(), reinterpret_cast<const char*>(xyz + 3 * std::size_t(i)),
+                                               reinterpret_cast<const char*>(xyz + 3 * std::size_t(i) + 3));
+      }
+      sel.clear();
+      sel.shrink_to_fit();
+    });
+    const std::vector<std::vector<char>> in = c.alltoall(out);
+    out.clear();
+    step(c, [&] {
+      for (int r = 0; r < c.size(); ++r) {
+        Reader rd{in[std::size_t(r)]};
+        while (!rd.done()) {
+          const std::uint64_t s = rd.get<std::uint64_t>(), n = rd.get<std::uint64_t>();
+          const auto it = local.find(int(s));
+          if (it == local.end()) throw Error(NBMC_ERROR_INTERNAL, "MPI: particles arrived for another rank's subdomain");
+          std::vector<double>& dst = parts_xyz[it->second];
+          const std::size_t at = dst.size();
+          dst.resize(at + 3 * std::size_t(n));
+          if (rd.at + 3 * n * sizeof(double) > rd.b.size()) throw Error(NBMC_ERROR_INTERNAL, "MPI: short particle message");
+          std::memcpy(dst.data() + at, rd.b.data() + rd.at, 3 * std::size_t(n) * sizeof(double));
+          rd.at += 3 * std::size_t(n) * sizeof(double);
+        }
+      }
+    });
+  }
+  // 5. The subdomains, with band growth exchanged between the ranks.
+  SubdomainReport& rep = ctx.subdomain_report;
+  rep = SubdomainReport();
+  rep.used = true;
+  for (int a = 0; a < 3; ++a) rep.parts[a] = d.parts[a];
+  rep.count = d.count();
+  rep.automatic = ctx.subdomains.automatic;
+  rep.ghost_width = double(d.ghost_nb_cells) * g.nb_cell;
+  SubdomainComm comm;
+  comm.exchange = [&](const std::vector<std::array<std::int64_t, 4>>& recs) {
+    std::vector<std::vector<char>> out(static_cast<std::size_t>(c.size()));
+    for (const auto& r : recs) put(out[std::size_t(owner[std::size_t(r[0])])], r);
+    std::vector<std::array<std::int64_t, 4>> got;
+    for (const auto& b : c.alltoall(out)) {
+      Reader rd{b};
+      while (!rd.done()) got.push_back(rd.get<std::array<std::int64_t, 4>>());
+    }
+    return got;
+  };
+  comm.any = [&](bool b) {
+    std::uint64_t v = b ? 1 : 0;
+    c.reduce(&v, 1, NBMC__MAX_U64);
+    return v != 0;
+  };
+  comm.agree = [&](std::exception_ptr e) { agree(c, e); };
+  Progress progress;
+  if (ctx.progress_fn) {
+    nbmc_progress_fn fn = ctx.progress_fn;
+    void* user = ctx.progress_user;
+    progress.fn = [fn, user](int stage, double f) { return fn(user, stage, f) == 0; };
+  }
+  Params q = p;
+  q.use_bbox = false;  // the selection applied the box
+  const RunRegion run = [&](const ParticleInput& in, const Params& pp, HostMesh& m, RunStats& s) {
+    run_region(ctx, in, pp, progress, m, s);
+  };
+  RunStats st;
+  ctx.memory.reset_peak();
+  std::vector<Piece> pieces = run_subdomain_job(
+      d, q, mine, [&](std::size_t i, std::vector<double>& out) { out = parts_xyz[i]; }, run, comm, st, rep);
+  for (SubdomainEntry& e : rep.entries) e.rank = c.rank();
+  parts_xyz.clear();
+  // 6. This rank's subdomains merged into one piece (with keys).
+  Piece merged;
+  step(c, [&] {
+    std::vector<const Piece*> ptrs;
+    for (const Piece& pc : pieces) ptrs.push_back(&pc);
+    stitch(ptrs, [&](std::uint64_t nv, std::uint64_t nt) {
+      merged.positions.resize(3 * nv);
+      merged.normals.resize(p.normals ? 3 * nv : 0);
+      merged.triangles.resize(3 * nt);
+      merged.vertex_keys.resize(nv);
+      merged.vertex_axes.resize(nv);
+      merged.triangle_cells.resize(nt);
+      return StitchTarget{merged.positions.data(), p.normals ? merged.normals.data() : nullptr,
+                          merged.triangles.data(), merged.vertex_keys.data(), merged.vertex_axes.data(),
+                          merged.triangle_cells.data()};
+    });
+    pieces.clear();
+  });
+  // 7. Counts over all ranks (stage times: the slowest rank's).
+  std::uint64_t sums[8] = {st.surface_particles, st.occupied_cells, st.band_vertices, st.band_blocks,
+                           st.cells, st.evaluations, st.band_growth_cells, rep.ghost_particles};
+  c.reduce(sums, 8, NBMC__SUM_U64);
+  double stage_max[16];
+  std::copy(st.stage, st.stage + 16, stage_max);
+  c.reduce(stage_max, 16, NBMC__MAX_F64);
+  std::uint64_t ex[2] = {rep.reruns, rep.exchanged_cells};
+  c.reduce(ex, 2, NBMC__SUM_U64);
+  // Per-subdomain entries to the root (fixed-size records).
+  {
+    std::vector<char> b;
+    for (const SubdomainEntry& e : rep.entries) put(b, e);
+    const auto all = c.gather(b, root);
+    if (c.rank() == root) {
+      std::vector<SubdomainEntry> entries;
+      for (const auto& part : all) {
+        Reader rd{part};
+        while (!rd.done()) entries.push_back(rd.get<SubdomainEntry>());
+      }
+      std::sort(entries.begin(), entries.end(),
+                [](const SubdomainEntry& a, const SubdomainEntry& b2) { return a.index < b2.index; });
+      rep.entries = entries;
+    }
+  }
+  rep.reruns = ex[0];
+  rep.exchanged_cells = ex[1];
+  rep.ghost_particles = sums[7];
+  RunStats frame;
+  frame.particles = total_particles;
+  frame.surface_particles = sums[0];
+  frame.occupied_cells = sums[1];
+  frame.band_vertices = sums[2];
+  frame.band_blocks = sums[3];
+  frame.cells = sums[4];
+  frame.evaluations = sums[5];
+  frame.band_growth_cells = sums[6];
+  std::copy(stage_max, stage_max + 16, frame.stage);
+  frame.grid_vertices = g.vertex_count();
+  for (int a = 0; a < 3; ++a) {
+    frame.dims[a] = std::uint64_t(g.dims[a]);
+    frame.origin[a] = g.origin[a];
+  }
+  frame.cell = g.cell;
+  // 8. Output.
+  if (output == NBMC__OUTPUT_GATHER) {
+    std::vector<char> b;
+    step(c, [&] {
+      pack_piece(b, merged);
+      merged = Piece();
+    });
+    const auto all = c.gather(b, root);
+    b.clear();
+    b.shrink_to_fit();
+    step(c, [&] {
+      if (c.rank() != root) return;
+      std::vector<Piece> ps;
+      for (const auto& part : all) {
+        Reader rd{part};
+        ps.push_back(unpack_piece(rd));
+      }
+      std::vector<const Piece*> ptrs;
+      for (const Piece& pc : ps) ptrs.push_back(&pc);
+      const double t1 = now();
+      const StitchResult r = stitch(ptrs, [&](std::uint64_t nv, std::uint64_t nt) {
+        mesh.positions.resize(3 * nv);
+        mesh.normals.resize(p.normals ? 3 * nv : 0);
+        mesh.triangles.resize(3 * nt);
+        return StitchTarget{mesh.positions.data(), p.normals ? mesh.normals.data() : nullptr, mesh.triangles.data()};
+      });
+      rep.stitch_seconds = now() - t1;
+      rep.shared_vertices = r.shared_vertices;
+      frame.stage[6] += rep.stitch_seconds;
+      frame.vertices = r.vertices;
+      frame.triangles = r.triangles;
+      if (ctx.mesh_memory == NBMC_MEMORY_DEVICE) run_on_kokkos_thread(ctx, [&] { move_mesh_to_device(mesh); });
+    });
+  } else {
+    std::vector<std::uint64_t> ids;
+    std::uint64_t total = 0;
+    {
+      std::exception_ptr e;
+      try {
+        global_ids(c, d, owner, merged, ids, total);  // collective inside: not in a step()
+      } catch (...) {
+        e = std::current_exception();
+      }
+      agree(c, e);
+    }
+    step(c, [&] {
+      mesh.positions.swap(merged.positions);
+      mesh.normals.swap(merged.normals);
+      mesh.triangles.swap(merged.triangles);
+      mesh.global_ids = std::move(ids);
+      mesh.global_vertex_count = total;
+      frame.vertices = mesh.vertex_count();
+      frame.triangles = mesh.triangle_count();
+      if (ctx.mesh_memory == NBMC_MEMORY_DEVICE) run_on_kokkos_thread(ctx, [&] { move_mesh_to_device(mesh); });
+    });
+  }
+  frame.total = now() - t_start;
+  ctx.stats = frame;
+  ctx.peak_memory = ctx.memory.peak.load();
+}
+
+}  // namespace nbmc
