@@ -595,6 +595,17 @@ int32_t nbmc__context_bind_collective(nbmc_context* ctx, int32_t bound) {
   return NBMC_OK;
 }
 
+int32_t nbmc__context_attach(nbmc_context* ctx, void* data, void (*release)(void*)) {
+  if (!ctx) return NBMC_ERROR_INVALID_ARGUMENT;
+  if (!data) ctx->attached.reset();
+  else ctx->attached = std::shared_ptr<void>(data, [release](void* p) {
+    if (release) release(p);
+  });
+  return NBMC_OK;
+}
+
+void* nbmc__context_attached(const nbmc_context* ctx) { return ctx ? ctx->attached.get() : nullptr; }
+
 int32_t nbmc__context_fail(nbmc_context* ctx, int32_t status, const char* message) {
   return fail(ctx, status, message ? message : "");
 }

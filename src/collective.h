@@ -56,6 +56,11 @@ NBMC_API int32_t nbmc__reconstruct_collective(nbmc_context* ctx, const nbmc_para
  * that the next collective reconstruction fails on every process. */
 NBMC_API int32_t nbmc__context_bind_collective(nbmc_context* ctx, int32_t bound);
 
+/* Attaches data to ctx (replacing and releasing what was attached):
+ * release(data) runs when the context is destroyed. */
+NBMC_API int32_t nbmc__context_attach(nbmc_context* ctx, void* data, void (*release)(void* data));
+NBMC_API void* nbmc__context_attached(const nbmc_context* ctx);
+
 /* Stores a message as the context's last error (for libnbmc_mpi's own
  * failures), returns status. */
 NBMC_API int32_t nbmc__context_fail(nbmc_context* ctx, int32_t status, const char* message);

@@ -48,6 +48,7 @@ struct nbmc_context {
   bool collective = false;                 // one of several processes' contexts (libnbmc_mpi)
   int32_t pending_status = 0;              // collective: the last upload's failure, for every rank to see
   std::string pending_error;
+  std::shared_ptr<void> attached;          // libnbmc_mpi's communicator (nbmc__context_attach)
   nbmc::SubdomainReport subdomain_report;  // of the last reconstruction
   nbmc::mesh::PostprocessStats postprocess;  // of the last reconstruction (capi_mesh.cpp)
   bool has_stats = false;

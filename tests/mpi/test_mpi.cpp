@@ -1,0 +1,339 @@
+// SPDX-License-Identifier: MIT
+// nbmc over MPI (run by ctest with mpirun -n 2, 3 and 4): every rank builds
+// the same particles, passes its share (slabs, a random assignment, all on
+// one rank) to a collective reconstruction, and the result must equal one
+// process's mesh of all the particles, bit for bit (gathered), or make it up
+// exactly (pieces: every triangle once, shared vertices with one global id
+// and the same position on every rank). Errors on one rank must end the call
+// on every rank with the same status and the failing rank named.
+#include "nbmc_mpi.h"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <cstring>
+#include <fstream>
+#include <map>
+#include <random>
+#include <string>
+#include <vector>
+
+namespace {
+
+int g_rank = 0, g_size = 1, g_failures = 0;
+
+#define CHECK(cond, ...)                                                            \
+  do {                                                                              \
+    if (!(cond)) {                                                                  \
+      std::fprintf(stderr, "[rank %d] %s:%d: CHECK(%s) failed: ", g_rank, __FILE__, \
+                   __LINE__, #cond);                                                \
+      std::fprintf(stderr, __VA_ARGS__);                                            \
+      std::fprintf(stderr, "\n");                                                   \
+      ++g_failures;                                                                 \
+    }                                                                               \
+  } while (0)
+
+struct Mesh {
+  std::vector<float> pos, nrm;
+  std::vector<std::uint32_t> tri;
+  std::vector<std::uint64_t> gid;
+  std::uint64_t global_count = 0;
+};
+
+Mesh take(nbmc_mesh* m) {
+  Mesh out;
+  const std::size_t nv = nbmc_mesh_vertex_count(m), nt = nbmc_mesh_triangle_count(m);
+  if (nv) out.pos.assign(nbmc_mesh_positions(m), nbmc_mesh_positions(m) + 3 * nv);
+  if (nv && nbmc_mesh_normals(m)) out.nrm.assign(nbmc_mesh_normals(m), nbmc_mesh_normals(m) + 3 * nv);
+  if (nt) out.tri.assign(nbmc_mesh_triangles(m), nbmc_mesh_triangles(m) + 3 * nt);
+  if (const std::uint64_t* g = nbmc_mesh_global_vertex_ids(m)) out.gid.assign(g, g + nv);
+  out.global_count = nbmc_mesh_global_vertex_count(m);
+  nbmc_mesh_destroy(m);
+  return out;
+}
+
+nbmc_context* context(bool bound) {
+  nbmc_context_desc d;
+  nbmc_context_desc_init(&d);
+  d.backend = NBMC_BACKEND_OPENMP;
+  d.num_threads = 1;
+  nbmc_context* ctx = nullptr;
+  if (nbmc_context_create(&d, &ctx) != NBMC_OK) {
+    std::fprintf(stderr, "context: %s\n", nbmc_context_last_error(nullptr));
+    std::exit(2);
+  }
+  if (bound) CHECK(nbmc_mpi_context_set_comm(ctx, MPI_COMM_WORLD) == NBMC_OK, "%s", nbmc_context_last_error(ctx));
+  return ctx;
+}
+
+// A lumpy blob (sphere + box), jittered: the same on every rank.
+std::vector<double> blob(double r) {
+  std::vector<double> p;
+  std::mt19937 g(42);
+  std::uniform_real_distribution<double> u(-0.2 * r, 0.2 * r);
+  for (double z = -0.35; z <= 0.3; z += r)
+    for (double y = -0.3; y <= 0.25; y += r)
+      for (double x = -0.4; x <= 0.3; x += r) p.insert(p.end(), {x + u(g), y + u(g), z + u(g)});
+  for (double z = -0.35; z <= 0.35; z += r)
+    for (double y = -0.25; y <= 0.45; y += r)
+      for (double x = 0.0; x <= 0.7; x += r)
+        if ((x - 0.35) * (x - 0.35) + (y - 0.1) * (y - 0.1) + z * z <= 0.35 * 0.35)
+          p.insert(p.end(), {x + u(g), y + u(g), z + u(g)});
+  return p;
+}
+
+std::vector<double> read_xyz(const std::string& path) {
+  std::ifstream f(path, std::ios::binary);
+  std::vector<float> v;
+  float x;
+  while (f.read(reinterpret_cast<char*>(&x), sizeof x)) v.push_back(x);
+  return std::vector<double>(v.begin(), v.end());
+}
+
+Mesh whole(const std::vector<double>& all, const nbmc_params& prm) {
+  nbmc_context* ctx = context(false);
+  CHECK(nbmc_context_set_particles_f64(ctx, all.data(), all.size() / 3, 0) == NBMC_OK, "upload");
+  nbmc_mesh* m = nullptr;
+  CHECK(nbmc_context_reconstruct(ctx, &prm, &m) == NBMC_OK, "%s", nbmc_context_last_error(ctx));
+  Mesh out = take(m);
+  nbmc_context_destroy(ctx);
+  return out;
+}
+
+// This rank's share of the particles under a split rule.
+std::vector<double> share(const std::vector<double>& all, const std::string& rule) {
+  std::vector<double> mine;
+  const std::size_t n = all.size() / 3;
+  double lo = 1e300, hi = -1e300;
+  for (std::size_t i = 0; i < n; ++i) {
+    lo = std::min(lo, all[3 * i]);
+    hi = std::max(hi, all[3 * i]);
+  }
+  std::mt19937_64 g(7);
+  for (std::size_t i = 0; i < n; ++i) {
+    int owner = 0;
+    if (rule == "slabs") owner = std::min(g_size - 1, int((all[3 * i] - lo) / (hi - lo + 1e-12) * g_size));
+    else if (rule == "random") owner = int(g() % std::uint64_t(g_size));
+    else if (rule == "rank0") owner = 0;
+    else if (rule == "last") owner = g_size - 1;
+    if (owner == g_rank) mine.insert(mine.end(), all.begin() + 3 * std::ptrdiff_t(i), all.begin() + 3 * std::ptrdiff_t(i) + 3);
+  }
+  return mine;
+}
+
+// Gathers variable-length arrays of T to rank 0.
+template <class T>
+std::vector<std::vector<T>> gather(const std::vector<T>& v) {
+  int n = int(v.size() * sizeof(T));
+  std::vector<int> counts(static_cast<std::size_t>(g_size)), displs(static_cast<std::size_t>(g_size));
+  MPI_Gather(&n, 1, MPI_INT, counts.data(), 1, MPI_INT, 0, MPI_COMM_WORLD);
+  int total = 0;
+  for (int r = 0; r < g_size; ++r) {
+    displs[std::size_t(r)] = total;
+    total += counts[std::size_t(r)];
+  }
+  std::vector<char> buf(std::size_t(g_rank == 0 ? total : 0) + 1);
+  MPI_Gatherv(v.data(), n, MPI_BYTE, buf.data(), counts.data(), displs.data(), MPI_BYTE, 0, MPI_COMM_WORLD);
+  std::vector<std::vector<T>> out;
+  if (g_rank != 0) return out;
+  for (int r = 0; r < g_size; ++r) {
+    std::vector<T> part(std::size_t(counts[std::size_t(r)]) / sizeof(T));
+    if (!part.empty()) std::memcpy(part.data(), buf.data() + displs[std::size_t(r)], std::size_t(counts[std::size_t(r)]));
+    out.push_back(part);
+  }
+  return out;
+}
+
+using Tri = std::array<float, 9>;
+std::vector<Tri> triangles_by_position(const Mesh& m) {
+  std::vector<Tri> t;
+  for (std::size_t i = 0; i + 2 < m.tri.size(); i += 3) {
+    Tri x;
+    for (int c = 0; c < 3; ++c)
+      for (int a = 0; a < 3; ++a) x[std::size_t(3 * c + a)] = m.pos[3 * std::size_t(m.tri[i + std::size_t(c)]) + std::size_t(a)];
+    t.push_back(x);
+  }
+  std::sort(t.begin(), t.end());
+  return t;
+}
+
+void check_case(const char* name, const std::vector<double>& all, const nbmc_params& prm, const std::string& rule,
+                int nx, int ny, int nz) {
+  const Mesh ref = whole(all, prm);
+  const std::vector<double> mine = share(all, rule);
+  // Gathered on the last rank (a root other than 0).
+  {
+    nbmc_context* ctx = context(true);
+    if (nx > 0) nbmc_context_set_subdomains(ctx, nx, ny, nz);
+    CHECK(nbmc_context_set_particles_f64(ctx, mine.empty() ? nullptr : mine.data(), mine.size() / 3, 0) == NBMC_OK,
+          "%s", nbmc_context_last_error(ctx));
+    nbmc_mesh* m = nullptr;
+    const int root = g_size - 1;
+    const int32_t st = nbmc_mpi_reconstruct(ctx, &prm, NBMC_MPI_GATHER, root, &m);
+    CHECK(st == NBMC_OK, "%s %s: %s", name, rule.c_str(), nbmc_context_last_error(ctx));
+    if (st == NBMC_OK) {
+      const Mesh got = take(m);
+      if (g_rank == root) {
+        CHECK(got.pos == ref.pos && got.tri == ref.tri && got.nrm == ref.nrm,
+              "%s %s gather: mesh differs (%zu/%zu vertices, %zu/%zu triangles)", name, rule.c_str(),
+              got.pos.size() / 3, ref.pos.size() / 3, got.tri.size() / 3, ref.tri.size() / 3);
+        nbmc_stats s;
+        nbmc_stats_init(&s);
+        CHECK(nbmc_context_stats(ctx, &s) == NBMC_OK && s.particle_count == all.size() / 3, "stats");
+        nbmc_subdomain_stats d;
+        nbmc_subdomain_stats_init(&d);
+        CHECK(nbmc_context_subdomain_stats(ctx, &d) == NBMC_OK && d.count >= std::uint64_t(g_size) - 0 &&
+                  d.count >= 1,
+              "subdomain stats");
+      } else {
+        CHECK(got.pos.empty() && got.tri.empty(), "non-root got a mesh");
+      }
+    }
+    nbmc_context_destroy(ctx);
+  }
+  // Pieces with global ids.
+  {
+    nbmc_context* ctx = context(true);
+    if (nx > 0) nbmc_context_set_subdomains(ctx, nx, ny, nz);
+    nbmc_context_set_particles_f64(ctx, mine.empty() ? nullptr : mine.data(), mine.size() / 3, 0);
+    nbmc_mesh* m = nullptr;
+    const int32_t st = nbmc_mpi_reconstruct(ctx, &prm, NBMC_MPI_PIECES, 0, &m);
+    CHECK(st == NBMC_OK, "%s %s pieces: %s", name, rule.c_str(), nbmc_context_last_error(ctx));
+    Mesh piece;
+    if (st == NBMC_OK) piece = take(m);
+    CHECK(piece.gid.size() == piece.pos.size() / 3, "global ids missing");
+    const auto pos = gather(piece.pos);
+    const auto tri = gather(piece.tri);
+    const auto gid = gather(piece.gid);
+    if (g_rank == 0 && st == NBMC_OK) {
+      // The raw marching-cubes reference (pieces are not cleaned up).
+      nbmc_params raw = prm;
+      raw.cleanup = 0;
+      raw.smooth_iterations = 0;
+      const Mesh ref_raw = whole(all, raw);
+      CHECK(piece.global_count == ref_raw.pos.size() / 3, "%s %s: %llu global vertices, the whole mesh has %zu", name,
+            rule.c_str(), (unsigned long long)piece.global_count, ref_raw.pos.size() / 3);
+      std::map<std::uint64_t, std::array<float, 3>> by_id;
+      Mesh joined;
+      for (int r = 0; r < g_size; ++r) {
+        Mesh p;
+        p.pos = pos[std::size_t(r)];
+        p.tri = tri[std::size_t(r)];
+        for (std::size_t v = 0; v < gid[std::size_t(r)].size(); ++v) {
+          const std::array<float, 3> x = {p.pos[3 * v], p.pos[3 * v + 1], p.pos[3 * v + 2]};
+          const auto it = by_id.find(gid[std::size_t(r)][v]);
+          if (it == by_id.end()) by_id[gid[std::size_t(r)][v]] = x;
+          else CHECK(it->second == x, "global id %llu has two positions", (unsigned long long)gid[std::size_t(r)][v]);
+        }
+        const std::vector<Tri> t = triangles_by_position(p);
+        for (const Tri& x : t) {
+          joined.tri.push_back(std::uint32_t(joined.pos.size() / 3));
+          joined.tri.push_back(std::uint32_t(joined.pos.size() / 3 + 1));
+          joined.tri.push_back(std::uint32_t(joined.pos.size() / 3 + 2));
+          joined.pos.insert(joined.pos.end(), x.begin(), x.end());
+        }
+      }
+      CHECK(by_id.size() == ref_raw.pos.size() / 3, "%s %s: %zu distinct ids, %zu vertices", name, rule.c_str(),
+            by_id.size(), ref_raw.pos.size() / 3);
+      CHECK(triangles_by_position(joined) == triangles_by_position(ref_raw),
+            "%s %s pieces: the triangles differ from the whole mesh's", name, rule.c_str());
+    }
+    nbmc_context_destroy(ctx);
+  }
+  if (g_rank == 0) std::printf("ok  %-10s %-7s (%zu particles)\n", name, rule.c_str(), all.size() / 3);
+}
+
+void check_errors(const std::vector<double>& all, const nbmc_params& prm) {
+  std::vector<double> mine = share(all, "slabs");
+  // Bad particles on the last rank: every rank fails with its status.
+  {
+    nbmc_context* ctx = context(true);
+    if (g_rank == g_size - 1 && !mine.empty()) mine[0] = std::nan("");
+    const int32_t up = nbmc_context_set_particles_f64(ctx, mine.data(), mine.size() / 3, 0);
+    if (g_rank == g_size - 1) CHECK(up == NBMC_ERROR_INVALID_PARTICLES, "upload of a NaN: %d", up);
+    nbmc_mesh* m = nullptr;
+    const int32_t st = nbmc_mpi_reconstruct(ctx, &prm, NBMC_MPI_GATHER, 0, &m);
+    const std::string msg = nbmc_context_last_error(ctx);
+    CHECK(st == NBMC_ERROR_INVALID_PARTICLES && m == nullptr, "NaN on one rank: status %d (%s)", st, msg.c_str());
+    CHECK(msg.find("rank " + std::to_string(g_size - 1)) != std::string::npos, "message names no rank: %s", msg.c_str());
+    // The context stays usable: a good upload works again.
+    mine = share(all, "slabs");
+    nbmc_context_set_particles_f64(ctx, mine.data(), mine.size() / 3, 0);
+    CHECK(nbmc_mpi_reconstruct(ctx, &prm, NBMC_MPI_GATHER, 0, &m) == NBMC_OK, "after the error: %s",
+          nbmc_context_last_error(ctx));
+    nbmc_mesh_destroy(m);
+    nbmc_context_destroy(ctx);
+  }
+  // A memory budget on rank 0 only.
+  {
+    nbmc_context* ctx = context(true);
+    if (g_rank == 0) nbmc_context_set_memory_budget(ctx, 1024);
+    nbmc_context_set_particles_f64(ctx, mine.data(), mine.size() / 3, 0);
+    nbmc_mesh* m = nullptr;
+    const int32_t st = nbmc_mpi_reconstruct(ctx, &prm, NBMC_MPI_PIECES, 0, &m);
+    CHECK(st == NBMC_ERROR_MEMORY_BUDGET, "budget on rank 0: status %d (%s)", st, nbmc_context_last_error(ctx));
+    CHECK(std::string(nbmc_context_last_error(ctx)).find("rank 0") != std::string::npos, "%s",
+          nbmc_context_last_error(ctx));
+    nbmc_context_destroy(ctx);
+  }
+  // A bad parameter (the same on every rank) and an unbound context.
+  {
+    nbmc_context* ctx = context(true);
+    nbmc_context_set_particles_f64(ctx, mine.data(), mine.size() / 3, 0);
+    nbmc_params bad = prm;
+    bad.cell_size = -1;
+    nbmc_mesh* m = nullptr;
+    CHECK(nbmc_mpi_reconstruct(ctx, &bad, NBMC_MPI_GATHER, 0, &m) == NBMC_ERROR_INVALID_PARAMETER, "bad parameter");
+    CHECK(nbmc_mpi_reconstruct(ctx, &prm, 5, 0, &m) == NBMC_ERROR_INVALID_ARGUMENT, "bad output");
+    CHECK(nbmc_mpi_reconstruct(ctx, &prm, NBMC_MPI_GATHER, g_size, &m) == NBMC_ERROR_INVALID_ARGUMENT, "bad root");
+    nbmc_context_destroy(ctx);
+    nbmc_context* plain = context(false);
+    CHECK(nbmc_mpi_reconstruct(plain, &prm, NBMC_MPI_GATHER, 0, &m) == NBMC_ERROR_INVALID_ARGUMENT, "unbound");
+    CHECK(nbmc_mpi_context_rank(plain) == -1, "unbound rank");
+    nbmc_context_destroy(plain);
+  }
+  // No particles anywhere.
+  {
+    nbmc_context* ctx = context(true);
+    CHECK(nbmc_context_set_particles_f64(ctx, nullptr, 0, 0) == NBMC_OK, "zero particles on a bound context");
+    nbmc_mesh* m = nullptr;
+    CHECK(nbmc_mpi_reconstruct(ctx, &prm, NBMC_MPI_GATHER, 0, &m) == NBMC_ERROR_NO_PARTICLES, "no particles");
+    nbmc_context_destroy(ctx);
+  }
+  if (g_rank == 0) std::printf("ok  errors agreed on every rank\n");
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  MPI_Init(&argc, &argv);
+  MPI_Comm_rank(MPI_COMM_WORLD, &g_rank);
+  MPI_Comm_size(MPI_COMM_WORLD, &g_size);
+  const double r = 0.05;
+  const std::vector<double> b = blob(r);
+  nbmc_params prm;
+  nbmc_params_init(&prm);
+  prm.spacing = r;
+  for (const char* rule : {"slabs", "random", "rank0", "last"}) check_case("blob", b, prm, rule, 0, 0, 0);
+  nbmc_params thin = prm;  // band growth that crosses subdomain faces
+  thin.band_width = 0.6;
+  thin.cleanup = 0;
+  check_case("thin-band", b, thin, "random", 3, 2, 2);
+  nbmc_params coarse = prm;
+  coarse.cell_size = 1;
+  coarse.method = NBMC_METHOD_ZB05;
+  check_case("zb05", b, coarse, "slabs", 4, 1, 1);
+  const char* dir = std::getenv("NBMC_DATA_DIR");
+  if (dir) {
+    const std::vector<double> f = read_xyz(std::string(dir) + "/xyz/splashsurf_dambreak_f23_24389.xyz");
+    if (!f.empty()) check_case("dambreak", f, prm, "slabs", 0, 0, 0);
+  }
+  check_errors(b, prm);
+  int failures = g_failures;
+  MPI_Allreduce(MPI_IN_PLACE, &failures, 1, MPI_INT, MPI_SUM, MPI_COMM_WORLD);
+  if (g_rank == 0) std::printf("%s (%d ranks, %d failed checks)\n", failures ? "FAILED" : "PASSED", g_size, failures);
+  MPI_Finalize();
+  return failures ? 1 : 0;
+}
