@@ -31,6 +31,13 @@
 
 #include <unistd.h>
 
+#if defined(NBMC_CLI_MPI)
+#include <nbmc_mpi.h>
+
+#include <cstdlib>
+#include <fstream>
+#endif
+
 namespace {
 
 using Clock = std::chrono::steady_clock;
@@ -96,6 +103,7 @@ struct Options {
   std::int64_t step = -1; // H5Part step of a single-frame run (-1: the first)
   std::string memory_budget;  // --memory-budget, "" = no cap
   std::string subdomains;     // --subdomains auto|N|NxMxK, "" = whole frame
+  bool pieces = false;        // --pieces: under MPI, one piece per rank and a .pvtp/.pvtu index
 };
 
 // --------------------------------------------------------------- helpers
@@ -242,6 +250,69 @@ void check_attributes(const std::string& path, const nbmc::io::Particles& p, con
   }
 }
 
+// One frame of a sequence: read, reconstruct, write (a failure is reported in
+// the result, not thrown; a cancel sets cancelled_run).
+nbmc::cli::FrameResult run_frame(const Options& o, nbmc_context* ctx, const nbmc::cli::Frame& f, bool& cancelled_run) {
+  using namespace nbmc;
+  cli::FrameResult r;
+  r.label = f.label;
+  r.input = f.input;
+  r.output = f.output;
+  const auto t0 = Clock::now();
+  if (!f.missing.empty()) {
+    r.status = "failed";
+    r.error = f.missing;
+  } else if (o.resume && cli::output_exists(f.output)) {
+    r.status = "skipped";
+  } else {
+    try {
+      io::ReadOptions ro;
+      ro.format = o.input_format;
+      ro.attributes = !o.attributes.empty();
+      ro.only = o.attributes;
+      ro.frame = f.step;
+      io::Particles particles = io::read_particles(f.input, ro);
+      check_attributes(f.input, particles, o.attributes, ro);
+      r.particles = particles.count();
+      std::int32_t st = nbmc_context_set_particles_f64(ctx, particles.xyz.data(), particles.count(), 0);
+      if (st != NBMC_OK) throw cli::FrameError(std::string(nbmc_status_string(st)) + ": " + nbmc_context_last_error(ctx));
+      nbmc_mesh* raw_mesh = nullptr;
+      st = nbmc_context_reconstruct(ctx, &o.params, &raw_mesh);
+      MeshPtr mesh(raw_mesh);
+      if (st == NBMC_ERROR_CANCELLED) {
+        cancelled_run = true;
+        return r;
+      }
+      if (st != NBMC_OK) throw cli::FrameError(std::string(nbmc_status_string(st)) + ": " + nbmc_context_last_error(ctx));
+      io::MeshView view = mesh_view(mesh.get());
+      std::vector<io::Attribute> attrs;
+      if (!o.attributes.empty()) {
+        attrs = io::interpolate_attributes(particles.xyz, particles.attributes, o.attributes, view.positions,
+                                           view.vertex_count, absolute_radius(o.params));
+        view.attributes = attrs.data();
+        view.attribute_count = attrs.size();
+      }
+      particles = io::Particles();
+      cli::make_parent_folders(f.output);
+      io::write_mesh(f.output, view, "", [] { return cli::interrupted(); });
+      r.vertices = view.vertex_count;
+      r.triangles = view.triangle_count;
+      r.status = "written";
+    } catch (const io::Cancelled&) {
+      cancelled_run = true;
+      return r;
+    } catch (const std::bad_alloc&) {
+      r.status = "failed";
+      r.error = "out of memory";
+    } catch (const std::exception& e) {
+      r.status = "failed";
+      r.error = e.what();
+    }
+  }
+  r.seconds = seconds_since(t0);
+  return r;
+}
+
 // ------------------------------------------------------------ a sequence
 int reconstruct_sequence(Options& o, const std::vector<nbmc::cli::Frame>& frames) {
   using namespace nbmc;
@@ -266,66 +337,12 @@ int reconstruct_sequence(Options& o, const std::vector<nbmc::cli::Frame>& frames
   bool cancelled_run = false;
   for (std::size_t i = 0; i < frames.size(); ++i) {
     const cli::Frame& f = frames[i];
-    cli::FrameResult r;
-    r.label = f.label;
-    r.input = f.input;
-    r.output = f.output;
-    const auto t0 = Clock::now();
     if (cli::interrupted()) {
       cancelled_run = true;
       break;
     }
-    if (!f.missing.empty()) {
-      r.status = "failed";
-      r.error = f.missing;
-    } else if (o.resume && cli::output_exists(f.output)) {
-      r.status = "skipped";
-    } else {
-      try {
-        io::ReadOptions ro;
-        ro.format = o.input_format;
-        ro.attributes = !o.attributes.empty();
-        ro.only = o.attributes;
-        ro.frame = f.step;
-        io::Particles particles = io::read_particles(f.input, ro);
-        check_attributes(f.input, particles, o.attributes, ro);
-        r.particles = particles.count();
-        st = nbmc_context_set_particles_f64(ctx.get(), particles.xyz.data(), particles.count(), 0);
-        if (st != NBMC_OK) throw cli::FrameError(std::string(nbmc_status_string(st)) + ": " + nbmc_context_last_error(ctx.get()));
-        nbmc_mesh* raw_mesh = nullptr;
-        st = nbmc_context_reconstruct(ctx.get(), &o.params, &raw_mesh);
-        MeshPtr mesh(raw_mesh);
-        if (st == NBMC_ERROR_CANCELLED) {
-          cancelled_run = true;
-          break;
-        }
-        if (st != NBMC_OK) throw cli::FrameError(std::string(nbmc_status_string(st)) + ": " + nbmc_context_last_error(ctx.get()));
-        io::MeshView view = mesh_view(mesh.get());
-        std::vector<io::Attribute> attrs;
-        if (!o.attributes.empty()) {
-          attrs = io::interpolate_attributes(particles.xyz, particles.attributes, o.attributes, view.positions,
-                                             view.vertex_count, absolute_radius(o.params));
-          view.attributes = attrs.data();
-          view.attribute_count = attrs.size();
-        }
-        particles = io::Particles();
-        cli::make_parent_folders(f.output);
-        io::write_mesh(f.output, view, "", [] { return cli::interrupted(); });
-        r.vertices = view.vertex_count;
-        r.triangles = view.triangle_count;
-        r.status = "written";
-      } catch (const io::Cancelled&) {
-        cancelled_run = true;
-        break;
-      } catch (const std::bad_alloc&) {
-        r.status = "failed";
-        r.error = "out of memory";
-      } catch (const std::exception& e) {
-        r.status = "failed";
-        r.error = e.what();
-      }
-    }
-    r.seconds = seconds_since(t0);
+    cli::FrameResult r = run_frame(o, ctx.get(), f, cancelled_run);
+    if (cancelled_run) break;
     meter.done(r.status == "written", r.seconds);
     if (r.status == "failed") {
       if (r.error.rfind(r.input, 0) == 0) // the message names the file already
@@ -467,6 +484,374 @@ int reconstruct(Options& o) {
   return 0;
 }
 
+
+#if defined(NBMC_CLI_MPI)
+// ------------------------------------------------------------ under MPI
+// `mpirun -n P nbmc reconstruct ...`: one frame split over the ranks (rank
+// 0 reads and scatters; the mesh gathered on rank 0, or --pieces), or a
+// sequence whose frames the ranks take one at a time from a shared counter.
+
+// Started by mpirun/mpiexec/srun (an MPI launcher sets one of these).
+bool launched_by_mpi() {
+  for (const char* v : {"OMPI_COMM_WORLD_SIZE", "PMI_SIZE", "PMIX_RANK", "MPI_LOCALNRANKS"})
+    if (std::getenv(v)) return true;
+  return false;
+}
+
+int local_rank() {
+  for (const char* v : {"OMPI_COMM_WORLD_LOCAL_RANK", "MPI_LOCALRANKID", "SLURM_LOCALID"})
+    if (const char* s = std::getenv(v)) return std::atoi(s);
+  return 0;
+}
+
+// A context on this rank's GPU (local rank -> device) or CPU.
+nbmc_context* mpi_context(Options& o, std::string& error) {
+  nbmc_context_desc d = o.desc;
+  if (d.backend == NBMC_BACKEND_CUDA || (d.backend == NBMC_BACKEND_AUTO && nbmc_backend_available(NBMC_BACKEND_CUDA)))
+    d.device_id = local_rank();
+  nbmc_context* ctx = nullptr;
+  std::int32_t st = nbmc_context_create(&d, &ctx);
+  if (st != NBMC_OK && d.device_id != 0) {  // fewer GPUs than ranks on this node: share device 0
+    d.device_id = 0;
+    st = nbmc_context_create(&d, &ctx);
+  }
+  if (st != NBMC_OK) {
+    error = std::string(nbmc_status_string(st)) + ": " + nbmc_context_last_error(nullptr);
+    return nullptr;
+  }
+  apply_memory_budget(ctx, o);
+  return ctx;
+}
+
+// The same string on every rank (from root).
+std::string bcast_string(const std::string& s, int rank, int root = 0) {
+  std::uint64_t n = s.size();
+  MPI_Bcast(&n, 1, MPI_UINT64_T, root, MPI_COMM_WORLD);
+  std::string out = rank == root ? s : std::string(n, '\0');
+  if (n) MPI_Bcast(&out[0], int(n), MPI_CHAR, root, MPI_COMM_WORLD);
+  return out;
+}
+
+// Every rank's error (or ""), agreed: the lowest failing rank's, named.
+std::string agree_error(const std::string& mine, int rank, int size) {
+  int first = mine.empty() ? size : rank;
+  MPI_Allreduce(MPI_IN_PLACE, &first, 1, MPI_INT, MPI_MIN, MPI_COMM_WORLD);
+  if (first == size) return "";
+  const std::string msg = bcast_string(mine, rank, first);
+  return "rank " + std::to_string(first) + ": " + msg;
+}
+
+std::string piece_path(const std::string& index, int rank, const std::string& ext) {
+  const std::size_t dot = index.rfind('.');
+  return index.substr(0, dot) + "_" + std::to_string(rank) + "." + ext;
+}
+
+int reconstruct_mpi(Options& o, int rank, int size, bool pieces) {
+  using namespace nbmc;
+  const auto t_start = Clock::now();
+  cli::install_interrupt_handler();
+  const bool root = rank == 0;
+  const bool json_to_stdout = o.json && (o.json_path.empty() || o.json_path == "-");
+  const bool stderr_tty = ::isatty(STDERR_FILENO) == 1;
+  const bool show_progress = root && (o.progress == "always" || (o.progress == "auto" && stderr_tty && !o.quiet));
+  cli::Progress progress(show_progress, stderr_tty);
+  auto fail = [&](const std::string& msg, int code) {
+    if (root) std::fprintf(stderr, "nbmc: error: %s\n", msg.c_str());
+    return code;
+  };
+  if (!o.attributes.empty()) return fail("--attributes is not supported under MPI yet (run one process)", 2);
+  std::string piece_ext;
+  if (pieces) {
+    const std::string lower_out = lower(o.output);
+    const bool pvtp = lower_out.size() > 5 && lower_out.substr(lower_out.size() - 5) == ".pvtp";
+    const bool pvtu = lower_out.size() > 5 && lower_out.substr(lower_out.size() - 5) == ".pvtu";
+    if (!pvtp && !pvtu) return fail("--pieces writes a ParaView index: give -o NAME.pvtp (or .pvtu)", 2);
+    piece_ext = pvtp ? "vtp" : "vtu";
+  }
+
+  cli::Report report;
+  report.version = nbmc_version_string();
+  report.input_path = o.input;
+  report.output_path = o.output;
+  // Rank 0 reads the frame; the others wait for its verdict.
+  io::Particles particles;
+  std::string error;
+  if (root) {
+    try {
+      report.output_format = pieces ? piece_ext : io::mesh_format(o.output);
+      report.input_format = io::particle_format(o.input, o.input_format);
+      const auto t0 = Clock::now();
+      io::ReadOptions ro;
+      ro.format = o.input_format;
+      ro.frame = o.step;
+      particles = io::read_particles(o.input, ro);
+      report.read_seconds = seconds_since(t0);
+    } catch (const std::exception& e) {
+      error = e.what();
+    }
+  }
+  error = bcast_string(error, rank);
+  if (!error.empty()) return fail(error, 1);
+  // Even shares, in file order (nbmc moves them to the ranks that need them).
+  std::uint64_t n = particles.count();
+  MPI_Bcast(&n, 1, MPI_UINT64_T, 0, MPI_COMM_WORLD);
+  report.particle_count = n;
+  std::vector<int> counts(static_cast<std::size_t>(size)), displs(static_cast<std::size_t>(size));
+  for (int r = 0; r < size; ++r) {
+    const std::uint64_t a = n * std::uint64_t(r) / std::uint64_t(size), b = n * std::uint64_t(r + 1) / std::uint64_t(size);
+    if (3 * (b - a) > std::uint64_t(INT32_MAX) || 3 * a > std::uint64_t(INT32_MAX))
+      return fail("the frame is too large to scatter from rank 0 (" + std::to_string(n) +
+                      " particles); use more ranks", 1);
+    counts[std::size_t(r)] = int(3 * (b - a));
+    displs[std::size_t(r)] = int(3 * a);
+  }
+  std::vector<double> mine(std::size_t(counts[std::size_t(rank)]));
+  MPI_Scatterv(root ? particles.xyz.data() : nullptr, counts.data(), displs.data(), MPI_DOUBLE, mine.data(),
+               counts[std::size_t(rank)], MPI_DOUBLE, 0, MPI_COMM_WORLD);
+  particles = io::Particles();
+
+  std::string ctx_error;
+  ContextPtr ctx(mpi_context(o, ctx_error));
+  ctx_error = agree_error(ctx_error, rank, size);
+  if (!ctx_error.empty()) return fail(ctx_error, 1);
+  std::int32_t backend = o.desc.backend;
+  if (nbmc_context_backend(ctx.get(), &backend) == NBMC_OK) report.backend = name_of(kBackends, backend);
+  if (root) nbmc_context_set_progress(ctx.get(), &cli::Progress::callback, &progress);
+  std::int32_t st = nbmc_mpi_context_set_comm(ctx.get(), MPI_COMM_WORLD);
+  if (st != NBMC_OK) return fail(nbmc_context_last_error(ctx.get()), 1);
+  nbmc_context_set_particles_f64(ctx.get(), mine.empty() ? nullptr : mine.data(), mine.size() / 3, 0);
+  std::vector<double>().swap(mine);
+
+  nbmc_mesh* raw_mesh = nullptr;
+  st = nbmc_mpi_reconstruct(ctx.get(), &o.params, pieces ? NBMC_MPI_PIECES : NBMC_MPI_GATHER, 0, &raw_mesh);
+  MeshPtr mesh(raw_mesh);
+  progress.finish();
+  if (st != NBMC_OK) {
+    if (root) library_error(st, nbmc_context_last_error(ctx.get()));
+    return st == NBMC_ERROR_CANCELLED ? 130 : 1;
+  }
+  nbmc_stats_init(&report.stats);
+  nbmc_context_stats(ctx.get(), &report.stats);
+  report.params = o.params;
+  report.ranks = size;
+  nbmc_subdomain_stats_init(&report.subdomains);
+  if (nbmc_context_subdomain_stats(ctx.get(), &report.subdomains) == NBMC_OK && root)
+    for (std::uint64_t i = 0; i < report.subdomains.count; ++i) {
+      nbmc_subdomain_entry e;
+      nbmc_subdomain_entry_init(&e);
+      if (nbmc_context_subdomain_entry(ctx.get(), i, &e) == NBMC_OK) report.subdomain_entries.push_back(e);
+    }
+
+  // Write: the whole mesh on rank 0, or every rank its piece and rank 0 the index.
+  std::string write_error;
+  const auto t0 = Clock::now();
+  if (!pieces) {
+    if (root) {
+      try {
+        if (o.check) {
+          nbmc_mesh_check_result_init(&report.check);
+          report.has_check = nbmc_mesh_check(mesh.get(), &report.check) == NBMC_OK;
+        }
+        io::write_mesh(o.output, mesh_view(mesh.get()), report.output_format, [] { return cli::interrupted(); });
+      } catch (const std::exception& e) {
+        write_error = e.what();
+      }
+    }
+  } else {
+    const std::string mine_path = piece_path(o.output, rank, piece_ext);
+    try {
+      io::write_mesh(mine_path, mesh_view(mesh.get()), piece_ext, [] { return cli::interrupted(); });
+    } catch (const std::exception& e) {
+      write_error = e.what();
+    }
+    write_error = agree_error(write_error, rank, size);
+    if (!write_error.empty()) {
+      std::remove(mine_path.c_str());  // no partial output
+    } else if (root) {
+      // The ParaView index of the pieces (file names relative to it).
+      const bool vtp = piece_ext == "vtp";
+      const std::string type = vtp ? "PPolyData" : "PUnstructuredGrid";
+      std::string x = "<?xml version=\"1.0\"?>\n<VTKFile type=\"" + type +
+                      "\" version=\"0.1\" byte_order=\"LittleEndian\" header_type=\"UInt64\">\n  <" + type +
+                      " GhostLevel=\"0\">\n";
+      if (o.params.compute_normals)
+        x += "    <PPointData Normals=\"Normals\">\n      <PDataArray type=\"Float32\" Name=\"Normals\" "
+             "NumberOfComponents=\"3\"/>\n    </PPointData>\n";
+      x += "    <PPoints>\n      <PDataArray type=\"Float32\" NumberOfComponents=\"3\"/>\n    </PPoints>\n";
+      if (!vtp)
+        x += "    <PCells>\n      <PDataArray type=\"Int64\" Name=\"connectivity\"/>\n      <PDataArray "
+             "type=\"Int64\" Name=\"offsets\"/>\n      <PDataArray type=\"UInt8\" Name=\"types\"/>\n    </PCells>\n";
+      for (int r = 0; r < size; ++r) {
+        std::string src = piece_path(o.output, r, piece_ext);
+        const std::size_t slash = src.rfind('/');
+        if (slash != std::string::npos) src = src.substr(slash + 1);
+        x += "    <Piece Source=\"" + src + "\"/>\n";
+      }
+      x += "  </" + type + ">\n</VTKFile>\n";
+      const std::string tmp = o.output + ".tmp";
+      std::ofstream f(tmp, std::ios::binary);
+      f << x;
+      f.close();
+      if (!f || std::rename(tmp.c_str(), o.output.c_str()) != 0) {
+        std::remove(tmp.c_str());
+        write_error = "could not write " + o.output;
+      }
+    }
+  }
+  write_error = bcast_string(write_error, rank);
+  if (!write_error.empty()) {
+    if (pieces) std::remove(piece_path(o.output, rank, piece_ext).c_str());
+    return fail(write_error, 1);
+  }
+  report.write_seconds = seconds_since(t0);
+  mesh.reset();
+  ctx.reset();
+  if (!root) return 0;
+  report.total_seconds = seconds_since(t_start);
+  report.peak_rss_bytes = cli::peak_rss_bytes();
+  if (!emit_report(o, json_to_stdout, [&] { return cli::format_report(report); },
+                   [&] { return cli::format_json(report); }))
+    return 1;
+  return 0;
+}
+
+// A sequence: every rank takes the next frame from a counter on rank 0
+// (frames differ in cost), with its own context and GPU; rank 0 reports.
+int reconstruct_sequence_mpi(Options& o, const std::vector<nbmc::cli::Frame>& frames, int rank, int size) {
+  using namespace nbmc;
+  const auto t_start = Clock::now();
+  const bool root = rank == 0;
+  const bool json_to_stdout = o.json && (o.json_path.empty() || o.json_path == "-");
+  const bool show = root && !o.quiet && o.progress != "never";
+  for (const cli::Frame& f : frames)
+    if (lower(io::mesh_format(f.output)) == "h5") {
+      if (root)
+        std::fputs("nbmc: error: under MPI a sequence needs one output file per frame (not one .h5 for all)\n", stderr);
+      return 2;
+    }
+  std::string error;
+  ContextPtr ctx(mpi_context(o, error));
+  error = agree_error(error, rank, size);
+  if (!error.empty()) {
+    if (root) std::fprintf(stderr, "nbmc: error: %s\n", error.c_str());
+    return 1;
+  }
+  std::int32_t backend = o.desc.backend;
+  nbmc_context_backend(ctx.get(), &backend);
+  // Two counters on rank 0: frames handed out, frames done.
+  std::int64_t* base = nullptr;
+  MPI_Win win;
+  MPI_Win_allocate(root ? 2 * sizeof(std::int64_t) : 0, sizeof(std::int64_t), MPI_INFO_NULL, MPI_COMM_WORLD, &base,
+                   &win);
+  if (root) base[0] = base[1] = 0;
+  MPI_Barrier(MPI_COMM_WORLD);
+  auto fetch_add = [&](int which) {
+    const std::int64_t one = 1;
+    std::int64_t got = 0;
+    MPI_Win_lock(MPI_LOCK_SHARED, 0, 0, win);
+    MPI_Fetch_and_op(&one, &got, MPI_INT64_T, 0, which, MPI_SUM, win);
+    MPI_Win_unlock(0, win);
+    return got;
+  };
+  std::vector<std::pair<std::int64_t, cli::FrameResult>> mine;
+  cli::RateMeter meter(frames.size());
+  bool cancelled_run = false;
+  for (;;) {
+    if (cli::interrupted()) {
+      cancelled_run = true;
+      break;
+    }
+    const std::int64_t i = fetch_add(0);
+    if (i >= std::int64_t(frames.size())) break;
+    cli::FrameResult r = run_frame(o, ctx.get(), frames[std::size_t(i)], cancelled_run);
+    if (cancelled_run) break;
+    const std::int64_t done = fetch_add(1) + 1;
+    if (r.status == "failed")
+      std::fprintf(stderr, "nbmc: error: frame %s (%s, rank %d): %s\n", r.label.c_str(), r.input.c_str(), rank,
+                   r.error.c_str());
+    meter.done(r.status == "written", r.seconds);
+    if (show) std::fputs(cli::progress_line(std::size_t(done), frames.size(), r, meter).c_str(), stderr);
+    mine.emplace_back(i, std::move(r));
+  }
+  MPI_Barrier(MPI_COMM_WORLD);
+  MPI_Win_free(&win);
+  int any_cancel = cancelled_run ? 1 : 0;
+  MPI_Allreduce(MPI_IN_PLACE, &any_cancel, 1, MPI_INT, MPI_MAX, MPI_COMM_WORLD);
+  ctx.reset();
+  // The results to rank 0, in frame order.
+  std::string packed;
+  auto put_str = [&](const std::string& s) {
+    const std::uint64_t n = s.size();
+    packed.append(reinterpret_cast<const char*>(&n), sizeof n);
+    packed += s;
+  };
+  for (const auto& [i, r] : mine) {
+    packed.append(reinterpret_cast<const char*>(&i), sizeof i);
+    for (const std::string* s : {&r.label, &r.input, &r.output, &r.status, &r.error}) put_str(*s);
+    const std::uint64_t nums[3] = {r.particles, r.vertices, r.triangles};
+    packed.append(reinterpret_cast<const char*>(nums), sizeof nums);
+    packed.append(reinterpret_cast<const char*>(&r.seconds), sizeof r.seconds);
+  }
+  int len = int(packed.size());
+  std::vector<int> lens(static_cast<std::size_t>(size)), offs(static_cast<std::size_t>(size));
+  MPI_Gather(&len, 1, MPI_INT, lens.data(), 1, MPI_INT, 0, MPI_COMM_WORLD);
+  int total = 0;
+  for (int r = 0; r < size; ++r) {
+    offs[std::size_t(r)] = total;
+    total += lens[std::size_t(r)];
+  }
+  std::string all(root ? std::size_t(total) : 0, '\0');
+  MPI_Gatherv(packed.data(), len, MPI_CHAR, root ? &all[0] : nullptr, lens.data(), offs.data(), MPI_CHAR, 0,
+              MPI_COMM_WORLD);
+  if (!root) return 0;
+  std::vector<std::pair<std::int64_t, cli::FrameResult>> results;
+  std::size_t at = 0;
+  auto get = [&](void* p, std::size_t n) {
+    std::memcpy(p, all.data() + at, n);
+    at += n;
+  };
+  auto get_str = [&]() {
+    std::uint64_t n = 0;
+    get(&n, sizeof n);
+    std::string s = all.substr(at, std::size_t(n));
+    at += std::size_t(n);
+    return s;
+  };
+  while (at < all.size()) {
+    std::int64_t i = 0;
+    get(&i, sizeof i);
+    cli::FrameResult r;
+    r.label = get_str();
+    r.input = get_str();
+    r.output = get_str();
+    r.status = get_str();
+    r.error = get_str();
+    std::uint64_t nums[3];
+    get(nums, sizeof nums);
+    r.particles = nums[0];
+    r.vertices = nums[1];
+    r.triangles = nums[2];
+    get(&r.seconds, sizeof r.seconds);
+    results.emplace_back(i, std::move(r));
+  }
+  std::sort(results.begin(), results.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  if (any_cancel) {
+    std::fputs("nbmc: cancelled\n", stderr);
+    return 130;
+  }
+  cli::SequenceReport rep;
+  rep.version = nbmc_version_string();
+  rep.backend = name_of(kBackends, backend) + " x " + std::to_string(size) + " MPI ranks";
+  rep.params = o.params;
+  for (auto& [i, r] : results) rep.frames.push_back(std::move(r));
+  rep.total_seconds = seconds_since(t_start);
+  if (!emit_report(o, json_to_stdout, [&] { return cli::format_sequence(rep); },
+                   [&] { return cli::format_sequence_json(rep); }))
+    return 1;
+  return rep.failed() > 0 ? 1 : 0;
+}
+#endif  // NBMC_CLI_MPI
+
 } // namespace
 
 int main(int argc, char** argv) {
@@ -551,6 +936,9 @@ int main(int argc, char** argv) {
         std::uint64_t b = 0;
         return parse_size(v, b) ? std::string() : std::string("expected a size such as 4G, 512M or 1000000");
       });
+  rec->add_flag("--pieces", o.pieces,
+               "Under mpirun: every rank writes its piece of the mesh (NAME_<rank>.vtp) and rank 0 a ParaView "
+               "index; -o NAME.pvtp (or .pvtu)");
   rec->add_option("--subdomains", o.subdomains,
                   "Reconstruct the frame in subdomains and stitch them (the same mesh, bit for bit): NxMxK, N "
                   "(= NxNxN), or auto (split only when the frame's estimate exceeds --memory-budget or, on a GPU, "
@@ -640,6 +1028,34 @@ int main(int argc, char** argv) {
     if (!nbmc::cli::plan_sequence(o.input, o.output, o.input_format, o.frames, plan, usage)) {
       std::fprintf(stderr, "nbmc: error: %s\n", usage.c_str());
       return plan.usage_error ? 2 : 1;
+    }
+#if defined(NBMC_CLI_MPI)
+    if (launched_by_mpi()) {
+      int rank = 0, size = 1, code = 0;
+      MPI_Init(&argc, &argv);
+      MPI_Comm_rank(MPI_COMM_WORLD, &rank);
+      MPI_Comm_size(MPI_COMM_WORLD, &size);
+      if (rank != 0) o.quiet = true;
+      nbmc::cli::install_interrupt_handler();
+      try {
+        if (size == 1 && !o.pieces)
+          code = plan.is_sequence ? reconstruct_sequence(o, plan.frames) : (o.step = plan.step, reconstruct(o));
+        else if (plan.is_sequence)
+          code = reconstruct_sequence_mpi(o, plan.frames, rank, size);
+        else
+          code = (o.step = plan.step, reconstruct_mpi(o, rank, size, o.pieces));
+      } catch (const std::exception& e) {
+        std::fprintf(stderr, "nbmc: error (rank %d): %s\n", rank, e.what());
+        MPI_Abort(MPI_COMM_WORLD, 1);  // a rank that cannot go on must not leave the others waiting
+      }
+      nbmc_kokkos_finalize();
+      MPI_Finalize();
+      return code;
+    }
+#endif
+    if (o.pieces) {
+      std::fputs("nbmc: error: --pieces needs several MPI ranks (mpirun -n P nbmc reconstruct ...)\n", stderr);
+      return 2;
     }
     if (plan.is_sequence) {
       nbmc::cli::install_interrupt_handler();

@@ -145,6 +145,26 @@ std::string json_string(const std::string& s) {
   return out;
 }
 
+namespace {
+struct RankSums {
+  std::uint64_t subdomains = 0, particles = 0, ghosts = 0, triangles = 0;
+  double seconds = 0;
+};
+std::vector<RankSums> per_rank(const Report& r) {
+  std::vector<RankSums> v(static_cast<std::size_t>(r.ranks > 0 ? r.ranks : 0));
+  for (const nbmc_subdomain_entry& e : r.subdomain_entries) {
+    if (e.rank < 0 || e.rank >= r.ranks) continue;
+    RankSums& s = v[static_cast<std::size_t>(e.rank)];
+    ++s.subdomains;
+    s.particles += e.particles;
+    s.ghosts += e.ghost_particles;
+    s.triangles += e.triangle_count;
+    s.seconds += e.seconds;
+  }
+  return v;
+}
+}  // namespace
+
 std::string format_report(const Report& r) {
   const nbmc_stats& s = r.stats;
   std::string o;
@@ -235,6 +255,17 @@ std::string format_report(const Report& r) {
                     e.coord[1], e.coord[2], static_cast<long long>(e.cell_lo[0]),
                     static_cast<long long>(e.cell_hi[0]), grouped(e.particles).c_str(),
                     grouped(e.ghost_particles).c_str(), grouped(e.triangle_count).c_str(), e.runs, e.seconds);
+      o += buf;
+    }
+  }
+  if (r.ranks > 0) {
+    o += "\nmpi: " + std::to_string(r.ranks) + " ranks (peak memory below: rank 0's)\n";
+    o += "  rank  subdomains    particles      ghosts   triangles   seconds\n";
+    int k = 0;
+    for (const RankSums& x : per_rank(r)) {
+      std::snprintf(buf, sizeof buf, "  %4d %11llu %12s %11s %11s %9.4f\n", k++,
+                    static_cast<unsigned long long>(x.subdomains), grouped(x.particles).c_str(),
+                    grouped(x.ghosts).c_str(), grouped(x.triangles).c_str(), x.seconds);
       o += buf;
     }
   }
@@ -334,6 +365,18 @@ std::string format_json(const Report& r) {
            ", \"runs\": " + std::to_string(e.runs) + ", \"rank\": " + std::to_string(e.rank) +
            ", \"seconds\": " + json_number(e.seconds) + "}";
       first_entry = false;
+    }
+    o += "]},\n";
+  }
+  if (r.ranks > 0) {
+    o += "  \"mpi\": {\"ranks\": " + std::to_string(r.ranks) + ", \"per_rank\": [";
+    int k = 0;
+    for (const RankSums& x : per_rank(r)) {
+      o += std::string(k ? ", " : "") + "{\"rank\": " + std::to_string(k) + ", \"subdomains\": " +
+           std::to_string(x.subdomains) + ", \"particles\": " + std::to_string(x.particles) +
+           ", \"ghost_particles\": " + std::to_string(x.ghosts) + ", \"triangles\": " +
+           std::to_string(x.triangles) + ", \"seconds\": " + json_number(x.seconds) + "}";
+      ++k;
     }
     o += "]},\n";
   }

@@ -23,6 +23,7 @@ struct Report {
   nbmc_stats stats{};    // of the reconstruction
   nbmc_subdomain_stats subdomains{};  // count 0: the frame was not split
   std::vector<nbmc_subdomain_entry> subdomain_entries;
+  int ranks = 0;  // MPI ranks that shared the frame (0: none)
   bool normals = false;  // the mesh has normals
   std::vector<std::string> attributes; // interpolated onto the vertices
   double interpolate_seconds = 0;
