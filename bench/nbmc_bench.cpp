@@ -5,7 +5,14 @@
 //
 //   nbmc_bench FRAME.xyz --spacing R [--cell-size C] [--threads N]
 //              [--field narrow-band|dense|scatter] [--method ssp07|zb05] [--backend B]
-//              [--repeat K] [--device-resident]
+//              [--repeat K] [--device-resident] [--tile N] [--subdomains auto|NxMxK]
+//              [--memory-budget MIB]
+//
+// --no-cleanup: the raw marching-cubes mesh (nbmc_params.cleanup = 0).
+// --tile N: the frame repeated N x N x N times with gaps of 10% of its extent
+// (N = 2: the 1.65 M frame becomes 13.2 M particles, N = 4: 106 M), built in
+// memory. --subdomains / --memory-budget: nbmc_context_set_subdomains and the
+// context's budget (in MiB), for the out-of-core runs.
 //
 // --device-resident (CUDA builds): the particles are uploaded from a
 // cudaMalloc'd array (nbmc_context_set_particles_device_f32) and the mesh is
@@ -27,6 +34,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cstdio>
 #include <cstdlib>
@@ -48,6 +56,10 @@ struct Options {
   int max_threads = 0;
   int repeat = 1;
   bool device_resident = false;
+  int tile = 1;
+  int sub[3] = {1, 1, 1};
+  double budget_mib = 0;
+  bool no_cleanup = false;
 };
 
 [[noreturn]] void usage(const char* msg) {
@@ -85,9 +97,31 @@ double peak_rss_mib() {
   return double(u.ru_maxrss) / 1024.0;
 }
 
+// The frame repeated n x n x n times, 10% of its extent apart.
+std::vector<float> tiled(const std::vector<float>& p, int n) {
+  if (n <= 1) return p;
+  float lo[3] = {1e30f, 1e30f, 1e30f}, hi[3] = {-1e30f, -1e30f, -1e30f};
+  for (std::size_t i = 0; i + 2 < p.size(); i += 3)
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = std::min(lo[a], p[i + std::size_t(a)]);
+      hi[a] = std::max(hi[a], p[i + std::size_t(a)]);
+    }
+  std::vector<float> out;
+  out.reserve(p.size() * std::size_t(n) * std::size_t(n) * std::size_t(n));
+  for (int z = 0; z < n; ++z)
+    for (int y = 0; y < n; ++y)
+      for (int x = 0; x < n; ++x) {
+        const float off[3] = {1.1f * float(x) * (hi[0] - lo[0]), 1.1f * float(y) * (hi[1] - lo[1]),
+                              1.1f * float(z) * (hi[2] - lo[2])};
+        for (std::size_t i = 0; i + 2 < p.size(); i += 3)
+          for (int a = 0; a < 3; ++a) out.push_back(p[i + std::size_t(a)] + off[a]);
+      }
+  return out;
+}
+
 // One reconstruction; prints a single "RESULT key=value ..." line.
 int run_one(const Options& o) {
-  const std::vector<float> p = read_xyz(o.file);
+  const std::vector<float> p = tiled(read_xyz(o.file), o.tile);
   nbmc_context_desc d;
   nbmc_context_desc_init(&d);
   d.backend = o.backend;
@@ -97,10 +131,13 @@ int run_one(const Options& o) {
     std::fprintf(stderr, "nbmc_bench: %s\n", nbmc_context_last_error(nullptr));
     return 1;
   }
+  if (o.sub[0] != 1 || o.sub[1] != 1 || o.sub[2] != 1) nbmc_context_set_subdomains(ctx, o.sub[0], o.sub[1], o.sub[2]);
+  if (o.budget_mib > 0) nbmc_context_set_memory_budget(ctx, std::uint64_t(o.budget_mib * 1048576.0));
   nbmc_params prm;
   nbmc_params_init(&prm);
   prm.spacing = o.spacing;
   prm.cell_size = o.cell;
+  if (o.no_cleanup) prm.cleanup = 0;
   prm.method = o.method;
   prm.field = o.field;
   auto t_up = std::chrono::steady_clock::now();
@@ -159,6 +196,12 @@ int run_one(const Options& o) {
               (unsigned long long)s.triangle_count, (unsigned long long)s.neighbour_evaluations,
               double(s.peak_memory_bytes) / 1048576.0, peak_rss_mib(), s.total_seconds);
   for (int i = 0; i < NBMC_STAGE_COUNT; ++i) std::printf(" t%d=%.4f", i, s.stage_seconds[i]);
+  std::printf(" postprocess=%.4f", s.stage_seconds[NBMC_STAGE_POSTPROCESS]);
+  nbmc_subdomain_stats sub;
+  nbmc_subdomain_stats_init(&sub);
+  if (nbmc_context_subdomain_stats(ctx, &sub) == NBMC_OK && sub.count)
+    std::printf(" subdomains=%dx%dx%d ghosts=%llu reruns=%llu stitch=%.4f", sub.parts[0], sub.parts[1], sub.parts[2],
+                (unsigned long long)sub.ghost_particles, (unsigned long long)sub.reruns, sub.stitch_seconds);
   std::printf(" set_particles=%.4f%s\n", upload_call, o.device_resident ? " device_resident=1" : "");
   nbmc_context_destroy(ctx);
   return 0;
@@ -248,6 +291,14 @@ int main(int argc, char** argv) {
     else if (a == "--max-threads") o.max_threads = std::atoi(next().c_str());
     else if (a == "--repeat") o.repeat = std::max(1, std::atoi(next().c_str()));
     else if (a == "--device-resident") o.device_resident = true;
+    else if (a == "--no-cleanup") o.no_cleanup = true;
+    else if (a == "--tile") o.tile = std::max(1, std::atoi(next().c_str()));
+    else if (a == "--memory-budget") o.budget_mib = std::atof(next().c_str());
+    else if (a == "--subdomains") {
+      const std::string v = next();
+      if (v == "auto") o.sub[0] = NBMC_SUBDOMAINS_AUTO, o.sub[1] = o.sub[2] = 0;
+      else if (std::sscanf(v.c_str(), "%dx%dx%d", &o.sub[0], &o.sub[1], &o.sub[2]) != 3) usage("--subdomains NxMxK|auto");
+    }
     else if (a == "--field") o.field = field_of(next());
     else if (a == "--method") o.method = next() == "zb05" ? NBMC_METHOD_ZB05 : NBMC_METHOD_SSP07;
     else if (a == "--backend") {

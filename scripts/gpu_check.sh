@@ -8,7 +8,11 @@
 #   scripts/gpu_check.sh [DATA_DIR] [OUT_DIR]
 #
 # NBMC_GPU_CHECK_STEPS picks steps (default: all of "build equivalence
-# pointers sanitizers ncu bench"), e.g. two calls on one machine:
+# pointers sanitizers ncu bench"; also "subdomains" (split frames on the GPU
+# equal the whole frame and the CPU's, device-resident too), "mpi" (the CLI
+# under mpirun, ranks sharing or spreading over the GPUs), "python" (the
+# Python package's device arrays), "scale" (13.2 M and 106 M tiled frames,
+# whole and out-of-core)), e.g. two calls on one machine:
 # "build equivalence pointers sanitizers", then "bench".
 #
 # DATA_DIR holds xyz/*.xyz (default ../shared/data); logs go to OUT_DIR
@@ -78,6 +82,70 @@ if want ncu && command -v ncu >/dev/null; then
 fi
 
 BIG="$DATA/xyz/cbd1654k_t040_1654104.xyz"
+CLI="$B/install/bin/nbmc"
+MESHES=$(mktemp -d)  # meshes compared here, not copied to OUT
+trap 'rm -rf "$MESHES"' EXIT
+if want subdomains; then
+  step "subdomains on the GPU: the same file as the whole frame and as the CPU (292k frame, r and r/2)"
+  F="$DATA/xyz/cbd292k_t040_292008.xyz"
+  for cell in 1 0.5; do
+    "$CLI" reconstruct "$F" --spacing 0.0086 --cell-size $cell --backend cuda -o "$MESHES/g-whole.ply" -q || status=1
+    for s in 2x1x1 3x3x3 auto; do
+      extra=""; [ $s = auto ] && extra="--memory-budget 64M"
+      "$CLI" reconstruct "$F" --spacing 0.0086 --cell-size $cell --backend cuda -o "$MESHES/g-split.ply" \
+        --subdomains $s $extra --json "$OUT/g-split-$s-$cell.json" -q || status=1
+      if cmp -s "$MESHES/g-whole.ply" "$MESHES/g-split.ply"; then echo "cell $cell $s: identical"; else echo "cell $cell $s: DIFFERENT"; status=1; fi
+    done
+    "$B/install/bin/nbmc" reconstruct "$F" --spacing 0.0086 --cell-size $cell --backend openmp -o "$MESHES/c-split.ply" \
+      --subdomains 2x2x2 -q || status=1
+    python3 - "$MESHES/g-whole.ply" "$MESHES/c-split.ply" <<'PY' || status=1
+import sys, struct
+def load(p):
+    b = open(p, 'rb').read(); h = b.index(b'end_header\n') + 11
+    head = b[:h].decode(); nv = int(head.split('element vertex ')[1].split()[0]); nf = int(head.split('element face ')[1].split()[0])
+    return nv, nf
+a, c = load(sys.argv[1]), load(sys.argv[2])
+print("GPU whole vs CPU split: vertices/triangles", a, c, "same topology counts" if a == c else "DIFFERENT")
+sys.exit(0 if a == c else 1)
+PY
+  done
+  step "device-resident particles and mesh with subdomains (1.65 M, r/2)"
+  "$B/bench/nbmc_bench" "$BIG" --spacing 0.00484 --backend cuda --device-resident --repeat 2 2>&1 | tee "$OUT/dr-whole.txt"
+  "$B/bench/nbmc_bench" "$BIG" --spacing 0.00484 --backend cuda --device-resident --repeat 2 --subdomains 2x2x2 2>&1 | tee "$OUT/dr-split.txt"
+  python3 - "$OUT/dr-whole.txt" "$OUT/dr-split.txt" <<'PY' || status=1
+import sys, re
+v = [dict(re.findall(r"(\w+)=([\w.x]+)", open(p).read())) for p in sys.argv[1:]]
+ok = all(v[0].get(k) == v[1].get(k) for k in ("vertices", "triangles"))
+print("device-resident whole vs 2x2x2:", v[0].get("triangles"), v[1].get("triangles"), "same" if ok else "DIFFERENT")
+sys.exit(0 if ok else 1)
+PY
+fi
+
+if want mpi && [ -x "$CLI" ] && command -v mpirun >/dev/null; then
+  step "the CLI under mpirun on $(nvidia-smi -L | wc -l) GPU(s) (1.65 M frame, r/2)"
+  MF="$DATA/xyz/cbd1654k_t040_1654104.xyz"
+  flags="--oversubscribe"; [ "$(id -u)" = 0 ] && flags="$flags --allow-run-as-root"
+  "$CLI" reconstruct "$MF" --spacing 0.00484 --backend cuda -o "$MESHES/m1.ply" --json "$OUT/mpi-1.json" -q || status=1
+  for n in 2 4; do
+    mpirun $flags -n $n "$CLI" reconstruct "$MF" --spacing 0.00484 --backend cuda -o "$MESHES/m$n.ply" \
+      --json "$OUT/mpi-$n.json" -q || status=1
+    if cmp -s "$MESHES/m1.ply" "$MESHES/m$n.ply"; then echo "mpirun -n $n: identical to one process"; else echo "mpirun -n $n: DIFFERENT"; status=1; fi
+    grep -o '"total_seconds": [0-9.]*' "$OUT/mpi-$n.json" | head -1
+  done
+fi
+
+if want python; then
+  step "the Python package's GPU paths"
+  NBMC_LIBRARY="$B/install/lib/libnbmc.so" python3 "$ROOT/python/tests/gpu_check.py" 2>&1 | tee "$OUT/python-gpu.txt" || status=1
+fi
+
+if want scale; then
+  step "scale: tiled frames, whole and in subdomains (GPU)"
+  for t in 2 4; do
+    "$B/bench/nbmc_bench" "$BIG" --spacing 0.00484 --backend cuda --tile $t 2>&1 | tee -a "$OUT/scale.txt"
+    "$B/bench/nbmc_bench" "$BIG" --spacing 0.00484 --backend cuda --tile $t --subdomains auto --memory-budget 4096 2>&1 | tee -a "$OUT/scale.txt"
+  done
+fi
 want bench && step "benchmarks: $BIG"
 want bench && for cell in 1 0.5; do
   "$B/bench/nbmc_bench" "$BIG" --spacing 0.00484 --cell-size $cell --backend cuda --repeat 5 2>&1 | tee -a "$OUT/bench.txt"
