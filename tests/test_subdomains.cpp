@@ -9,6 +9,7 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstdlib>
 #include <cstring>
 #include <array>
 #include <fstream>
@@ -109,6 +110,20 @@ TEST(Subdomains, ShapesAreIdenticalForEverySplit) {
                    std::to_string(s[2]));
       expect_identical(p, prm, s[0], s[1], s[2]);
     }
+  }
+}
+
+// The stitching merges key ranges in parallel on large meshes; force many
+// ranges on these small ones (ranges end inside pieces and at shared keys).
+TEST(Subdomains, ParallelStitchingRanges) {
+  const double r = 0.05;
+  const Points p = jittered_blob(6, r);
+  nbmc_params prm = nbmc_test::params(r);
+  for (const char* ranges : {"2", "7", "64"}) {
+    SCOPED_TRACE(std::string("NBMC_STITCH_RANGES=") + ranges);
+    setenv("NBMC_STITCH_RANGES", ranges, 1);
+    expect_identical(p, prm, 3, 2, 2);
+    unsetenv("NBMC_STITCH_RANGES");
   }
 }
 
