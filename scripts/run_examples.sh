@@ -122,6 +122,10 @@ rust_tests() {
   need_cargo
   cargo --version; rustc --version
   cargo test --offline --locked --workspace --no-fail-fast
+  # nbmc-sys's MPI declarations link against libnbmc_mpi where it was built.
+  if ls "$LIBDIR"/libnbmc_mpi.so >/dev/null 2>&1; then
+    cargo test --offline --locked -p nbmc-sys --features mpi --no-fail-fast
+  fi
 }
 
 rust_example() {
@@ -140,6 +144,14 @@ fortran_cmake() {
   local n; n=$(ls "$OUT/fortran-cmake-frames"/frame_*.obj | wc -l)
   [ "$n" -ge 2 ] || { echo "expected several OBJ frames, found $n" >&2; return 1; }
   grep -c '^f ' "$OUT/fortran-cmake-frames"/frame_*.obj
+  # In situ over MPI (mpi_f08), when nbmc and the MPI Fortran compiler have it.
+  if [ -x "$OUT/fortran-cmake/example_mpi" ] && command -v mpirun >/dev/null 2>&1; then
+    local flags=(--oversubscribe)
+    [ "$(id -u)" = 0 ] && flags+=(--allow-run-as-root)
+    OMP_NUM_THREADS=1 mpirun "${flags[@]}" -n 3 "$OUT/fortran-cmake/example_mpi"
+  else
+    echo "Fortran MPI example not built (no libnbmc_mpi or no mpi_f08): skipped"
+  fi
 }
 
 fortran_make() {

@@ -90,6 +90,9 @@ fn main() {
     let include = found.include.canonicalize().unwrap_or(found.include.clone());
     println!("cargo:rustc-link-search=native={}", lib.display());
     println!("cargo:rustc-link-lib=dylib=nbmc");
+    if std::env::var_os("CARGO_FEATURE_MPI").is_some() {
+        println!("cargo:rustc-link-lib=dylib=nbmc_mpi");
+    }
     // rpath for this crate's own tests; dependants read DEP_NBMC_LIBDIR.
     println!("cargo:rustc-link-arg=-Wl,-rpath,{}", lib.display());
     println!("cargo:libdir={}", lib.display());

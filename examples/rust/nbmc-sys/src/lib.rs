@@ -303,3 +303,36 @@ extern "C" {
     pub fn nbmc_mesh_global_vertex_ids(mesh: *const nbmc_mesh) -> *const u64;
     pub fn nbmc_mesh_global_vertex_count(mesh: *const nbmc_mesh) -> u64;
 }
+
+/// include/nbmc_mpi.h (feature `mpi`, links libnbmc_mpi): one frame over the
+/// ranks of an MPI communicator. The communicator crosses as its Fortran
+/// handle (`MPI_Comm_c2f` of the C handle, an `i32` in every MPI library),
+/// or, with `nbmc_mpi_context_set_comm`, as the C handle itself, whose type
+/// depends on the MPI library (a pointer in Open MPI, an `int` in MPICH):
+/// `MpiComm` is Open MPI's.
+#[cfg(feature = "mpi")]
+pub mod mpi {
+    use super::{nbmc_context, nbmc_mesh, nbmc_params};
+    use core::ffi::c_void;
+
+    pub const NBMC_MPI_GATHER: i32 = 0;
+    pub const NBMC_MPI_PIECES: i32 = 1;
+
+    /// Open MPI's `MPI_Comm` (an opaque pointer).
+    pub type MpiComm = *mut c_void;
+
+    extern "C" {
+        // comm: an MpiComm (Open MPI)
+        pub fn nbmc_mpi_context_set_comm(ctx: *mut nbmc_context, comm: *mut c_void) -> i32;
+        pub fn nbmc_mpi_context_set_comm_f(ctx: *mut nbmc_context, fortran_comm: i32) -> i32;
+        pub fn nbmc_mpi_reconstruct(
+            ctx: *mut nbmc_context,
+            params: *const nbmc_params,
+            output: i32,
+            root: i32,
+            mesh: *mut *mut nbmc_mesh,
+        ) -> i32;
+        pub fn nbmc_mpi_context_rank(ctx: *const nbmc_context) -> i32;
+        pub fn nbmc_mpi_context_size(ctx: *const nbmc_context) -> i32;
+    }
+}

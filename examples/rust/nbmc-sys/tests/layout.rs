@@ -368,7 +368,10 @@ fn split_params(s: &str) -> Vec<String> {
 }
 
 fn rust_functions() -> Vec<RustFn> {
-    let src: String = LIB_RS.lines().filter(|l| !l.trim_start().starts_with("//")).collect::<Vec<_>>().join("\n");
+    // nbmc.h's functions: everything before the `mpi` module (nbmc_mpi.h,
+    // which needs mpi.h to compile, is checked by linking with feature `mpi`).
+    let lib_rs = LIB_RS.split("pub mod mpi {").next().unwrap_or(LIB_RS);
+    let src: String = lib_rs.lines().filter(|l| !l.trim_start().starts_with("//")).collect::<Vec<_>>().join("\n");
     let mut out = Vec::new();
     let mut rest = src.as_str();
     while let Some(i) = rest.find("extern \"C\" {") {
