@@ -104,6 +104,7 @@ struct Options {
   std::string memory_budget;  // --memory-budget, "" = no cap
   std::string subdomains;     // --subdomains auto|N|NxMxK, "" = whole frame
   bool pieces = false;        // --pieces: under MPI, one piece per rank and a .pvtp/.pvtu index
+  bool read_on_root = false;  // --read-on-root: under MPI, rank 0 reads HDF5 too and scatters
 };
 
 // --------------------------------------------------------------- helpers
@@ -573,10 +574,46 @@ int reconstruct_mpi(Options& o, int rank, int size, bool pieces) {
   report.version = nbmc_version_string();
   report.input_path = o.input;
   report.output_path = o.output;
-  // Rank 0 reads the frame; the others wait for its verdict.
+  // HDF5 layouts: every rank reads its own rows (hyperslabs); otherwise (or
+  // with --read-on-root) rank 0 reads the frame and scatters even shares.
   io::Particles particles;
   std::string error;
-  if (root) {
+  std::string format;
+  try {
+    format = io::particle_format(o.input, o.input_format);
+  } catch (const std::exception& e) {
+    error = e.what();
+  }
+  const bool parallel_read = !o.read_on_root && (format == "h5part" || format == "hdf5" || format == "pysph" ||
+                                                 format == "gadget");
+  std::vector<double> mine;
+  if (parallel_read && error.empty()) {
+    const auto t0 = Clock::now();
+    try {
+      report.output_format = pieces ? piece_ext : io::mesh_format(o.output);
+      report.input_format = format;
+      io::ReadOptions ro;
+      ro.format = o.input_format;
+      ro.frame = o.step;
+      ro.attributes = false;
+      ro.part = std::uint32_t(rank);
+      ro.parts = std::uint32_t(size);
+      particles = io::read_particles(o.input, ro);
+    } catch (const std::exception& e) {
+      error = e.what();
+    }
+    error = agree_error(error, rank, size);
+    if (!error.empty()) return fail(error, 1);
+    double t = seconds_since(t0);
+    MPI_Allreduce(MPI_IN_PLACE, &t, 1, MPI_DOUBLE, MPI_MAX, MPI_COMM_WORLD);
+    report.read_seconds = t;
+    std::uint64_t n = particles.count();
+    MPI_Allreduce(MPI_IN_PLACE, &n, 1, MPI_UINT64_T, MPI_SUM, MPI_COMM_WORLD);
+    report.particle_count = n;
+    mine.swap(particles.xyz);
+    particles = io::Particles();
+  }
+  if (!parallel_read && root && error.empty()) {
     try {
       report.output_format = pieces ? piece_ext : io::mesh_format(o.output);
       report.input_format = io::particle_format(o.input, o.input_format);
@@ -590,6 +627,7 @@ int reconstruct_mpi(Options& o, int rank, int size, bool pieces) {
       error = e.what();
     }
   }
+  if (!parallel_read) {
   error = bcast_string(error, rank);
   if (!error.empty()) return fail(error, 1);
   // Even shares, in file order (nbmc moves them to the ranks that need them).
@@ -605,10 +643,11 @@ int reconstruct_mpi(Options& o, int rank, int size, bool pieces) {
     counts[std::size_t(r)] = int(3 * (b - a));
     displs[std::size_t(r)] = int(3 * a);
   }
-  std::vector<double> mine(std::size_t(counts[std::size_t(rank)]));
+  mine.resize(static_cast<std::size_t>(counts[static_cast<std::size_t>(rank)]));
   MPI_Scatterv(root ? particles.xyz.data() : nullptr, counts.data(), displs.data(), MPI_DOUBLE, mine.data(),
                counts[std::size_t(rank)], MPI_DOUBLE, 0, MPI_COMM_WORLD);
   particles = io::Particles();
+  }
 
   std::string ctx_error;
   ContextPtr ctx(mpi_context(o, ctx_error));
@@ -939,6 +978,9 @@ int main(int argc, char** argv) {
   rec->add_flag("--pieces", o.pieces,
                "Under mpirun: every rank writes its piece of the mesh (NAME_<rank>.vtp) and rank 0 a ParaView "
                "index; -o NAME.pvtp (or .pvtu)");
+  rec->add_flag("--read-on-root", o.read_on_root,
+               "Under mpirun: rank 0 reads the whole file and scatters it (HDF5 inputs are otherwise read by "
+               "every rank, its own rows)");
   rec->add_option("--subdomains", o.subdomains,
                   "Reconstruct the frame in subdomains and stitch them (the same mesh, bit for bit): NxMxK, N "
                   "(= NxNxN), or auto (split only when the frame's estimate exceeds --memory-budget or, on a GPU, "

@@ -203,7 +203,11 @@ public:
 
 private:
   const std::string& name() const { return f_.name(); }
-  std::vector<double> read_dataset(hid_t loc, const std::string& path, std::uint64_t values, const std::string& what);
+  // cols > 0: positions, rows of cols values; with opt_.parts > 1 only this
+  // reader's share of the rows is read (a hyperslab).
+  std::vector<double> read_dataset(hid_t loc, const std::string& path, std::uint64_t values, const std::string& what,
+                                   std::uint64_t cols = 0);
+  bool sharing() const { return opt_.parts > 1; }
   Particles from_group(const std::string& group, bool positions_as_xyz);
   Particles from_gadget_group(const std::string& group);
   void attributes_of_group(const std::string& group, std::uint64_t n, const std::vector<std::string>& skip,
@@ -216,7 +220,7 @@ private:
 };
 
 std::vector<double> Reader::read_dataset(hid_t loc, const std::string& path, std::uint64_t values,
-                                         const std::string& what) {
+                                         const std::string& what, std::uint64_t cols) {
   Id d(H5Dopen2(loc, path.c_str(), H5P_DEFAULT), H5Dclose);
   if (!d.ok()) fail(name(), "cannot open dataset " + path + h5_message());
   Shape s;
@@ -231,6 +235,23 @@ std::vector<double> Reader::read_dataset(hid_t loc, const std::string& path, std
   if (values > kMaxParticles * 3 || bytes_needed / kMaxDeflateRatio > storage + (1 << 20) / kMaxDeflateRatio)
     fail(name(), what + " " + path + " declares " + std::to_string(values) + " values but stores only " +
                      std::to_string(storage) + " bytes");
+  if (cols > 0 && sharing()) {
+    const std::uint64_t rows = values / cols;
+    const std::uint64_t lo = rows * opt_.part / opt_.parts, hi = rows * (opt_.part + 1) / opt_.parts;
+    std::vector<double> v(static_cast<std::size_t>((hi - lo) * cols));
+    if (hi > lo) {
+      hsize_t start[2] = {lo, 0}, count[2] = {hi - lo, s.rank == 2 ? s.dims[1] : 1};
+      Id file_space(H5Dget_space(d.get()), H5Sclose);
+      hsize_t mem_dims[1] = {(hi - lo) * cols};
+      Id mem_space(H5Screate_simple(1, mem_dims, nullptr), H5Sclose);
+      if (!file_space.ok() || !mem_space.ok() ||
+          H5Sselect_hyperslab(file_space.get(), H5S_SELECT_SET, start, nullptr, count, nullptr) < 0 ||
+          H5Dread(d.get(), H5T_NATIVE_DOUBLE, mem_space.get(), file_space.get(), H5P_DEFAULT, v.data()) < 0)
+        fail(name(), "cannot read rows " + std::to_string(lo) + " to " + std::to_string(hi) + " of " + what + " " +
+                         path + h5_message());
+    }
+    return v;
+  }
   std::vector<double> v(static_cast<std::size_t>(values));
   if (values > 0 && H5Dread(d.get(), H5T_NATIVE_DOUBLE, H5S_ALL, H5S_ALL, H5P_DEFAULT, v.data()) < 0)
     fail(name(), "cannot read " + what + " " + path + h5_message());
@@ -316,12 +337,13 @@ Particles Reader::from_group(const std::string& group, bool) {
       fail(name(), "dataset " + path + " has " + std::to_string(s.dims[0]) + " values but " + join(group, "x") +
                        " has " + std::to_string(n));
     d.reset();
-    axis[a] = read_dataset(f_.get(), path, n, "dataset");
+    axis[a] = read_dataset(f_.get(), path, n, "dataset", 1);
   }
-  out.xyz.resize(static_cast<std::size_t>(3 * n));
-  for (std::size_t i = 0; i < n; ++i)
+  const std::size_t m = axis[0].size();  // n, or this reader's share
+  out.xyz.resize(3 * m);
+  for (std::size_t i = 0; i < m; ++i)
     for (int a = 0; a < 3; ++a) out.xyz[3 * i + static_cast<std::size_t>(a)] = axis[a][i];
-  attributes_of_group(group, n, {"x", "y", "z"}, out);
+  if (!sharing()) attributes_of_group(group, n, {"x", "y", "z"}, out);
   return out;
 }
 
@@ -337,8 +359,8 @@ Particles Reader::from_gadget_group(const std::string& group) {
     fail(name(), "dataset " + path + " is not N x 3");
   d.reset();
   Particles out;
-  out.xyz = read_dataset(f_.get(), path, 3 * s.dims[0], "dataset");
-  attributes_of_group(group, s.dims[0], {"Coordinates"}, out);
+  out.xyz = read_dataset(f_.get(), path, 3 * s.dims[0], "dataset", 3);
+  if (!sharing()) attributes_of_group(group, s.dims[0], {"Coordinates"}, out);
   return out;
 }
 
@@ -376,7 +398,7 @@ Particles Reader::by_layout(const std::string& layout_in, const std::string& obj
       if (s.rank != 2 || s.dims[1] != 3) fail(name(), "dataset " + object + " is not N x 3 (positions)");
       d.reset();
       Particles out;
-      out.xyz = read_dataset(f, object, 3 * s.dims[0], "dataset");
+      out.xyz = read_dataset(f, object, 3 * s.dims[0], "dataset", 3);
       return out;
     }
     if (k != H5I_GROUP) fail(name(), object + " is neither a group nor a dataset");

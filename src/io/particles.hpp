@@ -48,6 +48,10 @@ struct ReadOptions {
   bool attributes = true;         // read per-particle attributes where the format has them
   std::vector<std::string> only;  // when not empty, only these attributes (others are skipped)
   std::int64_t frame = -1;        // multi-step files (H5Part): the step number; -1 = the first
+  // HDF5 layouts: read only share `part` of `parts` of the particles (rows
+  // [n part / parts, n (part + 1) / parts) of the position datasets, by
+  // hyperslab), as each MPI rank does; attributes are then not read.
+  std::uint32_t part = 0, parts = 1;
 };
 
 // Reads a particle file. format: one of the names above, or "" to take it

@@ -23,6 +23,13 @@ check "report lists 3 ranks" "grep -q '\"mpi\": {\"ranks\": 3' mpi.json"
 "${MPIRUN[@]}" -n 3 "$NBMC" reconstruct "$FRAME" --particle-radius 0.025 -o split.ply --subdomains 3x2x2 -q
 check "--subdomains under MPI: the same file" "cmp -s whole.ply split.ply"
 
+H5=$SRC/tests/data/h5part_steps.h5part
+"$NBMC" reconstruct "$H5" --spacing 0.1 -o h5-whole.ply -q
+"${MPIRUN[@]}" -n 3 "$NBMC" reconstruct "$H5" --spacing 0.1 -o h5-par.ply -q
+check "HDF5 read by every rank (hyperslabs): the same file" "cmp -s h5-whole.ply h5-par.ply"
+"${MPIRUN[@]}" -n 2 "$NBMC" reconstruct "$H5" --spacing 0.1 -o h5-root.ply -q --read-on-root
+check "HDF5 read on rank 0 and scattered: the same file" "cmp -s h5-whole.ply h5-root.ply"
+
 "${MPIRUN[@]}" -n 3 "$NBMC" reconstruct "$FRAME" --particle-radius 0.025 -o surf.pvtp --pieces -q
 check "--pieces: three pieces and an index" \
   "[ -s surf_0.vtp ] && [ -s surf_1.vtp ] && [ -s surf_2.vtp ] && grep -c 'Piece Source' surf.pvtp | grep -q 3"
