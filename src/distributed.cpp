@@ -541,16 +541,7 @@ void reconstruct_collective(nbmc_context& ctx, const nbmc_params& full, const nb
         Reader rd{part};
         ps.push_back(unpack_piece(rd));
       }
-      std::vector<const Piece*> ptrs;
-      for (const Piece& pc : ps) ptrs.push_back(&pc);
-      const double t1 = now();
-      const StitchResult r = stitch(ptrs, [&](std::uint64_t nv, std::uint64_t nt) {
-        mesh.positions.resize(3 * nv);
-        mesh.normals.resize(p.normals ? 3 * nv : 0);
-        mesh.triangles.resize(3 * nt);
-        return StitchTarget{mesh.positions.data(), p.normals ? mesh.normals.data() : nullptr, mesh.triangles.data()};
-      });
-      rep.stitch_seconds = now() - t1;
+      const StitchResult r = stitch_into(ps, p.normals, mesh, rep.stitch_seconds);
       rep.shared_vertices = r.shared_vertices;
       frame.stage[6] += rep.stitch_seconds;
       frame.vertices = r.vertices;

@@ -35,6 +35,20 @@ std::uint64_t owned_particles(const Grid& g, const Subdomain& s, const std::vect
 
 }  // namespace
 
+StitchResult stitch_into(const std::vector<Piece>& pieces, bool normals, HostMesh& mesh, double& seconds) {
+  const double t0 = now();
+  std::vector<const Piece*> ptrs;
+  for (const Piece& pc : pieces) ptrs.push_back(&pc);
+  const StitchResult r = stitch(ptrs, [&](std::uint64_t nv, std::uint64_t nt) {
+    mesh.positions.resize(3 * nv);
+    mesh.normals.resize(normals ? 3 * nv : 0);
+    mesh.triangles.resize(3 * nt);
+    return StitchTarget{mesh.positions.data(), normals ? mesh.normals.data() : nullptr, mesh.triangles.data()};
+  });
+  seconds = now() - t0;
+  return r;
+}
+
 void add_run_stats(RunStats& t, const RunStats& o) {
   t.surface_particles += o.surface_particles;
   t.occupied_cells += o.occupied_cells;
@@ -198,16 +212,7 @@ void run_split(const int parts[3], const Grid& g, const double* xyz, std::size_t
   for (const SubdomainEntry& e : rep.entries) particles += e.particles;
   if (particles == 0 && p.use_bbox)
     throw Error(NBMC_ERROR_NO_PARTICLES, "no particle lies within the bounding box (extended by the influence radius)");
-  const double t1 = now();
-  std::vector<const Piece*> ptrs;
-  for (const Piece& pc : pieces) ptrs.push_back(&pc);
-  const StitchResult r = stitch(ptrs, [&](std::uint64_t nv, std::uint64_t nt) {
-    mesh.positions.resize(3 * nv);
-    mesh.normals.resize(p.normals ? 3 * nv : 0);
-    mesh.triangles.resize(3 * nt);
-    return StitchTarget{mesh.positions.data(), p.normals ? mesh.normals.data() : nullptr, mesh.triangles.data()};
-  });
-  rep.stitch_seconds = now() - t1;
+  const StitchResult r = stitch_into(pieces, p.normals, mesh, rep.stitch_seconds);
   rep.shared_vertices = r.shared_vertices;
   acc.stage[6] += rep.stitch_seconds;
   acc.particles = particles;

@@ -58,6 +58,9 @@ bool reconstruct_subdomains(const SubdomainSetting& setting, std::uint64_t budge
                             std::size_t count, const Params& p, const RunRegion& run, HostMesh& mesh, RunStats& st,
                             SubdomainReport& rep);
 
+// Stitches pieces into a host mesh (normals when asked); the time in seconds.
+StitchResult stitch_into(const std::vector<Piece>& pieces, bool normals, HostMesh& mesh, double& seconds);
+
 // Merges a subdomain run's stats into the frame's (sums of the work done).
 void add_run_stats(RunStats& total, const RunStats& one);
 

@@ -68,6 +68,9 @@ struct ParticleInput {
 // Device memory outside Kokkos' bookkeeping (pipeline_cuda.cpp): for meshes
 // handed to the caller, which may outlive the Kokkos runtime.
 std::shared_ptr<void> cuda_allocate(std::size_t bytes, const char* what);
+// Gives mesh one device allocation the caller owns (positions, normals when
+// asked, triangles) and sets its device pointers and counts.
+void allocate_device_mesh(HostMesh& mesh, std::uint64_t vertices, std::uint64_t triangles, bool normals);
 #endif
 
 struct RunStats {
@@ -432,17 +435,8 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
     lap(5);
   } else if (mesh_on_device) {
 #if defined(KOKKOS_ENABLE_CUDA)
-    // One allocation the caller owns: positions, normals, triangles.
+    allocate_device_mesh(mesh, r.vertices, r.triangles, p.normals);
     const std::size_t np = 3 * std::size_t(r.vertices), nn = p.normals ? np : 0, nt = 3 * std::size_t(r.triangles);
-    const std::size_t bytes = (np + nn) * sizeof(float) + nt * sizeof(std::uint32_t);
-    mesh.device = cuda_allocate(bytes, "the mesh");
-    mesh.on_device = true;
-    float* base = static_cast<float*>(mesh.device.get());
-    mesh.d_positions = np ? base : nullptr;
-    mesh.d_normals = nn ? base + np : nullptr;
-    mesh.d_triangles = nt ? reinterpret_cast<std::uint32_t*>(base + np + nn) : nullptr;
-    mesh.d_vertices = r.vertices;
-    mesh.d_triangles_count = r.triangles;
     Kokkos::View<float*, MemSpace, Unmanaged> dpos(mesh.d_positions, np), dnrm(mesh.d_normals, nn);
     Kokkos::View<std::uint32_t*, MemSpace, Unmanaged> dtri(mesh.d_triangles, nt);
     compute_vertices(space, bv, n_words, g, cphi, cinfo, cvoff, Kokkos::View<float*, MemSpace>(dpos),

@@ -86,6 +86,19 @@ std::shared_ptr<void> cuda_allocate(std::size_t bytes, const char* what) {
   return std::shared_ptr<void>(p, [](void* q) { cudaFree(q); });
 }
 
+void allocate_device_mesh(HostMesh& mesh, std::uint64_t vertices, std::uint64_t triangles, bool normals) {
+  const std::size_t np = 3 * std::size_t(vertices), nn = normals ? np : 0, nt = 3 * std::size_t(triangles);
+  const std::size_t bytes = (np + nn) * sizeof(float) + nt * sizeof(std::uint32_t);
+  mesh.device = cuda_allocate(bytes, "the mesh");
+  mesh.on_device = true;
+  float* base = static_cast<float*>(mesh.device.get());
+  mesh.d_positions = np ? base : nullptr;
+  mesh.d_normals = nn ? base + np : nullptr;
+  mesh.d_triangles = nt ? reinterpret_cast<std::uint32_t*>(base + np + nn) : nullptr;
+  mesh.d_vertices = vertices;
+  mesh.d_triangles_count = triangles;
+}
+
 #endif  // KOKKOS_ENABLE_CUDA
 
 void reconstruct_cuda(const ParticleInput& in, const Params& p, MemoryTracker& t, const Progress& pr,
@@ -211,16 +224,8 @@ void download_particles(const void* device_xyz, std::size_t count, double* host)
 void move_mesh_to_device(HostMesh& m) {
 #if defined(KOKKOS_ENABLE_CUDA)
   const std::size_t np = m.positions.size(), nn = m.normals.size(), nt = m.triangles.size();
-  const std::size_t bytes = (np + nn) * sizeof(float) + nt * sizeof(std::uint32_t);
   HostMesh d;
-  d.device = cuda_allocate(bytes, "the mesh");
-  d.on_device = true;
-  float* base = static_cast<float*>(d.device.get());
-  d.d_positions = np ? base : nullptr;
-  d.d_normals = nn ? base + np : nullptr;
-  d.d_triangles = nt ? reinterpret_cast<std::uint32_t*>(base + np + nn) : nullptr;
-  d.d_vertices = np / 3;
-  d.d_triangles_count = nt / 3;
+  allocate_device_mesh(d, np / 3, nt / 3, nn > 0);
   if (np) cuda_check(cudaMemcpy(d.d_positions, m.positions.data(), np * sizeof(float), cudaMemcpyHostToDevice), "mesh positions");
   if (nn) cuda_check(cudaMemcpy(d.d_normals, m.normals.data(), nn * sizeof(float), cudaMemcpyHostToDevice), "mesh normals");
   if (nt)
