@@ -16,8 +16,8 @@
  *
  * Each particle must be passed by exactly one rank (any decomposition: the
  * ranks' regions may be any shape and may interleave). nbmc picks its own
- * subdomains (nbmc_context_set_subdomains sets their number; by default as
- * many as ranks, or more with NBMC_SUBDOMAINS_AUTO and a memory budget),
+ * subdomains (nbmc_context_set_subdomains sets their number; by default four
+ * per rank, or more with NBMC_SUBDOMAINS_AUTO and a memory budget),
  * moves particles and ghost particles to the ranks that run them, and
  * returns the same mesh as one process would make of all the particles, bit
  * for bit (gathered), or the pieces of it (pieces: before clean-up and
