@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <thread>
 
 namespace nbmc {
 
@@ -109,17 +110,38 @@ std::vector<std::vector<std::uint32_t>> select_particles(const Decomposition& d,
     hi[a] = p.bbox_max[a] + p.influence_radius;
   }
   const int px = d.parts[0], py = d.parts[1];
-  for (std::size_t i = 0; i < count; ++i) {
-    const double* x = xyz + 3 * i;
-    if (p.use_bbox && !(x[0] >= lo[0] && x[0] <= hi[0] && x[1] >= lo[1] && x[1] <= hi[1] && x[2] >= lo[2] &&
-                        x[2] <= hi[2]))
-      continue;
-    std::uint32_t c[3];
-    for (int a = 0; a < 3; ++a) c[a] = neighbour_cell(x[a] - g.origin[a], inv, g.nb_dims[a]);
-    for (int z = first[2][c[2]]; z <= last[2][c[2]]; ++z)
-      for (int y = first[1][c[1]]; y <= last[1][c[1]]; ++y)
-        for (int xx = first[0][c[0]]; xx <= last[0][c[0]]; ++xx)
-          out[std::size_t((z * py + y) * px + xx)].push_back(std::uint32_t(i));
+  // Contiguous chunks of the particles on the host's threads, each into its
+  // own lists, joined in chunk order (so every list stays in input order).
+  const std::size_t chunks =
+      std::max<std::size_t>(1, std::min<std::size_t>(std::max(1u, std::thread::hardware_concurrency()), count / 20000));
+  std::vector<std::vector<std::vector<std::uint32_t>>> part(chunks, std::vector<std::vector<std::uint32_t>>(out.size()));
+  auto select = [&](std::size_t k) {
+    auto& mine = part[k];
+    for (std::size_t i = count * k / chunks, e = count * (k + 1) / chunks; i < e; ++i) {
+      const double* x = xyz + 3 * i;
+      if (p.use_bbox && !(x[0] >= lo[0] && x[0] <= hi[0] && x[1] >= lo[1] && x[1] <= hi[1] && x[2] >= lo[2] &&
+                          x[2] <= hi[2]))
+        continue;
+      std::uint32_t c[3];
+      for (int a = 0; a < 3; ++a) c[a] = neighbour_cell(x[a] - g.origin[a], inv, g.nb_dims[a]);
+      for (int z = first[2][c[2]]; z <= last[2][c[2]]; ++z)
+        for (int y = first[1][c[1]]; y <= last[1][c[1]]; ++y)
+          for (int xx = first[0][c[0]]; xx <= last[0][c[0]]; ++xx)
+            mine[std::size_t((z * py + y) * px + xx)].push_back(std::uint32_t(i));
+    }
+  };
+  std::vector<std::thread> pool;
+  for (std::size_t k = 1; k < chunks; ++k) pool.emplace_back(select, k);
+  select(0);
+  for (std::thread& t : pool) t.join();
+  for (std::size_t s = 0; s < out.size(); ++s) {
+    std::size_t n = 0;
+    for (const auto& c : part) n += c[s].size();
+    out[s].reserve(n);
+    for (auto& c : part) {
+      out[s].insert(out[s].end(), c[s].begin(), c[s].end());
+      std::vector<std::uint32_t>().swap(c[s]);
+    }
   }
   return out;
 }
