@@ -454,7 +454,7 @@ NBMC_API int32_t nbmc_mesh_check(const nbmc_mesh* mesh, nbmc_mesh_check_result* 
 
 /* nx, ny, nz >= 1 (1, 1, 1: no split, the default), or nx ==
  * NBMC_SUBDOMAINS_AUTO (ny, nz ignored): split only when the estimated memory
- * of the frame exceeds 60% of the memory budget (nbmc_context_set_memory_budget;
+ * of the frame exceeds 80% of the memory budget (nbmc_context_set_memory_budget;
  * on a CUDA context without one, 80% of the GPU's free memory), into as many
  * subdomains as the estimate asks, and further if one still exceeds the
  * budget. Applies to the following reconstructions. Returns NBMC_OK or

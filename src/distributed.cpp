@@ -366,9 +366,9 @@ void reconstruct_collective(nbmc_context& ctx, const nbmc_params& full, const nb
     // with one each, 148 k / 144 k with four).
     std::uint64_t pieces = 4 * std::uint64_t(c.size());
     if (ctx.subdomains.automatic && ctx.memory.budget) {
-      const double usable = 0.6 * double(ctx.memory.budget);
+      const double usable = 0.8 * double(ctx.memory.budget);
       pieces = std::max<std::uint64_t>(
-          pieces, std::uint64_t(std::ceil(double(estimate_bytes(p, total_particles)) / usable * 1.25)));
+          pieces, std::uint64_t(std::ceil(double(estimate_bytes(p, total_particles)) / usable * 1.15)));
     }
     if (ctx.subdomains.automatic || parts[0] * parts[1] * parts[2] == 1) choose_parts(g, pieces, parts);
     d = decompose(g, p, parts);

@@ -4,11 +4,13 @@
 #include <Kokkos_Core.hpp>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <map>
 #include <set>
 #include <sstream>
+#include <thread>
 
 namespace nbmc {
 
@@ -18,19 +20,34 @@ double now() {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
 
+// Runs f(begin, end) over [0, n) in contiguous chunks on the host's threads.
+template <class F>
+void chunked(std::size_t n, const F& f) {
+  const std::size_t k =
+      std::max<std::size_t>(1, std::min<std::size_t>(std::max(1u, std::thread::hardware_concurrency()), n / 50000));
+  std::vector<std::thread> pool;
+  for (std::size_t t = 1; t < k; ++t) pool.emplace_back([&f, n, k, t] { f(n * t / k, n * (t + 1) / k); });
+  f(0, n / k);
+  for (std::thread& th : pool) th.join();
+}
+
 // Particles of packed xyz whose grid cell the subdomain owns.
 std::uint64_t owned_particles(const Grid& g, const Subdomain& s, const std::vector<double>& xyz) {
-  std::uint64_t n = 0;
-  for (std::size_t i = 0; i + 2 < xyz.size(); i += 3) {
-    bool in = true;
-    for (int a = 0; a < 3 && in; ++a) {
-      std::int64_t c = std::int64_t(std::floor((xyz[i + a] - g.origin[a]) / g.cell));
-      c = std::max<std::int64_t>(0, std::min<std::int64_t>(c, g.dims[a] - 2));
-      in = c >= s.cell_lo[a] && c < s.cell_hi[a];
+  std::atomic<std::uint64_t> total{0};
+  chunked(xyz.size() / 3, [&](std::size_t b, std::size_t e) {
+    std::uint64_t n = 0;
+    for (std::size_t i = b; i < e; ++i) {
+      bool in = true;
+      for (int a = 0; a < 3 && in; ++a) {
+        std::int64_t c = std::int64_t(std::floor((xyz[3 * i + std::size_t(a)] - g.origin[a]) / g.cell));
+        c = std::max<std::int64_t>(0, std::min<std::int64_t>(c, g.dims[a] - 2));
+        in = c >= s.cell_lo[a] && c < s.cell_hi[a];
+      }
+      n += in ? 1 : 0;
     }
-    n += in ? 1 : 0;
-  }
-  return n;
+    total += n;
+  });
+  return total.load();
 }
 
 }  // namespace
@@ -204,8 +221,10 @@ void run_split(const int parts[3], const Grid& g, const double* xyz, std::size_t
       d, q, all,
       [&](std::size_t i, std::vector<double>& out) {
         out.resize(3 * sel[i].size());
-        for (std::size_t k = 0; k < sel[i].size(); ++k)
-          for (int a = 0; a < 3; ++a) out[3 * k + std::size_t(a)] = xyz[3 * std::size_t(sel[i][k]) + std::size_t(a)];
+        chunked(sel[i].size(), [&](std::size_t b, std::size_t e) {
+          for (std::size_t k = b; k < e; ++k)
+            for (int a = 0; a < 3; ++a) out[3 * k + std::size_t(a)] = xyz[3 * std::size_t(sel[i][k]) + std::size_t(a)];
+        });
       },
       run, local, acc, rep);
   std::uint64_t particles = 0;
@@ -242,12 +261,12 @@ bool reconstruct_subdomains(const SubdomainSetting& setting, std::uint64_t budge
   std::uint64_t pieces = 1;
   if (setting.automatic) {
     if (!budget) return false;
-    // A subdomain may use 60% of the budget by the estimate; the rest is
+    // A subdomain may use 80% of the budget by the estimate; the rest is
     // the estimate's error and what the context holds besides.
-    const double usable = 0.6 * double(budget);
+    const double usable = 0.8 * double(budget);
     const double est = double(estimate_bytes(p, count));
     if (est <= usable) return false;
-    pieces = std::uint64_t(std::ceil(est / usable * 1.25));  // ghosts add to each subdomain
+    pieces = std::uint64_t(std::ceil(est / usable * 1.15));  // ghosts add to each subdomain
     choose_parts(g, pieces, parts);
     if (parts[0] * parts[1] * parts[2] == 1) return false;
   }

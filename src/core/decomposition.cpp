@@ -157,11 +157,14 @@ void subdomains_near_cell(const Decomposition& d, std::int64_t i, std::int64_t j
 }
 
 std::uint64_t estimate_bytes(const Params& p, std::uint64_t particles) {
-  // Measured peaks (bench/RESULTS.md, "subdomains"): about 56 bytes per
-  // particle for sorting and the neighbourhood, and the band and mesh grow
-  // with (r/c)^2 per surface particle; 1.5x safety, plus fixed overhead.
+  // Measured peaks per particle (bench/RESULTS.md, "Scale-out"): 41, 148 and
+  // 910 bytes at cells r, r/2 and r/4 on the 292 k frame (CPU), 137-138 at
+  // r/2 on the 1.65 M and 13.2 M frames (GPU): about 26 + 15 (r/c)^3 (the band
+  // is 2r thick, so its vertices grow with the cube of r/c). 10% margin, plus
+  // fixed overhead; a subdomain over the budget anyway makes `auto` split
+  // further.
   const double ratio = p.spacing / p.cell_size;
-  const double per_particle = 1.5 * (56.0 + 22.0 * ratio * ratio);
+  const double per_particle = 1.1 * (30.0 + 16.0 * ratio * ratio * ratio);
   return std::uint64_t(per_particle * double(particles)) + (std::uint64_t(64) << 20);
 }
 
