@@ -134,6 +134,29 @@ if want mpi && [ -x "$CLI" ] && command -v mpirun >/dev/null; then
   done
 fi
 
+if want mpibench && [ -x "$CLI" ] && command -v mpirun >/dev/null; then
+  step "MPI on the CPU cores: 4 ranks x 4 threads vs 1 rank x 16 threads (13.2 M frame, r/2), and a 64-frame sequence on 4 ranks vs 1"
+  flags="--oversubscribe --bind-to none"; [ "$(id -u)" = 0 ] && flags="$flags --allow-run-as-root"
+  T="$MESHES/tiled.xyz"
+  python3 - "$BIG" "$T" <<'PY'
+import sys, numpy as np
+p = np.fromfile(sys.argv[1], dtype="<f4").reshape(-1, 3)
+lo, hi = p.min(0), p.max(0)
+tiles = [p + np.array([x, y, z], dtype="f4") * 1.1 * (hi - lo) for z in range(2) for y in range(2) for x in range(2)]
+np.concatenate(tiles).astype("<f4").tofile(sys.argv[2])
+PY
+  TIMEFORMAT="%R s"
+  echo "1 rank x 16 threads:"; time "$CLI" reconstruct "$T" --spacing 0.00484 --backend openmp --threads 16 -o "$MESHES/t1.ply" -q --no-cleanup
+  echo "4 ranks x 4 threads:"; time mpirun $flags -n 4 "$CLI" reconstruct "$T" --spacing 0.00484 --backend openmp --threads 4 -o "$MESHES/t4.ply" -q --no-cleanup
+  if cmp -s "$MESHES/t1.ply" "$MESHES/t4.ply"; then echo "identical files"; else echo "DIFFERENT files"; status=1; fi
+  mkdir -p "$MESHES/seq"
+  for i in $(seq 1 64); do ln -sf "$DATA/xyz/cbd292k_t040_292008.xyz" "$MESHES/seq/f_$i.xyz"; done
+  echo "64 frames, 1 rank x 4 threads:"; time "$CLI" reconstruct "$MESHES/seq/f_{}.xyz" --spacing 0.0086 --backend openmp --threads 4 -o "$MESHES/o1/s_{}.ply" -q
+  echo "64 frames, 4 ranks x 4 threads:"; time mpirun $flags -n 4 "$CLI" reconstruct "$MESHES/seq/f_{}.xyz" --spacing 0.0086 --backend openmp --threads 4 -o "$MESHES/o4/s_{}.ply" -q
+  n=$(ls "$MESHES/o4" | wc -l); echo "$n meshes written by 4 ranks"; [ "$n" = 64 ] || status=1
+  cmp -s "$MESHES/o1/s_17.ply" "$MESHES/o4/s_17.ply" && echo "frame 17 identical" || { echo "frame 17 DIFFERENT"; status=1; }
+fi
+
 if want python; then
   step "the Python package's GPU paths"
   NBMC_LIBRARY="$B/install/lib/libnbmc.so" python3 "$ROOT/python/tests/gpu_check.py" 2>&1 | tee "$OUT/python-gpu.txt" || status=1
