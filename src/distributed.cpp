@@ -33,10 +33,6 @@
 namespace nbmc {
 namespace {
 
-double now() {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
-
 struct Coll {
   const nbmc__collective& c;
   int rank() const { return c.rank; }
@@ -316,7 +312,7 @@ void global_ids(const Coll& c, const Decomposition& d, const std::vector<int>& o
 void reconstruct_collective(nbmc_context& ctx, const nbmc_params& full, const nbmc__collective& hooks,
                             int32_t output, int32_t root, HostMesh& mesh) {
   const Coll c{hooks};
-  const double t_start = now();
+  const double t_start = seconds_now();
   Params p;
   // 1. Parameters, and what each rank's upload left (agreed: a rank whose
   //    particles were rejected fails the call on every rank).
@@ -575,7 +571,7 @@ void reconstruct_collective(nbmc_context& ctx, const nbmc_params& full, const nb
       if (ctx.mesh_memory == NBMC_MEMORY_DEVICE) run_on_kokkos_thread(ctx, [&] { move_mesh_to_device(mesh); });
     });
   }
-  frame.total = now() - t_start;
+  frame.total = seconds_now() - t_start;
   ctx.stats = frame;
   ctx.peak_memory = ctx.memory.peak.load();
 }

@@ -1,6 +1,8 @@
 // SPDX-License-Identifier: MIT
 #include "subdomains.hpp"
 
+#include "core/parallel.hpp"
+
 #include <Kokkos_Core.hpp>
 
 #include <algorithm>
@@ -10,31 +12,16 @@
 #include <map>
 #include <set>
 #include <sstream>
-#include <thread>
 
 namespace nbmc {
 
 namespace {
 
-double now() {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
-}
-
-// Runs f(begin, end) over [0, n) in contiguous chunks on the host's threads.
-template <class F>
-void chunked(std::size_t n, const F& f) {
-  const std::size_t k =
-      std::max<std::size_t>(1, std::min<std::size_t>(std::max(1u, std::thread::hardware_concurrency()), n / 50000));
-  std::vector<std::thread> pool;
-  for (std::size_t t = 1; t < k; ++t) pool.emplace_back([&f, n, k, t] { f(n * t / k, n * (t + 1) / k); });
-  f(0, n / k);
-  for (std::thread& th : pool) th.join();
-}
-
 // Particles of packed xyz whose grid cell the subdomain owns.
 std::uint64_t owned_particles(const Grid& g, const Subdomain& s, const std::vector<double>& xyz) {
   std::atomic<std::uint64_t> total{0};
-  chunked(xyz.size() / 3, [&](std::size_t b, std::size_t e) {
+  const std::size_t n_particles = xyz.size() / 3;
+  for_chunks(n_particles, chunk_count(n_particles, 50000), [&](std::size_t, std::size_t b, std::size_t e) {
     std::uint64_t n = 0;
     for (std::size_t i = b; i < e; ++i) {
       bool in = true;
@@ -52,8 +39,12 @@ std::uint64_t owned_particles(const Grid& g, const Subdomain& s, const std::vect
 
 }  // namespace
 
+double seconds_now() {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
+}
+
 StitchResult stitch_into(const std::vector<Piece>& pieces, bool normals, HostMesh& mesh, double& seconds) {
-  const double t0 = now();
+  const double t0 = seconds_now();
   std::vector<const Piece*> ptrs;
   for (const Piece& pc : pieces) ptrs.push_back(&pc);
   const StitchResult r = stitch(ptrs, [&](std::uint64_t nv, std::uint64_t nt) {
@@ -62,7 +53,7 @@ StitchResult stitch_into(const std::vector<Piece>& pieces, bool normals, HostMes
     mesh.triangles.resize(3 * nt);
     return StitchTarget{mesh.positions.data(), normals ? mesh.normals.data() : nullptr, mesh.triangles.data()};
   });
-  seconds = now() - t0;
+  seconds = seconds_now() - t0;
   return r;
 }
 
@@ -141,9 +132,9 @@ std::vector<Piece> run_subdomain_job(const Decomposition& d, const Params& p, co
       in.region = &reg;
       HostMesh mesh;
       RunStats one;
-      const double t0 = now();
+      const double t0 = seconds_now();
       run(in, p, mesh, one);
-      e.seconds += now() - t0;
+      e.seconds += seconds_now() - t0;
       if (e.runs > 0) ++rep.reruns;
       ++e.runs;
       for (int q = 0; q < 16; ++q) st.stage[q] += one.stage[q];
@@ -216,12 +207,12 @@ void run_split(const int parts[3], const Grid& g, const double* xyz, std::size_t
   rep.count = d.count();
   rep.ghost_width = double(d.ghost_nb_cells) * g.nb_cell;
   RunStats acc;
-  const double t0 = now();
+  const double t0 = seconds_now();
   std::vector<Piece> pieces = run_subdomain_job(
       d, q, all,
       [&](std::size_t i, std::vector<double>& out) {
         out.resize(3 * sel[i].size());
-        chunked(sel[i].size(), [&](std::size_t b, std::size_t e) {
+        for_chunks(sel[i].size(), chunk_count(sel[i].size(), 50000), [&](std::size_t, std::size_t b, std::size_t e) {
           for (std::size_t k = b; k < e; ++k)
             for (int a = 0; a < 3; ++a) out[3 * k + std::size_t(a)] = xyz[3 * std::size_t(sel[i][k]) + std::size_t(a)];
         });
@@ -243,7 +234,7 @@ void run_split(const int parts[3], const Grid& g, const double* xyz, std::size_t
     acc.origin[a] = g.origin[a];
   }
   acc.cell = g.cell;
-  acc.total = now() - t0;
+  acc.total = seconds_now() - t0;
   st = acc;
 }
 

@@ -61,6 +61,9 @@ bool reconstruct_subdomains(const SubdomainSetting& setting, std::uint64_t budge
 // Stitches pieces into a host mesh (normals when asked); the time in seconds.
 StitchResult stitch_into(const std::vector<Piece>& pieces, bool normals, HostMesh& mesh, double& seconds);
 
+// Monotonic clock in seconds (the report's per-subdomain and stitch times).
+double seconds_now();
+
 // Merges a subdomain run's stats into the frame's (sums of the work done).
 void add_run_stats(RunStats& total, const RunStats& one);
 

@@ -1,10 +1,11 @@
 // SPDX-License-Identifier: MIT
 #include "decomposition.hpp"
 
+#include "parallel.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
-#include <thread>
 
 namespace nbmc {
 
@@ -112,12 +113,11 @@ std::vector<std::vector<std::uint32_t>> select_particles(const Decomposition& d,
   const int px = d.parts[0], py = d.parts[1];
   // Contiguous chunks of the particles on the host's threads, each into its
   // own lists, joined in chunk order (so every list stays in input order).
-  const std::size_t chunks =
-      std::max<std::size_t>(1, std::min<std::size_t>(std::max(1u, std::thread::hardware_concurrency()), count / 20000));
+  const std::size_t chunks = chunk_count(count, 20000);
   std::vector<std::vector<std::vector<std::uint32_t>>> part(chunks, std::vector<std::vector<std::uint32_t>>(out.size()));
-  auto select = [&](std::size_t k) {
+  for_chunks(count, chunks, [&](std::size_t k, std::size_t begin, std::size_t end) {
     auto& mine = part[k];
-    for (std::size_t i = count * k / chunks, e = count * (k + 1) / chunks; i < e; ++i) {
+    for (std::size_t i = begin; i < end; ++i) {
       const double* x = xyz + 3 * i;
       if (p.use_bbox && !(x[0] >= lo[0] && x[0] <= hi[0] && x[1] >= lo[1] && x[1] <= hi[1] && x[2] >= lo[2] &&
                           x[2] <= hi[2]))
@@ -129,11 +129,7 @@ std::vector<std::vector<std::uint32_t>> select_particles(const Decomposition& d,
           for (int xx = first[0][c[0]]; xx <= last[0][c[0]]; ++xx)
             mine[std::size_t((z * py + y) * px + xx)].push_back(std::uint32_t(i));
     }
-  };
-  std::vector<std::thread> pool;
-  for (std::size_t k = 1; k < chunks; ++k) pool.emplace_back(select, k);
-  select(0);
-  for (std::thread& t : pool) t.join();
+  });
   for (std::size_t s = 0; s < out.size(); ++s) {
     std::size_t n = 0;
     for (const auto& c : part) n += c[s].size();

@@ -2,21 +2,18 @@
 // Parallel k-way merge: the key space is cut at splitter keys sampled from
 // the pieces, so that every thread merges its own key range of all pieces
 // (equal keys never straddle two ranges); a prefix sum over the ranges'
-// counts then places each range's output. Plain C++ threads: the CUDA build
-// of the library has no OpenMP.
+// counts then places each range's output.
 #include "stitch.hpp"
 
+#include "parallel.hpp"
 #include "params.hpp"
 
 #include <algorithm>
 #include <cstdlib>
 #include <cstring>
-#include <exception>
 #include <limits>
-#include <mutex>
 #include <queue>
 #include <sstream>
-#include <thread>
 #include <utility>
 
 namespace nbmc {
@@ -33,24 +30,6 @@ struct Cursor {
     return piece > o.piece;
   }
 };
-
-template <class F>
-void parallel(int n, const F& f) {
-  std::vector<std::thread> pool;
-  std::exception_ptr err;
-  std::mutex m;
-  for (int t = 0; t < n; ++t)
-    pool.emplace_back([&, t] {
-      try {
-        f(t);
-      } catch (...) {
-        std::lock_guard<std::mutex> lock(m);
-        if (!err) err = std::current_exception();
-      }
-    });
-  for (auto& th : pool) th.join();
-  if (err) std::rethrow_exception(err);
-}
 
 // Splitter keys cutting the union of sorted key arrays into about n ranges.
 template <class GetKeys>
@@ -81,8 +60,7 @@ StitchResult stitch(const std::vector<const Piece*>& pieces,
     vtotal += p->vertex_count();
     ttotal += p->triangle_count();
   }
-  const unsigned hw = std::max(1u, std::thread::hardware_concurrency());
-  int n = int(std::min<std::uint64_t>(hw, std::max<std::uint64_t>(1, vtotal / 200000)));
+  int n = int(chunk_count(std::size_t(vtotal), 200000));
   // NBMC_STITCH_RANGES=n (tests): that many key ranges whatever the size.
   if (const char* e = std::getenv("NBMC_STITCH_RANGES")) n = std::max(1, std::min(256, std::atoi(e)));
 
@@ -108,7 +86,8 @@ StitchResult stitch(const std::vector<const Piece*>& pieces,
   // Per range: the (piece, index) of each kept vertex, and its shared count.
   std::vector<std::vector<std::pair<std::uint32_t, std::uint32_t>>> kept(static_cast<std::size_t>(nv_ranges));
   std::vector<std::uint64_t> shared(static_cast<std::size_t>(nv_ranges), 0);
-  parallel(nv_ranges, [&](int t) {
+  on_threads(std::size_t(nv_ranges), [&](std::size_t ti) {
+    const int t = int(ti);
     std::vector<std::size_t> next(vfirst[std::size_t(t)]);
     const std::vector<std::size_t>& end = vfirst[std::size_t(t) + 1];
     std::priority_queue<Cursor, std::vector<Cursor>, std::greater<Cursor>> heap;
@@ -161,7 +140,8 @@ StitchResult stitch(const std::vector<const Piece*>& pieces,
     throw Error(NBMC_ERROR_DOMAIN_TOO_LARGE, "the stitched mesh has more vertices than 32-bit indices can address");
   const StitchTarget tg = out(r.vertices, r.triangles);
   // Final indices and the vertex arrays, range by range.
-  parallel(nv_ranges, [&](int t) {
+  on_threads(std::size_t(nv_ranges), [&](std::size_t ti) {
+    const int t = int(ti);
     const std::uint64_t base = voff[std::size_t(t)];
     for (std::size_t q = 0; q < k; ++q)
       for (std::size_t v = vfirst[std::size_t(t)][q]; v < vfirst[std::size_t(t) + 1][q]; ++v)
@@ -193,7 +173,8 @@ StitchResult stitch(const std::vector<const Piece*>& pieces,
     std::uint32_t piece;
     bool operator>(const TCursor& o) const { return key != o.key ? key > o.key : piece > o.piece; }
   };
-  parallel(nt_ranges, [&](int t) {
+  on_threads(std::size_t(nt_ranges), [&](std::size_t ti) {
+    const int t = int(ti);
     std::vector<std::size_t> next(tfirst[std::size_t(t)]);
     const std::vector<std::size_t>& end = tfirst[std::size_t(t) + 1];
     std::priority_queue<TCursor, std::vector<TCursor>, std::greater<TCursor>> heap;
