@@ -8,7 +8,9 @@
 #   scripts/gpu_check.sh [DATA_DIR] [OUT_DIR]
 #
 # NBMC_GPU_CHECK_STEPS picks steps (default: all of "build equivalence
-# pointers sanitizers ncu bench"; also "subdomains" (split frames on the GPU
+# pointers sanitizers ncu bench"; also "zb05" (the two field methods
+# side by side, ncu on the gather), "limits" (106 M tiled at r/4 and r/8:
+# clear errors), "subdomains" (split frames on the GPU
 # equal the whole frame and the CPU's, device-resident too), "mpi" (the CLI
 # under mpirun, ranks sharing or spreading over the GPUs), "python" (the
 # Python package's device arrays), "scale" (13.2 M and 106 M tiled frames,
@@ -169,6 +171,31 @@ if want scale; then
     "$B/bench/nbmc_bench" "$BIG" --spacing 0.00484 --backend cuda --tile $t --subdomains auto --memory-budget 4096 2>&1 | tee -a "$OUT/scale.txt"
   done
 fi
+if want zb05; then
+  step "ZB05 vs SSP07 (1.65 M frame, r/2): stage times, growth rounds, the gather kernel under ncu"
+  for m in ssp07 zb05; do
+    for be in cuda openmp; do
+      NBMC_TRACE=1 "$B/bench/nbmc_bench" "$BIG" --spacing 0.00484 --backend $be --method $m --repeat 3 2>&1 | tee -a "$OUT/zb05.txt"
+    done
+    if command -v ncu >/dev/null; then
+      timeout 240 ncu --section SpeedOfLight --section Occupancy --section LaunchStats --section MemoryWorkloadAnalysis \
+        --kernel-name-base demangled -k regex:gather --launch-count 2 "$B/bench/nbmc_bench" "$BIG" --spacing 0.00484 \
+        --backend cuda --method $m >"$OUT/ncu-$m.txt" 2>&1
+      grep -E "Duration|Registers Per|Achieved Occupancy|Theoretical Occupancy|Compute \(SM\) Throughput|Memory Throughput|Grid Size|Local" "$OUT/ncu-$m.txt" | head -30
+    fi
+  done
+fi
+
+if want limits; then
+  step "size limits: the 1.65 M frame tiled 4x4x4 (106 M) at r/4 and r/8 on the GPU (clear errors, no internal error)"
+  for cell in 0.25 0.125; do
+    for s in 1x1x1 auto; do
+      timeout 280 "$B/bench/nbmc_bench" "$BIG" --spacing 0.00484 --backend cuda --tile 4 --cell-size $cell --subdomains $s --no-cleanup 2>&1 | tail -4 | tee -a "$OUT/limits.txt"
+      echo "rc=$? cell=$cell subdomains=$s" | tee -a "$OUT/limits.txt"
+    done
+  done
+fi
+
 want bench && step "benchmarks: $BIG"
 want bench && for cell in 1 0.5; do
   "$B/bench/nbmc_bench" "$BIG" --spacing 0.00484 --cell-size $cell --backend cuda --repeat 5 2>&1 | tee -a "$OUT/bench.txt"

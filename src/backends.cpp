@@ -450,6 +450,23 @@ void run_backend(nbmc_context& ctx, const Params& p, HostMesh& mesh, RunStats& s
         if (mesh_on_device) move_mesh_to_device(mesh);
         return;
       }
+      if (ctx.subdomains.automatic) {
+        // `auto` estimated that the frame fits; if the whole run still hits
+        // a limit that splitting avoids, split after all.
+        try {
+          run_one(in, p, mesh_on_device, mesh, st);
+          return;
+        } catch (const Error& e) {
+          if (!split_would_help(e)) throw;
+        }
+        mesh = HostMesh();
+        st = RunStats();
+        if (reconstruct_subdomains(ctx.subdomains, budget, xyz, in.count, p, run, mesh, st, ctx.subdomain_report,
+                                   2)) {
+          if (mesh_on_device) move_mesh_to_device(mesh);
+          return;
+        }
+      }
     }
     run_one(in, p, mesh_on_device, mesh, st);
   };

@@ -242,7 +242,7 @@ void run_split(const int parts[3], const Grid& g, const double* xyz, std::size_t
 
 bool reconstruct_subdomains(const SubdomainSetting& setting, std::uint64_t budget, const double* xyz,
                             std::size_t count, const Params& p, const RunRegion& run, HostMesh& mesh, RunStats& st,
-                            SubdomainReport& rep) {
+                            SubdomainReport& rep, std::uint64_t at_least) {
   if (p.field != FieldKind::NarrowBand)
     throw Error(NBMC_ERROR_INVALID_PARAMETER, "subdomains need the narrow-band field (not the dense or scatter baselines)");
   double lo[3], hi[3];
@@ -251,13 +251,15 @@ bool reconstruct_subdomains(const SubdomainSetting& setting, std::uint64_t budge
   int parts[3] = {setting.parts[0], setting.parts[1], setting.parts[2]};
   std::uint64_t pieces = 1;
   if (setting.automatic) {
-    if (!budget) return false;
-    // A subdomain may use 80% of the budget by the estimate; the rest is
-    // the estimate's error and what the context holds besides.
-    const double usable = 0.8 * double(budget);
-    const double est = double(estimate_bytes(p, count));
-    if (est <= usable) return false;
-    pieces = std::uint64_t(std::ceil(est / usable * 1.15));  // ghosts add to each subdomain
+    if (budget) {
+      // A subdomain may use 80% of the budget by the estimate; the rest is
+      // the estimate's error and what the context holds besides.
+      const double usable = 0.8 * double(budget);
+      const double est = double(estimate_bytes(p, count));
+      if (est > usable) pieces = std::uint64_t(std::ceil(est / usable * 1.15));  // ghosts add to each subdomain
+    }
+    pieces = std::max(pieces, at_least);
+    if (pieces <= 1) return false;
     choose_parts(g, pieces, parts);
     if (parts[0] * parts[1] * parts[2] == 1) return false;
   }
@@ -269,8 +271,7 @@ bool reconstruct_subdomains(const SubdomainSetting& setting, std::uint64_t budge
       return true;
     } catch (const Error& e) {
       // `auto`: a subdomain over the budget splits the frame further.
-      const bool memory = e.status == NBMC_ERROR_MEMORY_BUDGET || e.status == NBMC_ERROR_OUT_OF_MEMORY;
-      if (!setting.automatic || !memory || attempt >= 6) throw;
+      if (!setting.automatic || !split_would_help(e) || attempt >= 6) throw;
       const int before = parts[0] * parts[1] * parts[2];
       pieces = std::uint64_t(before) * 2;
       choose_parts(g, pieces, parts);

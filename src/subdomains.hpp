@@ -51,12 +51,20 @@ std::vector<Piece> run_subdomain_job(const Decomposition& d, const Params& p, co
                                      SubdomainReport& rep);
 
 // The whole in-process path: splits (or, with `automatic`, decides whether
-// and how to split under budget_bytes), runs, stitches into mesh. Returns
-// false when `automatic` decided not to split (the caller then runs the
-// frame whole).
+// and how to split under budget_bytes, into at least `at_least` pieces),
+// runs, stitches into mesh. Returns false when `automatic` decided not to
+// split (the caller then runs the frame whole, and calls again with
+// at_least = 2 if that run fails with an error split_would_help accepts).
 bool reconstruct_subdomains(const SubdomainSetting& setting, std::uint64_t budget_bytes, const double* xyz,
                             std::size_t count, const Params& p, const RunRegion& run, HostMesh& mesh, RunStats& st,
-                            SubdomainReport& rep);
+                            SubdomainReport& rep,
+                            std::uint64_t at_least = 1);
+
+// Whether splitting the frame (further) can get past error e: a memory
+// budget, an allocation that failed, a per-run size limit.
+inline bool split_would_help(const Error& e) {
+  return e.split_helps || e.status == NBMC_ERROR_MEMORY_BUDGET || e.status == NBMC_ERROR_OUT_OF_MEMORY;
+}
 
 // Stitches pieces into a host mesh (normals when asked); the time in seconds.
 StitchResult stitch_into(const std::vector<Piece>& pieces, bool normals, HostMesh& mesh, double& seconds);

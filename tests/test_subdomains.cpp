@@ -235,6 +235,60 @@ TEST(Subdomains, AutoSplitsOnlyOverTheBudget) {
   EXPECT_TRUE(same_bits(whole.mesh.triangles, small.mesh.triangles));
 }
 
+// A per-run size limit (on a GPU: 2^31 band vertex slots; here lowered with
+// the test hook NBMC_MAX_BAND_BLOCKS) stops a whole run with
+// NBMC_ERROR_DOMAIN_TOO_LARGE and the figures, before the field is
+// evaluated; the context stays usable, and `auto` splits the frame instead,
+// with the whole frame's mesh.
+TEST(Subdomains, BandSizeLimitFailsCleanlyAndAutoSplits) {
+  const double r = 0.05;
+  const Points p = jittered_blob(9, r);
+  nbmc_params prm = nbmc_test::params(r);
+  nbmc_context_desc d;
+  nbmc_context_desc_init(&d);
+  d.backend = NBMC_BACKEND_OPENMP;
+  d.num_threads = 2;
+  nbmc_context* ctx = nullptr;
+  ASSERT_EQ(nbmc_context_create(&d, &ctx), NBMC_OK);
+  ASSERT_EQ(nbmc_context_set_particles_f64(ctx, p.data(), p.size() / 3, 0), NBMC_OK);
+  nbmc_mesh* m = nullptr;
+  ASSERT_EQ(nbmc_context_reconstruct(ctx, &prm, &m), NBMC_OK);
+  nbmc_test::Mesh whole;
+  whole.positions.assign(nbmc_mesh_positions(m), nbmc_mesh_positions(m) + 3 * nbmc_mesh_vertex_count(m));
+  whole.triangles.assign(nbmc_mesh_triangles(m), nbmc_mesh_triangles(m) + 3 * nbmc_mesh_triangle_count(m));
+  nbmc_mesh_destroy(m);
+  nbmc_stats st;
+  nbmc_stats_init(&st);
+  ASSERT_EQ(nbmc_context_stats(ctx, &st), NBMC_OK);
+  ASSERT_GT(st.band_block_count, 4u);
+  const std::string limit = std::to_string(st.band_block_count * 7 / 10);
+  setenv("NBMC_MAX_BAND_BLOCKS", limit.c_str(), 1);
+  m = nullptr;
+  EXPECT_EQ(nbmc_context_reconstruct(ctx, &prm, &m), NBMC_ERROR_DOMAIN_TOO_LARGE);
+  EXPECT_EQ(m, nullptr);
+  const std::string msg = nbmc_context_last_error(ctx);
+  EXPECT_NE(msg.find(std::to_string(st.band_block_count) + " blocks"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("at most " + limit), std::string::npos) << msg;
+  EXPECT_NE(msg.find("--subdomains auto"), std::string::npos) << msg;
+  // The same context, `auto`: no budget on this CPU context, but the limit
+  // makes it split.
+  ASSERT_EQ(nbmc_context_set_subdomains(ctx, NBMC_SUBDOMAINS_AUTO, 0, 0), NBMC_OK);
+  const int32_t status = nbmc_context_reconstruct(ctx, &prm, &m);
+  unsetenv("NBMC_MAX_BAND_BLOCKS");
+  ASSERT_EQ(status, NBMC_OK) << nbmc_context_last_error(ctx);
+  nbmc_subdomain_stats sub;
+  nbmc_subdomain_stats_init(&sub);
+  ASSERT_EQ(nbmc_context_subdomain_stats(ctx, &sub), NBMC_OK);
+  EXPECT_GE(sub.count, 2u);
+  EXPECT_EQ(sub.automatic, 1u);
+  std::vector<float> pos(nbmc_mesh_positions(m), nbmc_mesh_positions(m) + 3 * nbmc_mesh_vertex_count(m));
+  std::vector<std::uint32_t> tri(nbmc_mesh_triangles(m), nbmc_mesh_triangles(m) + 3 * nbmc_mesh_triangle_count(m));
+  nbmc_mesh_destroy(m);
+  nbmc_context_destroy(ctx);
+  EXPECT_TRUE(same_bits(whole.positions, pos));
+  EXPECT_TRUE(same_bits(whole.triangles, tri));
+}
+
 TEST(Subdomains, BadSettings) {
   nbmc_context_desc d;
   nbmc_context_desc_init(&d);

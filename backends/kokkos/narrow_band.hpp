@@ -14,6 +14,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <vector>
 
 namespace nbmc {
@@ -104,6 +106,29 @@ BandView<MemSpace> view_of(const Band<MemSpace>& b, const Grid& g) {
 }
 
 // Gives every block its index in the sorted key order.
+// The largest band one run may hold. Kernels over band vertex slots (64 per
+// word, 512 per 8x8x8 block) index with Kokkos's CUDA range type, 32-bit
+// unsigned in Kokkos 3.4, and some of its scans count in int: a GPU run is
+// limited to 2^31 slots, 4,194,304 blocks (about 1.5 G band vertices at real
+// fill). Past it the kernels would wrap silently, so the run stops with
+// NBMC_ERROR_DOMAIN_TOO_LARGE (split_helps: NBMC_SUBDOMAINS_AUTO splits).
+// The host has no such limit. NBMC_MAX_BAND_BLOCKS (tests) sets a limit on
+// every backend.
+template <class MemSpace>
+void check_band_blocks(std::size_t n_blocks) {
+  constexpr bool host = Kokkos::SpaceAccessibility<Kokkos::HostSpace, MemSpace>::accessible;
+  std::uint64_t limit = host ? 0 : (std::uint64_t(1) << 31) / 512;
+  if (const char* e = std::getenv("NBMC_MAX_BAND_BLOCKS")) limit = std::strtoull(e, nullptr, 10);
+  if (!limit || n_blocks <= limit) return;
+  char msg[512];
+  std::snprintf(msg, sizeof msg,
+                "the narrow band needs %llu blocks of 8x8x8 vertices (%.2f G vertex slots); one run on this backend "
+                "handles at most %llu blocks: split the frame (--subdomains auto or NxMxK, "
+                "nbmc_context_set_subdomains) or use a larger cell size",
+                (unsigned long long)n_blocks, double(n_blocks) * 512 / 1e9, (unsigned long long)limit);
+  throw Error(5 /*NBMC_ERROR_DOMAIN_TOO_LARGE*/, msg, true);
+}
+
 template <class ExecSpace>
 void number_blocks(const ExecSpace& space, Band<typename ExecSpace::memory_space>& band) {
   auto map = band.blocks.map;
@@ -241,6 +266,7 @@ void build_narrow_band(const ExecSpace& space, MemoryTracker& tracker, const Gri
       inserted);
   space.fence();
   band.n_blocks = inserted;
+  check_band_blocks<MemSpace>(band.n_blocks);
   collect_sorted_keys(space, tracker, band);
   number_blocks(space, band);  // before marking: the marking looks blocks up
 
@@ -309,6 +335,7 @@ void extend_band(const ExecSpace& space, MemoryTracker& tracker, const Grid& g,
     }
   std::sort(keys.begin(), keys.end());
   keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
+  check_band_blocks<MemSpace>(keys.size());
   std::vector<std::uint64_t> words(keys.size() * 8, 0);
   for (std::size_t b = 0; b < old.n_blocks; ++b) {
     const std::size_t nbk = std::size_t(std::lower_bound(keys.begin(), keys.end(), okeys(b)) - keys.begin());
@@ -347,6 +374,7 @@ void build_dense_band(const ExecSpace& space, MemoryTracker& tracker, const Grid
                       Band<typename ExecSpace::memory_space>& band) {
   using MemSpace = typename ExecSpace::memory_space;
   const std::int64_t bd[3] = {g.block_dims(0), g.block_dims(1), g.block_dims(2)};
+  check_band_blocks<MemSpace>(std::size_t(bd[0] * bd[1] * bd[2]));
   std::vector<std::uint64_t> keys;
   keys.reserve(std::size_t(bd[0] * bd[1] * bd[2]));
   for (std::int64_t z = 0; z < bd[2]; ++z)

@@ -18,7 +18,11 @@ namespace nbmc {
 // Status carried by exceptions thrown inside the pipeline; the C API maps it.
 struct Error : std::runtime_error {
   int32_t status;
-  Error(int32_t s, const std::string& msg) : std::runtime_error(msg), status(s) {}
+  // A limit of one run that splitting the frame into subdomains avoids
+  // (NBMC_SUBDOMAINS_AUTO then splits, or splits further).
+  bool split_helps = false;
+  Error(int32_t s, const std::string& msg, bool split = false)
+      : std::runtime_error(msg), status(s), split_helps(split) {}
 };
 
 // A std::allocator that leaves new elements uninitialised, for large arrays
