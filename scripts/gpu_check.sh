@@ -190,8 +190,11 @@ if want limits; then
   step "size limits: the 1.65 M frame tiled 4x4x4 (106 M) at r/4 and r/8 on the GPU (clear errors, no internal error)"
   for cell in 0.25 0.125; do
     for s in 1x1x1 auto; do
-      timeout 280 "$B/bench/nbmc_bench" "$BIG" --spacing 0.00484 --backend cuda --tile 4 --cell-size $cell --subdomains $s --no-cleanup 2>&1 | tail -4 | tee -a "$OUT/limits.txt"
-      echo "rc=$? cell=$cell subdomains=$s" | tee -a "$OUT/limits.txt"
+      [ $cell = 0.125 ] && [ $s = auto ] && continue  # works, but takes minutes
+      timeout 200 "$B/bench/nbmc_bench" "$BIG" --spacing 0.00484 --backend cuda --tile 4 --cell-size $cell --subdomains $s --no-cleanup >"$MESHES/limit.txt" 2>&1
+      rc=$?
+      tail -3 "$MESHES/limit.txt" | cut -c1-600 | tee -a "$OUT/limits.txt"
+      echo "rc=$rc cell=$cell subdomains=$s" | tee -a "$OUT/limits.txt"
     done
   done
 fi

@@ -306,10 +306,17 @@ void build_narrow_band(const ExecSpace& space, MemoryTracker& tracker, const Gri
 // Grows the band by the eight corners of every cell in `cells` (grid
 // coordinates of the cells' minimum corners, host memory). Returns the new
 // band; `old` is left intact so field values can be carried over.
+// What extend_band changed, to carry the field values over (carry_values and
+// WordList in scalar_field.hpp): the new index of every old block, and the
+// words that gained vertices with the bits of those new vertices.
+struct BandGrowth {
+  std::vector<std::uint64_t> old_to_new, words, bits;
+};
+
 template <class ExecSpace>
 void extend_band(const ExecSpace& space, MemoryTracker& tracker, const Grid& g,
                  const Band<typename ExecSpace::memory_space>& old, const std::vector<std::int64_t>& cells,
-                 Band<typename ExecSpace::memory_space>& band) {
+                 Band<typename ExecSpace::memory_space>& band, BandGrowth* growth = nullptr) {
   using MemSpace = typename ExecSpace::memory_space;
   auto okeys = Kokkos::create_mirror_view_and_copy(Kokkos::HostSpace(), old.block_keys.view());
   auto owords = Kokkos::create_mirror_view_and_copy(Kokkos::HostSpace(), old.words.view());
@@ -337,10 +344,13 @@ void extend_band(const ExecSpace& space, MemoryTracker& tracker, const Grid& g,
   keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
   check_band_blocks<MemSpace>(keys.size());
   std::vector<std::uint64_t> words(keys.size() * 8, 0);
+  if (growth) growth->old_to_new.resize(old.n_blocks);
   for (std::size_t b = 0; b < old.n_blocks; ++b) {
     const std::size_t nbk = std::size_t(std::lower_bound(keys.begin(), keys.end(), okeys(b)) - keys.begin());
     for (int w = 0; w < 8; ++w) words[nbk * 8 + w] = owords(b * 8 + w);
+    if (growth) growth->old_to_new[b] = nbk;
   }
+  const std::vector<std::uint64_t> before = growth ? words : std::vector<std::uint64_t>();
   for (std::size_t c = 0; c + 2 < cells.size(); c += 3)
     for (int q = 0; q < 8; ++q) {
       const std::int64_t i = cells[c] + (q & 1), j = cells[c + 1] + ((q >> 1) & 1), k = cells[c + 2] + (q >> 2);
@@ -349,6 +359,15 @@ void extend_band(const ExecSpace& space, MemoryTracker& tracker, const Grid& g,
       const std::int64_t lx = i & 7, ly = j & 7, lz = k & 7;
       words[b * 8 + BandView<MemSpace>::word_of(lx, ly, lz)] |= std::uint64_t(1) << BandView<MemSpace>::bit_of(lx, ly, lz);
     }
+  if (growth) {
+    growth->words.clear();
+    growth->bits.clear();
+    for (std::size_t w = 0; w < words.size(); ++w)
+      if (const std::uint64_t fresh = words[w] & ~before[w]) {
+        growth->words.push_back(w);
+        growth->bits.push_back(fresh);
+      }
+  }
   band.n_blocks = keys.size();
   band.block_keys = Buffer<std::uint64_t, MemSpace>(tracker, "band::block_keys", keys.size());
   band.words = Buffer<std::uint64_t, MemSpace>(tracker, "band::words", words.size());

@@ -349,15 +349,31 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
       }
       if (round >= 1000) throw Error(9, "the narrow band did not close after 1000 growth rounds");
       Band<MemSpace> grown;
-      extend_band(space, tracker, g, band, leaks, grown);
+      BandGrowth growth;
+      extend_band(space, tracker, g, band, leaks, grown, &growth);
       Buffer<float, MemSpace> grown_phi(tracker, "scalar_field::values", grown.n_vertices);
-      const BandView<MemSpace> old_view = view_of(band, g);
-      const Kokkos::View<const float*, MemSpace> old_phi = phi.view();
-      auto grow = [&](auto method) {
-        return gather_field<decltype(method)>(space, nb, view_of(grown, g), grown.n_blocks * 8, g, fc,
-                                              grown_phi.view(), progress, &old_view, old_phi);
-      };
-      st.evaluations += with_field_method(p.method, grow);
+      {
+        // The old vertices keep their values; only the new ones are evaluated.
+        auto to_device = [&](const std::vector<std::uint64_t>& v, const char* label) {
+          Buffer<std::uint64_t, MemSpace> d(tracker, label, v.size());
+          Kokkos::deep_copy(space, d.view(),
+                            Kokkos::View<const std::uint64_t*, Kokkos::HostSpace,
+                                         Kokkos::MemoryTraits<Kokkos::Unmanaged>>(v.data(), v.size()));
+          return d;
+        };
+        const auto old_to_new = to_device(growth.old_to_new, "band::old_to_new");
+        const auto list_words = to_device(growth.words, "band::grown_words");
+        const auto list_bits = to_device(growth.bits, "band::grown_bits");
+        carry_values(space, view_of(band, g), band.n_blocks * 8, Kokkos::View<const float*, MemSpace>(phi.view()),
+                     view_of(grown, g), grown_phi.view(),
+                     Kokkos::View<const std::uint64_t*, MemSpace>(old_to_new.view()));
+        const WordList<MemSpace> list{list_words.view(), list_bits.view()};
+        auto grow = [&](auto method) {
+          return gather_field<decltype(method)>(space, nb, view_of(grown, g), growth.words.size(), g, fc,
+                                                grown_phi.view(), progress, list);
+        };
+        if (!growth.words.empty()) st.evaluations += with_field_method(p.method, grow);
+      }
       trace("band growth round", grown.n_vertices);
       band = std::move(grown);
       phi = std::move(grown_phi);

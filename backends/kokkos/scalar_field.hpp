@@ -213,27 +213,50 @@ KOKKOS_INLINE_FUNCTION float eval_vertex_direct(const NeighbourView<MemSpace>& n
   return Method::value(acc, fc);
 }
 
-// Where the band grows, vertices that the previous (smaller) band already had
-// keep their values; returns the mask of the word's vertices to evaluate.
+// Which words a gather evaluates: all (empty list: words [0, n_words), all
+// their vertices), or, after the band grew, the listed words and in each only
+// the vertices of `bits` (the new ones; the others were copied by
+// carry_values).
 template <class MemSpace>
-KOKKOS_INLINE_FUNCTION std::uint64_t carry_over(const BandView<MemSpace>& band, const BandView<MemSpace>& ob,
-                                                const Kokkos::View<float*, MemSpace>& phi,
-                                                const Kokkos::View<const float*, MemSpace>& old_phi, std::size_t w,
-                                                std::int64_t i0, std::int64_t j0, std::int64_t k0, int first,
-                                                int stride) {
-  const std::uint64_t full = band.words(w);
-  const std::uint32_t b =
-      ob.blocks.find(morton3(std::uint32_t(i0 >> 3), std::uint32_t(j0 >> 3), std::uint32_t(k0 >> 3)));
-  if (b == ~0u) return full;
-  const std::size_t ow = std::size_t(b) * 8 + (w & 7);
-  const std::uint64_t oword = ob.words(ow);
-  const std::uint64_t both = oword & full;
-  for (int bit = first; bit < 64; bit += stride) {
-    if (!((both >> bit) & 1)) continue;
-    const std::uint64_t below = (std::uint64_t(1) << bit) - 1;
-    phi(band.word_offset(w) + popcount64(full & below)) = old_phi(ob.word_offset(ow) + popcount64(oword & below));
-  }
-  return full & ~oword;
+struct WordList {
+  Kokkos::View<const std::uint64_t*, MemSpace> words, bits;
+  KOKKOS_INLINE_FUNCTION bool listed() const { return words.extent(0) != 0; }
+  KOKKOS_INLINE_FUNCTION std::size_t word(std::size_t q) const { return listed() ? std::size_t(words(q)) : q; }
+  KOKKOS_INLINE_FUNCTION std::uint64_t todo(std::size_t q, std::uint64_t full) const { return listed() ? bits(q) : full; }
+};
+
+// Where the band grew (band contains old; old block b is block old_to_new(b)
+// of band), copies the values of old's vertices to their places in band:
+// one work item per old word, a straight copy where the word did not change.
+template <class ExecSpace>
+void carry_values(const ExecSpace& space, const BandView<typename ExecSpace::memory_space>& old,
+                  std::size_t old_words, const Kokkos::View<const float*, typename ExecSpace::memory_space>& old_phi,
+                  const BandView<typename ExecSpace::memory_space>& band,
+                  const Kokkos::View<float*, typename ExecSpace::memory_space>& phi,
+                  const Kokkos::View<const std::uint64_t*, typename ExecSpace::memory_space>& old_to_new) {
+  Kokkos::parallel_for(
+      "nbmc::scalar_field::carry_values", Kokkos::RangePolicy<ExecSpace>(space, 0, old_words),
+      KOKKOS_LAMBDA(const std::size_t w) {
+        const std::uint64_t oword = old.words(w);
+        if (!oword) return;
+        const std::size_t nw = std::size_t(old_to_new(w >> 3)) * 8 + (w & 7);
+        const std::uint64_t nword = band.words(nw);
+        const std::size_t o0 = old.word_offset(w), n0 = band.word_offset(nw);
+        if (oword == nword) {
+          const int n = popcount64(oword);
+          for (int q = 0; q < n; ++q) phi(n0 + q) = old_phi(o0 + q);
+          return;
+        }
+        std::uint64_t rest = oword;
+        int q = 0;
+        while (rest) {
+          const int bit = ctz64(rest);
+          rest &= rest - 1;
+          phi(n0 + popcount64(nword & ((std::uint64_t(1) << bit) - 1))) = old_phi(o0 + q);
+          ++q;
+        }
+      });
+  space.fence();
 }
 
 // Host gather: one work item per band word (4x4x4 tile), vectorised across
@@ -242,20 +265,19 @@ template <class Method, class ExecSpace>
 std::uint64_t gather_words_host(const ExecSpace& space, const NeighbourView<typename ExecSpace::memory_space>& nb,
                                 const BandView<typename ExecSpace::memory_space>& band, std::size_t w0,
                                 std::size_t w1, const Grid& g, const FieldConstants& fc,
-                                const Kokkos::View<float*, typename ExecSpace::memory_space>& phi, bool has_old,
-                                const BandView<typename ExecSpace::memory_space>& ob,
-                                const Kokkos::View<const float*, typename ExecSpace::memory_space>& old_phi) {
+                                const Kokkos::View<float*, typename ExecSpace::memory_space>& phi,
+                                const WordList<typename ExecSpace::memory_space>& list) {
   const float c = float(g.cell), S = float(g.nb_cell);
   std::uint64_t evals = 0;
   Kokkos::parallel_reduce(
       "nbmc::scalar_field::gather", Kokkos::RangePolicy<ExecSpace, Kokkos::Schedule<Kokkos::Dynamic>>(space, w0, w1),
-      KOKKOS_LAMBDA(const std::size_t w, std::uint64_t& acc_evals) {
+      KOKKOS_LAMBDA(const std::size_t q, std::uint64_t& acc_evals) {
+        const std::size_t w = list.word(q);
         const std::uint64_t full = band.words(w);
-        if (!full) return;
+        std::uint64_t word = list.todo(q, full);
+        if (!word) return;
         std::int64_t i0, j0, k0;
         band.vertex(w, 0, i0, j0, k0);
-        std::uint64_t word = has_old ? carry_over(band, ob, phi, old_phi, w, i0, j0, k0, 0, 1) : full;
-        if (!word) return;
         // The tile's span contains every vertex's own span (the float
         // operations of cell_span are monotone in x).
         const float tmin[3] = {float(i0) * c, float(j0) * c, float(k0) * c};
@@ -289,9 +311,8 @@ template <class Method, class ExecSpace>
 std::uint64_t gather_words_team(const ExecSpace& space, const NeighbourView<typename ExecSpace::memory_space>& nb,
                                 const BandView<typename ExecSpace::memory_space>& band, std::size_t w0,
                                 std::size_t w1, const Grid& g, const FieldConstants& fc,
-                                const Kokkos::View<float*, typename ExecSpace::memory_space>& phi, bool has_old,
-                                const BandView<typename ExecSpace::memory_space>& ob,
-                                const Kokkos::View<const float*, typename ExecSpace::memory_space>& old_phi) {
+                                const Kokkos::View<float*, typename ExecSpace::memory_space>& phi,
+                                const WordList<typename ExecSpace::memory_space>& list) {
   using MemSpace = typename ExecSpace::memory_space;
   using Policy = Kokkos::TeamPolicy<ExecSpace>;
   using Member = typename Policy::member_type;
@@ -305,14 +326,13 @@ std::uint64_t gather_words_team(const ExecSpace& space, const NeighbourView<type
   Kokkos::parallel_for(
       "nbmc::scalar_field::gather_team", policy.set_scratch_size(0, Kokkos::PerTeam(shmem)),
       KOKKOS_LAMBDA(const Member& team) {
-        const std::size_t w = w0 + std::size_t(team.league_rank());
+        const std::size_t w = list.word(w0 + std::size_t(team.league_rank()));
         const int t = team.team_rank();
         const std::uint64_t full = band.words(w);
-        if (!full) return;
+        const std::uint64_t word = list.todo(w0 + std::size_t(team.league_rank()), full);
+        if (!word) return;
         std::int64_t i0, j0, k0;
         band.vertex(w, 0, i0, j0, k0);
-        const std::uint64_t word = has_old ? carry_over(band, ob, phi, old_phi, w, i0, j0, k0, t, 64) : full;
-        if (!word) return;
         const bool mine = (word >> t) & 1;
         std::int64_t i, j, k;
         band.vertex(w, t, i, j, k);
@@ -401,9 +421,8 @@ template <class Method, class ExecSpace>
 std::uint64_t gather_words_direct(const ExecSpace& space, const NeighbourView<typename ExecSpace::memory_space>& nb,
                                   const BandView<typename ExecSpace::memory_space>& band, std::size_t w0,
                                   std::size_t w1, const Grid& g, const FieldConstants& fc,
-                                  const Kokkos::View<float*, typename ExecSpace::memory_space>& phi, bool has_old,
-                                  const BandView<typename ExecSpace::memory_space>& ob,
-                                  const Kokkos::View<const float*, typename ExecSpace::memory_space>& old_phi) {
+                                  const Kokkos::View<float*, typename ExecSpace::memory_space>& phi,
+                                  const WordList<typename ExecSpace::memory_space>& list) {
   using MemSpace = typename ExecSpace::memory_space;
   const float c = float(g.cell), S = float(g.nb_cell);
   // A parallel_for, not a parallel_reduce: Kokkos 3.4 launches a CUDA reduce
@@ -415,24 +434,18 @@ std::uint64_t gather_words_direct(const ExecSpace& space, const NeighbourView<ty
   Kokkos::parallel_for(
       "nbmc::scalar_field::gather_direct", Kokkos::RangePolicy<ExecSpace>(space, w0 * 64, w1 * 64),
       KOKKOS_LAMBDA(const std::size_t v) {
-        const std::size_t w = v >> 6;
+        const std::size_t q = v >> 6;
+        const std::size_t w = list.word(q);
         const int bit = int(v & 63);
         const std::uint64_t full = band.words(w);
-        if (!((full >> bit) & 1)) return;
+        if (!((list.todo(q, full) >> bit) & 1)) return;
         std::int64_t i, j, k;
         band.vertex(w, bit, i, j, k);
         const std::size_t out = band.word_offset(w) + popcount64(full & ((std::uint64_t(1) << bit) - 1));
-        if (has_old) {
-          const std::int64_t o = ob.index(i, j, k);
-          if (o >= 0) {
-            phi(out) = old_phi(o);
-            return;
-          }
-        }
         const float x[3] = {float(i) * c, float(j) * c, float(k) * c};
         std::uint64_t e = 0;
         phi(out) = eval_vertex_direct<Method>(nb, x, S, fc, e);
-        if (e) Kokkos::atomic_add(&counts(w - w0), static_cast<unsigned long long>(e));
+        if (e) Kokkos::atomic_add(&counts(q - w0), static_cast<unsigned long long>(e));
       });
   std::uint64_t evals = 0;
   Kokkos::parallel_reduce(
@@ -442,21 +455,18 @@ std::uint64_t gather_words_direct(const ExecSpace& space, const NeighbourView<ty
   return evals;
 }
 
-// Evaluates the field on the band. With `old` (a band contained in `band`
-// whose values are `old_phi`), values of vertices already in `old` are copied
-// and only the new vertices are evaluated (used when the band grows).
+// Evaluates the field on the band's words [0, n_words), or with a list (see
+// WordList; n_words is then its length) only on the listed vertices: after
+// the band grew, the new ones (carry_values copies the others).
 template <class Method, class ExecSpace>
 std::uint64_t gather_field(const ExecSpace& space, const NeighbourView<typename ExecSpace::memory_space>& nb,
                            const BandView<typename ExecSpace::memory_space>& band, std::size_t n_words,
                            const Grid& g, const FieldConstants& fc,
                            const Kokkos::View<float*, typename ExecSpace::memory_space>& phi,
                            const Progress& progress,
-                           const BandView<typename ExecSpace::memory_space>* old = nullptr,
-                           const Kokkos::View<const float*, typename ExecSpace::memory_space>& old_phi = {}) {
-  using MemSpace = typename ExecSpace::memory_space;
+                           const WordList<typename ExecSpace::memory_space>& list = {}) {
   ScopedRegion region("nbmc::scalar_field::gather");
-  const bool has_old = old != nullptr;
-  const BandView<MemSpace> ob = has_old ? *old : BandView<MemSpace>();
+  using MemSpace = typename ExecSpace::memory_space;
   std::uint64_t total_evals = 0;
   // Chunks bound the time to react to cancellation. On a GPU, launches of
   // 4096 words filled half a wave of an H100 (ncu), so chunks are larger there.
@@ -465,13 +475,13 @@ std::uint64_t gather_field(const ExecSpace& space, const NeighbourView<typename 
   for (std::size_t w0 = 0; w0 < n_words; w0 += chunk) {
     const std::size_t w1 = std::min(n_words, w0 + chunk);
     if constexpr (host)
-      total_evals += gather_words_host<Method>(space, nb, band, w0, w1, g, fc, phi, has_old, ob, old_phi);
+      total_evals += gather_words_host<Method>(space, nb, band, w0, w1, g, fc, phi, list);
     else if (device_gather_kind() == 1)
-      total_evals += gather_words_direct<Method>(space, nb, band, w0, w1, g, fc, phi, has_old, ob, old_phi);
+      total_evals += gather_words_direct<Method>(space, nb, band, w0, w1, g, fc, phi, list);
     else
-      total_evals += gather_words_team<Method>(space, nb, band, w0, w1, g, fc, phi, has_old, ob, old_phi);
+      total_evals += gather_words_team<Method>(space, nb, band, w0, w1, g, fc, phi, list);
     trace("gather chunk", w1 - w0);
-    if (!has_old) progress(4 /*NBMC_STAGE_FIELD*/, double(w1) / double(n_words));
+    if (!list.listed()) progress(4 /*NBMC_STAGE_FIELD*/, double(w1) / double(n_words));
   }
   return total_evals;
 }
