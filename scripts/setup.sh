@@ -55,9 +55,11 @@ as_root() {
 }
 
 # ---------------------------------------------------------------- 1. packages
+# python3-paraview: the test that opens nbmc's .xdmf meshes with ParaView's
+# XDMF readers (tests/xdmf/check_xdmf.py; skipped without it).
 APT_PACKAGES=(build-essential cmake ninja-build pkg-config zlib1g-dev libhdf5-dev
               libgtest-dev libcli11-dev gfortran patch xz-utils
-              libopenmpi-dev openmpi-bin cargo)
+              libopenmpi-dev openmpi-bin cargo python3-paraview)
 install_packages() {
   [ "$SKIP_APT" = 1 ] && return 0
   command -v dpkg-query >/dev/null || { say "not a Debian system: skipping apt"; return 0; }

@@ -37,8 +37,10 @@
 #pragma once
 
 #include "mesh_check.hpp"
+#include "parallel.hpp"
 
 #include <algorithm>
+#include <atomic>
 #include <cstdint>
 #include <iterator>
 #include <tuple>
@@ -72,13 +74,28 @@ class Cleaner {
     for (std::size_t v = 0; v < nv; ++v) tail_[v] = std::uint32_t(v);
     const double extent = bounding_extent(positions, nv);
     degenerate_double_area_ = 2 * kDegenerateAreaFraction * extent * extent;
-    start_.assign(nv + 1, 0);
-    for (std::size_t i = 0; i < 3 * nt; ++i) ++start_[tri[i] + 1];
-    for (std::size_t v = 0; v < nv; ++v) start_[v + 1] += start_[v];
-    incident_.resize(start_[nv]);
-    std::vector<std::uint32_t> fill(start_.begin(), start_.end() - 1);
-    for (std::size_t t = 0; t < nt; ++t)
-      for (int k = 0; k < 3; ++k) incident_[fill[tri[3 * t + k]]++] = std::uint32_t(t);
+    // Triangles around each vertex (CSR, ascending triangle index): counted
+    // and filled on all host threads, each vertex's list sorted after.
+    {
+      std::vector<std::atomic<std::uint32_t>> count(nv + 1);
+      const std::size_t chunks = chunk_count(nt, 16384);
+      for_chunks(nt, chunks, [&](std::size_t, std::size_t b, std::size_t e) {
+        for (std::size_t i = 3 * b; i < 3 * e; ++i) count[tri[i] + 1].fetch_add(1, std::memory_order_relaxed);
+      });
+      start_.resize(nv + 1);
+      start_[0] = 0;
+      for (std::size_t v = 0; v < nv; ++v) start_[v + 1] = start_[v] + count[v + 1].load(std::memory_order_relaxed);
+      for (std::size_t v = 0; v < nv; ++v) count[v].store(start_[v], std::memory_order_relaxed);
+      incident_.resize(start_[nv]);
+      for_chunks(nt, chunks, [&](std::size_t, std::size_t b, std::size_t e) {
+        for (std::size_t t = b; t < e; ++t)
+          for (int k = 0; k < 3; ++k)
+            incident_[count[tri[3 * t + k]].fetch_add(1, std::memory_order_relaxed)] = std::uint32_t(t);
+      });
+      for_chunks(nv, chunk_count(nv, 16384), [&](std::size_t, std::size_t b, std::size_t e) {
+        for (std::size_t v = b; v < e; ++v) std::sort(incident_.begin() + start_[v], incident_.begin() + start_[v + 1]);
+      });
+    }
     mark_irregular();
   }
 
@@ -87,13 +104,20 @@ class Cleaner {
   double cos_limit = kCosMaxNormalTurn;
 
   // Bad triangles now: (class, sin of the smallest angle, index), worst first.
+  // (A scan on all host threads; the sort makes the list independent of them.)
   std::vector<std::tuple<int, double, std::uint32_t>> bad_triangles() const {
+    const std::size_t chunks = chunk_count(nt_, 16384);
+    std::vector<std::vector<std::tuple<int, double, std::uint32_t>>> part(chunks);
+    for_chunks(nt_, chunks, [&](std::size_t k, std::size_t b, std::size_t e) {
+      for (std::size_t t = b; t < e; ++t) {
+        if (!alive_[t]) continue;
+        const TriangleShape s = shape(std::uint32_t(t));
+        const int c = triangle_class(s, degenerate_double_area_);
+        if (c) part[k].emplace_back(-c, s.sin_min_angle, std::uint32_t(t));
+      }
+    });
     std::vector<std::tuple<int, double, std::uint32_t>> bad;
-    for (std::size_t t = 0; t < nt_; ++t) {
-      if (!alive_[t]) continue;
-      const int c = tri_class(std::uint32_t(t));
-      if (c) bad.emplace_back(-c, shape(std::uint32_t(t)).sin_min_angle, std::uint32_t(t));
-    }
+    for (const auto& q : part) bad.insert(bad.end(), q.begin(), q.end());
     std::sort(bad.begin(), bad.end());
     return bad;
   }
@@ -188,42 +212,44 @@ class Cleaner {
   // vertex, are never touched.
   void mark_irregular() {
     irregular_.assign(nv_, 0);
-    std::vector<std::pair<std::uint32_t, std::uint32_t>> in;  // (previous vertex, local index)
-    std::vector<std::uint32_t> out;                           // next vertex, by local index
-    for (std::size_t v = 0; v < nv_; ++v) {
-      const std::uint32_t b = start_[v], e = start_[v + 1];
-      bool ok = e - b >= 3;
-      in.clear();
-      out.clear();
-      for (std::uint32_t i = b; i < e && ok; ++i) {
-        const std::uint32_t* w = T_ + 3 * std::size_t(incident_[i]);
-        const int k = w[0] == v ? 0 : w[1] == v ? 1 : 2;
-        const std::uint32_t nx = w[(k + 1) % 3], pv = w[(k + 2) % 3];
-        if (nx == v || pv == v) ok = false;
-        out.push_back(nx);
-        in.push_back({pv, i - b});
+    for_chunks(nv_, chunk_count(nv_, 16384), [&](std::size_t, std::size_t vb, std::size_t ve) {
+      std::vector<std::pair<std::uint32_t, std::uint32_t>> in;  // (previous vertex, local index)
+      std::vector<std::uint32_t> out;                           // next vertex, by local index
+      for (std::size_t v = vb; v < ve; ++v) {
+        const std::uint32_t b = start_[v], e = start_[v + 1];
+        bool ok = e - b >= 3;
+        in.clear();
+        out.clear();
+        for (std::uint32_t i = b; i < e && ok; ++i) {
+          const std::uint32_t* w = T_ + 3 * std::size_t(incident_[i]);
+          const int k = w[0] == v ? 0 : w[1] == v ? 1 : 2;
+          const std::uint32_t nx = w[(k + 1) % 3], pv = w[(k + 2) % 3];
+          if (nx == v || pv == v) ok = false;
+          out.push_back(nx);
+          in.push_back({pv, i - b});
+        }
+        if (ok) {
+          std::sort(in.begin(), in.end());
+          for (std::size_t k = 1; k < in.size() && ok; ++k) ok = in[k].first != in[k - 1].first;
+        }
+        if (ok) {
+          // Walk the fan: from a triangle to the one whose previous vertex is
+          // this one's next; one cycle through all of them.
+          std::uint32_t cur = 0, steps = 0;
+          do {
+            auto it = std::lower_bound(in.begin(), in.end(), std::make_pair(out[cur], 0u));
+            if (it == in.end() || it->first != out[cur]) {
+              ok = false;
+              break;
+            }
+            cur = it->second;
+            ++steps;
+          } while (cur != 0 && steps <= out.size());
+          ok = ok && cur == 0 && steps == out.size();
+        }
+        if (!ok) irregular_[v] = 1;
       }
-      if (ok) {
-        std::sort(in.begin(), in.end());
-        for (std::size_t k = 1; k < in.size() && ok; ++k) ok = in[k].first != in[k - 1].first;
-      }
-      if (ok) {
-        // Walk the fan: from a triangle to the one whose previous vertex is
-        // this one's next; one cycle through all of them.
-        std::uint32_t cur = 0, steps = 0;
-        do {
-          auto it = std::lower_bound(in.begin(), in.end(), std::make_pair(out[cur], 0u));
-          if (it == in.end() || it->first != out[cur]) {
-            ok = false;
-            break;
-          }
-          cur = it->second;
-          ++steps;
-        } while (cur != 0 && steps <= out.size());
-        ok = ok && cur == 0 && steps == out.size();
-      }
-      if (!ok) irregular_[v] = 1;
-    }
+    });
   }
 
   // Alive triangles around v: in its own lists and those of the vertices
