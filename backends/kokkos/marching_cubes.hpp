@@ -299,6 +299,7 @@ std::vector<std::int64_t> find_band_leaks_near(const ExecSpace& space,
           cand.push_back(k);
         }
   sort_cells(cand, true);
+  trace("leaks near: candidates (host)", cand.size() / 3);
   const std::size_t n = cand.size() / 3;
   if (!n) return {};
   using Unmanaged = Kokkos::MemoryTraits<Kokkos::Unmanaged>;

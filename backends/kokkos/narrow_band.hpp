@@ -105,7 +105,6 @@ BandView<MemSpace> view_of(const Band<MemSpace>& b, const Grid& g) {
   return v;
 }
 
-// Gives every block its index in the sorted key order.
 // The largest band one run may hold. Kernels over band vertex slots (64 per
 // word, 512 per 8x8x8 block) index with Kokkos's CUDA range type, 32-bit
 // unsigned in Kokkos 3.4, and some of its scans count in int: a GPU run is
@@ -129,6 +128,7 @@ void check_band_blocks(std::size_t n_blocks) {
   throw Error(5 /*NBMC_ERROR_DOMAIN_TOO_LARGE*/, msg, true);
 }
 
+// Gives every block its index in the sorted key order.
 template <class ExecSpace>
 void number_blocks(const ExecSpace& space, Band<typename ExecSpace::memory_space>& band) {
   auto map = band.blocks.map;
@@ -320,6 +320,7 @@ void extend_band(const ExecSpace& space, MemoryTracker& tracker, const Grid& g,
   using MemSpace = typename ExecSpace::memory_space;
   auto okeys = Kokkos::create_mirror_view_and_copy(Kokkos::HostSpace(), old.block_keys.view());
   auto owords = Kokkos::create_mirror_view_and_copy(Kokkos::HostSpace(), old.words.view());
+  trace("extend: band to host", old.n_blocks);
   std::vector<std::uint64_t> keys(okeys.data(), okeys.data() + old.n_blocks);
   auto block_key = [](std::int64_t i, std::int64_t j, std::int64_t k) {
     return morton3(std::uint32_t(i >> 3), std::uint32_t(j >> 3), std::uint32_t(k >> 3));
@@ -368,6 +369,7 @@ void extend_band(const ExecSpace& space, MemoryTracker& tracker, const Grid& g,
         growth->bits.push_back(fresh);
       }
   }
+  trace("extend: new words (host)", keys.size());
   band.n_blocks = keys.size();
   band.block_keys = Buffer<std::uint64_t, MemSpace>(tracker, "band::block_keys", keys.size());
   band.words = Buffer<std::uint64_t, MemSpace>(tracker, "band::words", words.size());
@@ -383,8 +385,10 @@ void extend_band(const ExecSpace& space, MemoryTracker& tracker, const Grid& g,
       "nbmc::band::extend_insert", Kokkos::RangePolicy<ExecSpace>(space, 0, band.n_blocks),
       KOKKOS_LAMBDA(const std::size_t b) { map.insert(bk(b)); });
   space.fence();
+  trace("extend: upload, block map", keys.size());
   number_blocks(space, band);
   finish_band(space, tracker, band);
+  trace("extend: numbering", keys.size());
 }
 
 // The dense baseline: every vertex of the bounding grid is a "band" vertex.

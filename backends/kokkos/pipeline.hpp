@@ -364,9 +364,11 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
         const auto old_to_new = to_device(growth.old_to_new, "band::old_to_new");
         const auto list_words = to_device(growth.words, "band::grown_words");
         const auto list_bits = to_device(growth.bits, "band::grown_bits");
+        trace("growth: lists to device", growth.words.size());
         carry_values(space, view_of(band, g), band.n_blocks * 8, Kokkos::View<const float*, MemSpace>(phi.view()),
                      view_of(grown, g), grown_phi.view(),
                      Kokkos::View<const std::uint64_t*, MemSpace>(old_to_new.view()));
+        trace("growth: carry values", band.n_blocks * 8);
         const WordList<MemSpace> list{list_words.view(), list_bits.view()};
         auto grow = [&](auto method) {
           return gather_field<decltype(method)>(space, nb, view_of(grown, g), growth.words.size(), g, fc,
@@ -374,9 +376,9 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
         };
         if (!growth.words.empty()) st.evaluations += with_field_method(p.method, grow);
       }
-      trace("band growth round", grown.n_vertices);
       band = std::move(grown);
       phi = std::move(grown_phi);
+      trace("band growth round", band.n_vertices);
       st.band_growth_rounds = std::uint64_t(round + 1);
       st.band_growth_cells += leaks.size() / 3;
       if (region_in) region_in->grown.insert(region_in->grown.end(), leaks.begin(), leaks.end());
