@@ -214,6 +214,24 @@ KOKKOS_INLINE_FUNCTION int leaks_at(const BandView<MemSpace>& band, const Kokkos
 // Sorts cell triples (minimum corners, x y z) by z, then y, then x, so that
 // lists filled in parallel come out in one order; with `unique`, drops repeats.
 inline void sort_cells(std::vector<std::int64_t>& cells, bool unique) {
+  // Grid coordinates fit 21 bits (kMaxAxisCells): sorted as packed keys
+  // z << 42 | y << 21 | x, the same order, a few times faster.
+  constexpr std::int64_t kLimit = std::int64_t(1) << 21;
+  if (std::all_of(cells.begin(), cells.end(), [](std::int64_t v) { return v >= 0 && v < kLimit; })) {
+    std::vector<std::uint64_t> keys(cells.size() / 3);
+    for (std::size_t q = 0; q < keys.size(); ++q)
+      keys[q] = std::uint64_t(cells[3 * q + 2]) << 42 | std::uint64_t(cells[3 * q + 1]) << 21 | std::uint64_t(cells[3 * q]);
+    std::sort(keys.begin(), keys.end());
+    if (unique) keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
+    cells.resize(3 * keys.size());
+    constexpr std::uint64_t kMask = (std::uint64_t(1) << 21) - 1;
+    for (std::size_t q = 0; q < keys.size(); ++q) {
+      cells[3 * q] = std::int64_t(keys[q] & kMask);
+      cells[3 * q + 1] = std::int64_t((keys[q] >> 21) & kMask);
+      cells[3 * q + 2] = std::int64_t(keys[q] >> 42);
+    }
+    return;
+  }
   std::vector<std::array<std::int64_t, 3>> t(cells.size() / 3);
   for (std::size_t q = 0; q < t.size(); ++q) t[q] = {cells[3 * q + 2], cells[3 * q + 1], cells[3 * q]};
   std::sort(t.begin(), t.end());
