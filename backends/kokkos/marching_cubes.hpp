@@ -304,19 +304,51 @@ std::vector<std::int64_t> find_band_leaks_near(const ExecSpace& space,
                                                const std::vector<std::int64_t>& added) {
   using MemSpace = typename ExecSpace::memory_space;
   ScopedRegion region("nbmc::marching_cubes::band_leaks_near");
+  // The 27 cells around every added cell. `added` is sorted and its
+  // coordinates fit 21 bits, so as packed keys (z << 42 | y << 21 | x) each
+  // of the 27 shifted copies is sorted too: they are merged, not sorted.
   std::vector<std::int64_t> cand;
-  cand.reserve(added.size() * 27);
-  for (std::size_t c = 0; c + 2 < added.size(); c += 3)
+  {
+    const std::size_t n_added = added.size() / 3;
+    std::vector<std::uint64_t> keys;
+    keys.reserve(27 * n_added);
+    std::vector<std::size_t> run_end;
     for (int dz = -1; dz <= 1; ++dz)
       for (int dy = -1; dy <= 1; ++dy)
         for (int dx = -1; dx <= 1; ++dx) {
-          const std::int64_t i = added[c] + dx, j = added[c + 1] + dy, k = added[c + 2] + dz;
-          if (i < 0 || j < 0 || k < 0) continue;
-          cand.push_back(i);
-          cand.push_back(j);
-          cand.push_back(k);
+          for (std::size_t c = 0; c < n_added; ++c) {
+            const std::int64_t i = added[3 * c] + dx, j = added[3 * c + 1] + dy, k = added[3 * c + 2] + dz;
+            if (i < 0 || j < 0 || k < 0) continue;
+            keys.push_back(std::uint64_t(k) << 42 | std::uint64_t(j) << 21 | std::uint64_t(i));
+          }
+          run_end.push_back(keys.size());
         }
-  sort_cells(cand, true);
+    // Bottom-up merges of neighbouring runs.
+    std::vector<std::size_t> bounds(1, 0);
+    bounds.insert(bounds.end(), run_end.begin(), run_end.end());
+    while (bounds.size() > 2) {
+      std::vector<std::size_t> next(1, 0);
+      for (std::size_t r = 1; r < bounds.size(); r += 2) {
+        if (r + 1 < bounds.size()) {
+          std::inplace_merge(keys.begin() + std::ptrdiff_t(bounds[r - 1]), keys.begin() + std::ptrdiff_t(bounds[r]),
+                             keys.begin() + std::ptrdiff_t(bounds[r + 1]));
+          next.push_back(bounds[r + 1]);
+        } else {
+          next.push_back(bounds[r]);
+        }
+      }
+      bounds.swap(next);
+    }
+    if (!std::is_sorted(keys.begin(), keys.end())) std::sort(keys.begin(), keys.end());  // `added` unsorted
+    keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
+    constexpr std::uint64_t kMask = (std::uint64_t(1) << 21) - 1;
+    cand.resize(3 * keys.size());
+    for (std::size_t q = 0; q < keys.size(); ++q) {
+      cand[3 * q] = std::int64_t(keys[q] & kMask);
+      cand[3 * q + 1] = std::int64_t((keys[q] >> 21) & kMask);
+      cand[3 * q + 2] = std::int64_t(keys[q] >> 42);
+    }
+  }
   trace("leaks near: candidates (host)", cand.size() / 3);
   const std::size_t n = cand.size() / 3;
   if (!n) return {};

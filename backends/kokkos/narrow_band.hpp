@@ -13,6 +13,7 @@
 #include "grid.hpp"
 
 #include <algorithm>
+#include <iterator>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -321,7 +322,6 @@ void extend_band(const ExecSpace& space, MemoryTracker& tracker, const Grid& g,
   auto okeys = Kokkos::create_mirror_view_and_copy(Kokkos::HostSpace(), old.block_keys.view());
   auto owords = Kokkos::create_mirror_view_and_copy(Kokkos::HostSpace(), old.words.view());
   trace("extend: band to host", old.n_blocks);
-  std::vector<std::uint64_t> keys(okeys.data(), okeys.data() + old.n_blocks);
   auto block_key = [](std::int64_t i, std::int64_t j, std::int64_t k) {
     return morton3(std::uint32_t(i >> 3), std::uint32_t(j >> 3), std::uint32_t(k >> 3));
   };
@@ -336,38 +336,59 @@ void extend_band(const ExecSpace& space, MemoryTracker& tracker, const Grid& g,
     band.own_lo[a] = old.own_lo[a];
     band.own_hi[a] = old.own_hi[a];
   }
-  for (std::size_t c = 0; c + 2 < cells.size(); c += 3)
-    for (int q = 0; q < 8; ++q) {
-      const std::int64_t i = cells[c] + (q & 1), j = cells[c + 1] + ((q >> 1) & 1), k = cells[c + 2] + (q >> 2);
-      if (inside(i, j, k)) keys.push_back(block_key(i, j, k));
-    }
-  std::sort(keys.begin(), keys.end());
-  keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
-  check_band_blocks<MemSpace>(keys.size());
-  std::vector<std::uint64_t> words(keys.size() * 8, 0);
-  if (growth) growth->old_to_new.resize(old.n_blocks);
-  for (std::size_t b = 0; b < old.n_blocks; ++b) {
-    const std::size_t nbk = std::size_t(std::lower_bound(keys.begin(), keys.end(), okeys(b)) - keys.begin());
-    for (int w = 0; w < 8; ++w) words[nbk * 8 + w] = owords(b * 8 + w);
-    if (growth) growth->old_to_new[b] = nbk;
-  }
-  const std::vector<std::uint64_t> before = growth ? words : std::vector<std::uint64_t>();
+  // The corners to add, as (block key, word, bit); work in proportion to the
+  // cells added, plus one linear pass over the old blocks.
+  struct Corner {
+    std::uint64_t key;
+    int word;
+    std::uint64_t bit;
+  };
+  std::vector<Corner> corners;
+  corners.reserve(8 * (cells.size() / 3));
   for (std::size_t c = 0; c + 2 < cells.size(); c += 3)
     for (int q = 0; q < 8; ++q) {
       const std::int64_t i = cells[c] + (q & 1), j = cells[c + 1] + ((q >> 1) & 1), k = cells[c + 2] + (q >> 2);
       if (!inside(i, j, k)) continue;
-      const std::size_t b = std::size_t(std::lower_bound(keys.begin(), keys.end(), block_key(i, j, k)) - keys.begin());
       const std::int64_t lx = i & 7, ly = j & 7, lz = k & 7;
-      words[b * 8 + BandView<MemSpace>::word_of(lx, ly, lz)] |= std::uint64_t(1) << BandView<MemSpace>::bit_of(lx, ly, lz);
+      corners.push_back({block_key(i, j, k), BandView<MemSpace>::word_of(lx, ly, lz),
+                         std::uint64_t(1) << BandView<MemSpace>::bit_of(lx, ly, lz)});
     }
+  std::vector<std::uint64_t> added_keys(corners.size());
+  for (std::size_t q = 0; q < corners.size(); ++q) added_keys[q] = corners[q].key;
+  std::sort(added_keys.begin(), added_keys.end());
+  added_keys.erase(std::unique(added_keys.begin(), added_keys.end()), added_keys.end());
+  std::vector<std::uint64_t> keys;
+  keys.reserve(old.n_blocks + added_keys.size());
+  std::set_union(okeys.data(), okeys.data() + old.n_blocks, added_keys.begin(), added_keys.end(),
+                 std::back_inserter(keys));
+  check_band_blocks<MemSpace>(keys.size());
+  std::vector<std::uint64_t> words(keys.size() * 8, 0);
+  if (growth) growth->old_to_new.resize(old.n_blocks);
+  for (std::size_t b = 0, nbk = 0; b < old.n_blocks; ++b) {
+    while (keys[nbk] < okeys(b)) ++nbk;  // okeys is a subsequence of keys
+    for (int w = 0; w < 8; ++w) words[nbk * 8 + w] = owords(b * 8 + w);
+    if (growth) growth->old_to_new[b] = nbk;
+  }
+  // Set the corners' bits; the words and bits that are new.
+  std::vector<std::pair<std::uint64_t, std::uint64_t>> fresh;  // (word, bit)
+  for (const Corner& c : corners) {
+    const std::size_t b = std::size_t(std::lower_bound(keys.begin(), keys.end(), c.key) - keys.begin());
+    std::uint64_t& w = words[b * 8 + std::size_t(c.word)];
+    if (w & c.bit) continue;
+    w |= c.bit;
+    fresh.push_back({b * 8 + std::size_t(c.word), c.bit});
+  }
   if (growth) {
+    std::sort(fresh.begin(), fresh.end());
     growth->words.clear();
     growth->bits.clear();
-    for (std::size_t w = 0; w < words.size(); ++w)
-      if (const std::uint64_t fresh = words[w] & ~before[w]) {
-        growth->words.push_back(w);
-        growth->bits.push_back(fresh);
+    for (const auto& f : fresh) {
+      if (growth->words.empty() || growth->words.back() != f.first) {
+        growth->words.push_back(f.first);
+        growth->bits.push_back(0);
       }
+      growth->bits.back() |= f.second;
+    }
   }
   trace("extend: new words (host)", keys.size());
   band.n_blocks = keys.size();
