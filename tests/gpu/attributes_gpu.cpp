@@ -152,6 +152,18 @@ int main() {
   nbmc_mesh_destroy(m);
   nbmc_context_set_mesh_memory(gpu.c, NBMC_MEMORY_HOST);
 
+  // Device particles split into subdomains on the GPU: the same again.
+  {
+    Ctx split(NBMC_BACKEND_CUDA);
+    nbmc_context_set_subdomains(split.c, 2, 2, 1);
+    nbmc_context_set_particles_device_f64(split.c, d_p, n, 0);
+    nbmc_context_set_attribute_device_f64(split.c, "height", d_height, 1, 0);
+    nbmc_mesh* s = nullptr;
+    check(nbmc_context_reconstruct(split.c, &prm, &s) == NBMC_OK, "2x2x1 subdomains on the GPU");
+    check(same(positions(s), ref_p) && same(attr(s, "height"), ref_h), "subdomains: same mesh and attributes");
+    nbmc_mesh_destroy(s);
+  }
+
   // The OpenMP backend: vertices within a few ulps, so values close.
   {
     Ctx cpu(NBMC_BACKEND_OPENMP);
@@ -168,15 +180,15 @@ int main() {
 
   // Errors.
   nbmc_context_set_particles_f64(gpu.c, p.data(), n, 0);
-  check(nbmc_context_set_attribute_device_f64(gpu.c, "h", height.data(), 1, 0) == NBMC_ERROR_INVALID_ARGUMENT,
-        std::string("host pointer refused: ") + nbmc_context_last_error(gpu.c));
-  check(nbmc_context_set_attribute_device_f64(gpu.c, "h", d_height, 1, 12) == NBMC_ERROR_INVALID_ARGUMENT,
-        "misaligned stride refused");
+  int32_t st = nbmc_context_set_attribute_device_f64(gpu.c, "h", height.data(), 1, 0);
+  check(st == NBMC_ERROR_INVALID_ARGUMENT, std::string("host pointer refused: ") + nbmc_context_last_error(gpu.c));
+  st = nbmc_context_set_attribute_device_f64(gpu.c, "h", d_height, 1, 12);
+  check(st == NBMC_ERROR_INVALID_ARGUMENT, std::string("misaligned stride refused: ") + nbmc_context_last_error(gpu.c));
   std::vector<double> bad = height;
   bad[3] = std::nan("");
   double* d_bad = to_device(bad);
-  check(nbmc_context_set_attribute_device_f64(gpu.c, "h", d_bad, 1, 0) == NBMC_ERROR_INVALID_PARTICLES,
-        std::string("NaN on the device: ") + nbmc_context_last_error(gpu.c));
+  st = nbmc_context_set_attribute_device_f64(gpu.c, "h", d_bad, 1, 0);
+  check(st == NBMC_ERROR_INVALID_PARTICLES, std::string("NaN on the device: ") + nbmc_context_last_error(gpu.c));
   cudaFree(d_bad);
   cudaFree(d_p);
   cudaFree(d_height);
