@@ -848,7 +848,7 @@ def reconstruct(points: Any, spacing: Optional[float] = None, *,
     backend, threads, device_id, memory_budget, mesh_memory, progress
         As for :class:`Context`.
     attributes
-        ``{name: values}``: per-particle arrays, (N,) or (N, 3), interpolated
+        ``{{name: values}}``: per-particle arrays, (N,) or (N, 3), interpolated
         onto the vertices (:attr:`Mesh.attributes`; see
         :meth:`Context.set_attribute`). A particle file's own attributes
         cannot be read through the C ABI (a list of names raises
