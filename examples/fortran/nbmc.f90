@@ -22,6 +22,13 @@
 !   call nbmc_mesh_close(mesh)
 !   call nbmc_context_close(ctx)
 !
+! Per-particle data (after each upload, which removes earlier attributes):
+!   status = nbmc_context_set_attribute(ctx, 'velocity', vel)   ! vel(3, n) or rho(n), real32/64
+!   status = nbmc_context_reconstruct(ctx, params, mesh)
+!   a => nbmc_mesh_attribute(mesh, 'velocity', comps)        ! real(c_float) (comps, nv), host memory
+! The module checks that the array has one item per particle of the last
+! upload made through it (ctx%particles).
+!
 ! Names follow the C API; nbmc_version() is nbmc_library_version() here (Fortran
 ! is case-insensitive and NBMC_VERSION is the constant), nbmc_*_destroy are
 ! nbmc_*_close.
