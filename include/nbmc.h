@@ -165,7 +165,8 @@ NBMC_API int32_t nbmc_context_backend(const nbmc_context* ctx, int32_t* backend)
 /* Uploads (copies) count particle positions. Particle i's x, y, z are the
  * three consecutive values at byte offset i * byte_stride from xyz;
  * byte_stride 0 means tightly packed (3 * sizeof value). Works for C arrays of
- * [x,y,z] and for Fortran pos(3, n). Replaces earlier particles. Positions are
+ * [x,y,z] and for Fortran pos(3, n). Replaces earlier particles and removes
+ * all particle attributes (nbmc_context_set_attribute_*). Positions are
  * validated here: NaN, Inf or a magnitude above 1e15 gives
  * NBMC_ERROR_INVALID_PARTICLES (the message names the first bad particle),
  * count 0 gives NBMC_ERROR_NO_PARTICLES; on failure the context keeps no
