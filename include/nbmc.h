@@ -165,7 +165,8 @@ NBMC_API int32_t nbmc_context_backend(const nbmc_context* ctx, int32_t* backend)
 /* Uploads (copies) count particle positions. Particle i's x, y, z are the
  * three consecutive values at byte offset i * byte_stride from xyz;
  * byte_stride 0 means tightly packed (3 * sizeof value). Works for C arrays of
- * [x,y,z] and for Fortran pos(3, n). Replaces earlier particles. Positions are
+ * [x,y,z] and for Fortran pos(3, n). Replaces earlier particles and removes
+ * all particle attributes (nbmc_context_set_attribute_*). Positions are
  * validated here: NaN, Inf or a magnitude above 1e15 gives
  * NBMC_ERROR_INVALID_PARTICLES (the message names the first bad particle),
  * count 0 gives NBMC_ERROR_NO_PARTICLES; on failure the context keeps no
@@ -512,6 +513,77 @@ NBMC_API const uint64_t* nbmc_mesh_global_vertex_ids(const nbmc_mesh* mesh);
 /* Vertices of the whole frame's mesh that the pieces make up; 0 for a mesh
  * that is not a piece. */
 NBMC_API uint64_t nbmc_mesh_global_vertex_count(const nbmc_mesh* mesh);
+
+/* ------------------------------------------------------------------------
+ * Particle attributes: per-particle values (velocity, density, temperature,
+ * foam, ...) interpolated onto the vertices of the mesh.
+ *
+ * An attribute belongs to the particles uploaded last: set the particles
+ * first, then the attributes (one item per particle, the particles' count).
+ * Every particle upload (nbmc_context_set_particles*, _load_particles),
+ * successful or not, removes all attributes, so a solver sets them again
+ * each frame and a stale array is never used. nbmc_context_reconstruct then
+ * gives each vertex of the returned mesh, at its final position (after the
+ * clean-up and smoothing), the kernel-weighted mean of the attribute over the
+ * particles within the influence radius R,
+ *   a(x) = sum_j k_j a_j / sum_j k_j,  k_j = max(0, (1 - |x - x_j|^2/R^2)^3),
+ * the weights of the scalar field; a vertex with no particle closer than R
+ * takes the value of its nearest particle (lowest index on ties). The sums
+ * run in double precision in a fixed order, on the host, for every backend:
+ * the values are the same on every backend, thread count and subdomain split
+ * (a split frame is interpolated on the stitched mesh from all particles).
+ * Contexts bound to several processes (nbmc_mpi) do not support attributes
+ * yet: the setters return NBMC_ERROR_INVALID_ARGUMENT there.
+ * ---------------------------------------------------------------------- */
+
+/* Sets (copies) the attribute called name: components (1, a scalar, or 3, a
+ * vector) values per particle, particle i's at byte offset i * byte_stride
+ * from data (byte_stride 0: tightly packed, components * sizeof value), for
+ * the count of particles uploaded last. name: 1 to 255 bytes without
+ * control characters, matched exactly (writers replace what a format cannot
+ * hold, e.g. spaces, by '_'); setting a name again replaces that attribute
+ * (in its place in the order). data == NULL removes
+ * the attribute called name (NBMC_OK also when there is none).
+ * Errors: NBMC_ERROR_NO_PARTICLES before any particles are uploaded;
+ * NBMC_ERROR_INVALID_ARGUMENT for a NULL ctx or name, a bad name, components
+ * other than 1 or 3, a byte_stride smaller than one item, an MPI-bound
+ * context; NBMC_ERROR_INVALID_PARTICLES when a value is NaN, infinite or
+ * beyond 1e38 in magnitude (the message names the first such particle).
+ * On failure the context keeps no attribute of that name. Same threading
+ * rules as every call on ctx. */
+NBMC_API int32_t nbmc_context_set_attribute_f32(nbmc_context* ctx, const char* name, const float* data,
+                                                uint32_t components, uint64_t byte_stride);
+NBMC_API int32_t nbmc_context_set_attribute_f64(nbmc_context* ctx, const char* name, const double* data,
+                                                uint32_t components, uint64_t byte_stride);
+/* The same from CUDA device memory of the context's GPU (CUDA backend only,
+ * else NBMC_ERROR_BACKEND_UNAVAILABLE); data and byte_stride must be aligned
+ * to the value size. The values are copied to the host (the interpolation
+ * runs there) before the call returns. */
+NBMC_API int32_t nbmc_context_set_attribute_device_f32(nbmc_context* ctx, const char* name, const float* data,
+                                                       uint32_t components, uint64_t byte_stride);
+NBMC_API int32_t nbmc_context_set_attribute_device_f64(nbmc_context* ctx, const char* name, const double* data,
+                                                       uint32_t components, uint64_t byte_stride);
+
+/* Stage of nbmc_stats.stage_seconds: the interpolation of the attributes. */
+#define NBMC_STAGE_ATTRIBUTES 8
+
+/* Attributes of a mesh, in the order they were first set on the context; 0
+ * for NULL or a mesh reconstructed without attributes. */
+NBMC_API uint32_t nbmc_mesh_attribute_count(const nbmc_mesh* mesh);
+/* Name of attribute i (0 <= i < count), valid until nbmc_mesh_destroy; NULL
+ * when i is out of range. */
+NBMC_API const char* nbmc_mesh_attribute_name(const nbmc_mesh* mesh, uint32_t i);
+/* The values of the attribute called name (exact match): components (1 or
+ * 3, stored in *components when it is not NULL) floats per vertex, vertex
+ * after vertex, in HOST memory for every mesh (also one whose positions are
+ * on the device), valid until nbmc_mesh_destroy. NULL when the mesh has no
+ * such attribute (or mesh/name is NULL): *components is then 0 and
+ * nbmc_last_error() says why; NULL also for a mesh without vertices, with
+ * *components set and nbmc_last_error() empty. nbmc_mesh_write writes the
+ * attributes into the formats that carry them (PLY, VTK, VTU, VTP, glTF,
+ * HDF5; OBJ drops them). Read-only: may be called concurrently on one mesh
+ * (the message is thread-local). */
+NBMC_API const float* nbmc_mesh_attribute(const nbmc_mesh* mesh, const char* name, uint32_t* components);
 
 #ifdef __cplusplus
 } /* extern "C" */

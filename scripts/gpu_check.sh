@@ -51,6 +51,8 @@ fi
 if want pointers; then
   step "device pointers in the C API"
   "$B/tests/gpu/nbmc_cuda_device_pointers" "$DATA" 2>&1 | tee "$OUT/device-pointers.txt" || status=1
+  step "particle attributes on the GPU (device uploads, device meshes, subdomains)"
+  "$B/tests/gpu/nbmc_cuda_attributes" 2>&1 | tee "$OUT/attributes.txt" || status=1
 fi
 
 SMALL="$DATA/xyz/splashsurf_doubledambreak_f26_4732.xyz"

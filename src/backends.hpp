@@ -68,6 +68,12 @@ void download_mesh(const HostMesh& m, float* positions, float* normals, std::uin
 void download_particles(const void* device_xyz, std::size_t count, double* host);
 // Replaces a host mesh by a copy in one device allocation (NBMC_MEMORY_DEVICE).
 void move_mesh_to_device(HostMesh& m);
+// Copies count items of item_bytes, byte_stride apart in CUDA memory (checked
+// to be device memory of the current GPU, aligned to value_bytes), packed
+// into host. Throws Error(NBMC_ERROR_INVALID_ARGUMENT) for a host or
+// misaligned pointer, (NBMC_ERROR_BACKEND_UNAVAILABLE) without CUDA.
+void download_device_items(const void* src, std::uint64_t count, std::uint64_t byte_stride, std::size_t item_bytes,
+                           std::size_t value_bytes, void* host, const char* fn);
 // Free memory of the current CUDA device (0 without CUDA).
 std::uint64_t cuda_free_memory();
 

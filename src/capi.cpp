@@ -6,6 +6,7 @@
 
 #include "backends.hpp"
 #include "collective.h"
+#include "capi_attributes.hpp"
 #include "capi_mesh.hpp"
 #include "context.hpp"
 
@@ -85,6 +86,7 @@ const char* nbmc_stage_name(int32_t stage) {
   static const char* const names[NBMC_STAGE_COUNT] = {"upload", "neighbourhood", "surface particles", "band",
                                                       "field", "triangulation", "output"};
   if (stage == NBMC_STAGE_POSTPROCESS) return "postprocess";
+  if (stage == NBMC_STAGE_ATTRIBUTES) return "attributes";
   return stage >= 0 && stage < NBMC_STAGE_COUNT ? names[stage] : nullptr;
 }
 
@@ -246,6 +248,9 @@ static int32_t set_particles_impl(nbmc_context* ctx, const T* xyz, uint64_t coun
 // rank's particles out.
 template <class Impl>
 static int32_t collective_upload(nbmc_context* ctx, uint64_t count, const Impl& impl) {
+  // Attributes belong to the particles uploaded last: every upload, even a
+  // failed one, removes them.
+  if (ctx) ctx->attributes.clear();
   if (ctx && ctx->collective) {
     ctx->pending_status = 0;
     ctx->pending_error.clear();
@@ -397,6 +402,8 @@ int32_t nbmc_context_reconstruct(nbmc_context* ctx, const nbmc_params* params, n
   nbmc::RunStats st;
   nbmc::run_backend(*ctx, p, m->mesh, st);
   ctx->postprocess = nbmc::postprocess_mesh(full, m->mesh, st);
+  // On the final vertices, after the clean-up and smoothing.
+  nbmc::interpolate_mesh_attributes(*ctx, p, *m, st);
   ctx->stats = st;
   ctx->has_stats = true;
   *mesh = m.release();
@@ -598,6 +605,7 @@ extern "C" {
 int32_t nbmc__context_bind_collective(nbmc_context* ctx, int32_t bound) {
   if (!ctx) return NBMC_ERROR_INVALID_ARGUMENT;
   ctx->collective = bound != 0;
+  if (ctx->collective) ctx->attributes.clear();  // not supported over MPI yet
   ctx->pending_status = 0;
   ctx->pending_error.clear();
   ctx->last_error.clear();

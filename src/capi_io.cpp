@@ -5,6 +5,7 @@
 #include "nbmc.h"
 
 #include "backends.hpp"
+#include "capi_attributes.hpp"
 #include "context.hpp"
 #include "io/error.hpp"
 #include "io/mesh.hpp"
@@ -55,6 +56,8 @@ template <class F> int32_t guarded(nbmc_context* ctx, const char* fn, F&& f) {
 
 } // namespace
 
+void nbmc::set_thread_error(const std::string& msg) { g_last_error = msg; }
+
 extern "C" {
 
 int32_t nbmc_context_load_particles(nbmc_context* ctx, const char* path, const char* format, uint64_t* count_out) {
@@ -68,6 +71,7 @@ int32_t nbmc_context_load_particles(nbmc_context* ctx, const char* path, const c
   return guarded(ctx, fn, [&]() -> int32_t {
     ctx->particles.clear();  // the (pinned) buffer stays for the upload below
     ctx->device_particles = nbmc::DeviceParticles();
+    ctx->attributes.clear();  // they belonged to the particles replaced
     if (!path) return fail(ctx, NBMC_ERROR_INVALID_ARGUMENT, std::string(fn) + ": path is NULL");
     nbmc::io::ReadOptions o;
     o.format = format ? format : "";
@@ -109,6 +113,9 @@ int32_t nbmc_mesh_write(const nbmc_mesh* mesh, const char* path, const char* for
     v.positions = m.positions.empty() ? nullptr : m.positions.data();
     v.normals = m.normals.size() == m.positions.size() && !m.normals.empty() ? m.normals.data() : nullptr;
     v.triangles = m.triangles.empty() ? nullptr : m.triangles.data();
+    const std::vector<nbmc::io::Attribute> attributes = nbmc::mesh_attributes_for_writer(*mesh);
+    v.attributes = attributes.empty() ? nullptr : attributes.data();
+    v.attribute_count = attributes.size();
     nbmc::io::write_mesh(path, v, format ? format : "");
     return NBMC_OK;
   });

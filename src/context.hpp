@@ -8,6 +8,7 @@
 #include "../backends/kokkos/pipeline.hpp"
 #include "core/decomposition.hpp"
 #include "core/mesh_postprocess.hpp"
+#include "io/attributes.hpp"
 
 #include <memory>
 #include <new>
@@ -52,8 +53,21 @@ struct nbmc_context {
   nbmc::SubdomainReport subdomain_report;  // of the last reconstruction
   nbmc::mesh::PostprocessStats postprocess;  // of the last reconstruction (capi_mesh.cpp)
   bool has_stats = false;
+  // nbmc_context_set_attribute*: per-particle values (doubles) for the
+  // particles uploaded last; every particle upload clears them.
+  std::vector<nbmc::io::Attribute> attributes;
 };
+
+namespace nbmc {
+// An attribute interpolated onto a mesh's vertices (host memory).
+struct MeshAttribute {
+  std::string name;
+  std::uint32_t components = 1;
+  std::vector<float> values;  // components per vertex
+};
+}  // namespace nbmc
 
 struct nbmc_mesh {
   nbmc::HostMesh mesh;
+  std::vector<nbmc::MeshAttribute> attributes;
 };

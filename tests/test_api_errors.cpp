@@ -52,7 +52,8 @@ TEST(Version, MatchesHeader) {
   EXPECT_STREQ(nbmc_stage_name(NBMC_STAGE_FIELD), "field");
   // The host post-processing stage comes right after the pipeline's stages.
   EXPECT_STREQ(nbmc_stage_name(NBMC_STAGE_POSTPROCESS), "postprocess");
-  EXPECT_EQ(nbmc_stage_name(NBMC_STAGE_POSTPROCESS + 1), nullptr);
+  EXPECT_STREQ(nbmc_stage_name(NBMC_STAGE_ATTRIBUTES), "attributes");
+  EXPECT_EQ(nbmc_stage_name(NBMC_STAGE_ATTRIBUTES + 1), nullptr);
   EXPECT_EQ(nbmc_backend_available(NBMC_BACKEND_SERIAL), 1);
   EXPECT_EQ(nbmc_backend_available(NBMC_BACKEND_OPENMP), 1);
   EXPECT_EQ(nbmc_backend_available(99), 0);

@@ -31,20 +31,21 @@ void cuda_check(cudaError_t e, const std::string& what) {
 
 // A device pointer the caller gave us: device or managed memory of the
 // current device, or a clear error.
-void check_device_pointer(const void* p, const char* fn) {
+void check_device_pointer(const void* p, const char* fn, const char* what = "xyz",
+                          const char* host_hint = "nbmc_context_set_particles_f32/f64") {
   cudaPointerAttributes a;
   const cudaError_t e = cudaPointerGetAttributes(&a, p);
   if (e != cudaSuccess) {
     cudaGetLastError();
-    throw Error(1, std::string(fn) + ": xyz is not a CUDA pointer (" + cudaGetErrorString(e) + ")");
+    throw Error(1, std::string(fn) + ": " + what + " is not a CUDA pointer (" + cudaGetErrorString(e) + ")");
   }
   if (a.type != cudaMemoryTypeDevice && a.type != cudaMemoryTypeManaged)
-    throw Error(1, std::string(fn) + ": xyz is host memory; use nbmc_context_set_particles_f32/f64 for host arrays");
+    throw Error(1, std::string(fn) + ": " + what + " is host memory; use " + host_hint + " for host arrays");
   int dev = 0;
   cuda_check(cudaGetDevice(&dev), fn);
   if (a.type == cudaMemoryTypeDevice && a.device != dev) {
     std::ostringstream s;
-    s << fn << ": xyz lives on CUDA device " << a.device << ", the context runs on device " << dev;
+    s << fn << ": " << what << " lives on CUDA device " << a.device << ", the context runs on device " << dev;
     throw Error(1, s.str());
   }
 }
@@ -218,6 +219,26 @@ void download_particles(const void* device_xyz, std::size_t count, double* host)
 #else
   (void)device_xyz; (void)count; (void)host;
   throw Error(7, "the CUDA backend is not compiled in");
+#endif
+}
+
+void download_device_items(const void* src, std::uint64_t count, std::uint64_t byte_stride, std::size_t item_bytes,
+                           std::size_t value_bytes, void* host, const char* fn) {
+#if defined(KOKKOS_ENABLE_CUDA)
+  if (byte_stride % value_bytes != 0 || reinterpret_cast<std::uintptr_t>(src) % value_bytes != 0) {
+    std::ostringstream s;
+    s << fn << ": on the device, data and byte_stride (" << byte_stride << ") must be multiples of " << value_bytes
+      << " bytes (aligned values)";
+    throw Error(1, s.str());
+  }
+  check_device_pointer(src, fn, "data", "nbmc_context_set_attribute_f32/f64");
+  if (count)
+    cuda_check(cudaMemcpy2D(host, item_bytes, src, std::size_t(byte_stride), item_bytes, std::size_t(count),
+                            cudaMemcpyDeviceToHost),
+               "copying the attribute to the host");
+#else
+  (void)src; (void)count; (void)byte_stride; (void)item_bytes; (void)value_bytes; (void)host;
+  throw Error(7, std::string(fn) + ": the CUDA backend is not compiled in");
 #endif
 }
 

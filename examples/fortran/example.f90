@@ -86,6 +86,12 @@ program example
       ! Positions are rows 1:3 of state(6, n): the leading dimension is the stride.
       status = nbmc_context_set_particles(ctx, state)
       call check(status, 'nbmc_context_set_particles')
+      ! Per-particle data follows the particles onto the mesh: set after
+      ! every upload (an upload removes them). velocity(3, n), layer(n).
+      status = nbmc_context_set_attribute(ctx, 'velocity', state(4:6, :))
+      call check(status, 'nbmc_context_set_attribute velocity')
+      status = nbmc_context_set_attribute(ctx, 'layer', rest_height)
+      call check(status, 'nbmc_context_set_attribute layer')
       status = nbmc_context_reconstruct(ctx, params, mesh)
       call check(status, 'nbmc_context_reconstruct')
       status = nbmc_context_stats(ctx, stats)
@@ -114,7 +120,31 @@ program example
     end do
   end do
 
-  ! The last mesh once more, through nbmc's own writer (binary PLY).
+  ! The attributes interpolated onto the last mesh: pointers (components, nv)
+  ! into it. A layer height is a kernel mean of rest heights: within their range.
+  block
+    real(c_float), pointer :: vel(:, :), layer(:, :), none(:, :)
+    integer(c_int32_t) :: comps
+    character(len=:), allocatable :: first
+    integer(c_int64_t) :: nv
+    first = nbmc_mesh_attribute_name(mesh, 1_c_int32_t)
+    if (nbmc_mesh_attribute_count(mesh) /= 2 .or. first /= 'velocity') &
+         error stop 'expected the attributes velocity and layer'
+    nv = nbmc_mesh_vertex_count(mesh)
+    vel => nbmc_mesh_attribute(mesh, 'velocity', comps)
+    if (.not. associated(vel)) error stop 'velocity attribute missing'
+    if (comps /= 3 .or. size(vel, 2, kind=c_int64_t) /= nv) error stop 'velocity attribute of the wrong shape'
+    layer => nbmc_mesh_attribute(mesh, 'layer')
+    if (.not. associated(layer)) error stop 'layer attribute missing'
+    if (minval(layer) < -1e-6 .or. maxval(layer) > (ny - 1) * spacing + 1e-6) error stop 'layer out of range'
+    none => nbmc_mesh_attribute(mesh, 'nope', comps)
+    if (associated(none)) error stop 'unknown attribute found'
+    if (comps /= 0) error stop 'unknown attribute has components'
+    write (output_unit, '(a, f8.4, a, f8.4)') 'layer on the mesh: ', minval(layer), ' to ', maxval(layer)
+  end block
+
+  ! The last mesh once more, through nbmc's own writer (binary PLY, with the
+  ! attributes).
   status = nbmc_mesh_write(mesh, outdir // '/final.ply')
   if (status /= NBMC_OK) then
     write (error_unit, '(a, a, a, a)') 'error: nbmc_mesh_write failed: ', nbmc_status_string(status), ': ', &

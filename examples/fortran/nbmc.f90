@@ -22,6 +22,13 @@
 !   call nbmc_mesh_close(mesh)
 !   call nbmc_context_close(ctx)
 !
+! Per-particle data (after each upload, which removes earlier attributes):
+!   status = nbmc_context_set_attribute(ctx, 'velocity', vel)   ! vel(3, n) or rho(n), real32/64
+!   status = nbmc_context_reconstruct(ctx, params, mesh)
+!   a => nbmc_mesh_attribute(mesh, 'velocity', comps)        ! real(c_float) (comps, nv), host memory
+! The module checks that the array has one item per particle of the last
+! upload made through it (ctx%particles).
+!
 ! Names follow the C API; nbmc_version() is nbmc_library_version() here (Fortran
 ! is case-insensitive and NBMC_VERSION is the constant), nbmc_*_destroy are
 ! nbmc_*_close.
@@ -111,12 +118,16 @@ module nbmc
   integer(c_int32_t), parameter, public :: NBMC_STAGE_COUNT             = 7
   integer(c_int32_t), parameter, public :: NBMC_STAGE_SLOTS             = 16
   integer(c_int32_t), parameter, public :: NBMC_STAGE_POSTPROCESS       = 7
+  integer(c_int32_t), parameter, public :: NBMC_STAGE_ATTRIBUTES        = 8
 
   ! ---------------------------------------------------------------- handles
   ! The component is public for calls this module does not wrap; leave it
   ! alone otherwise.
   type, public :: nbmc_context
     type(c_ptr) :: ptr = c_null_ptr
+    ! Particles of the last upload through this module (0 after a failed
+    ! one); nbmc_context_set_attribute checks its arrays against it.
+    integer(c_int64_t) :: particles = 0
   end type nbmc_context
 
   type, public :: nbmc_mesh
@@ -211,6 +222,9 @@ module nbmc
   public :: nbmc_mesh_memory, nbmc_mesh_copy_to_host, nbmc_mesh_c_arrays
   public :: nbmc_context_load_particles, nbmc_mesh_write, nbmc_last_error
   public :: nbmc_kokkos_finalize
+  public :: nbmc_context_set_attribute, nbmc_context_remove_attribute
+  public :: nbmc_context_set_attribute_device_f32, nbmc_context_set_attribute_device_f64
+  public :: nbmc_mesh_attribute_count, nbmc_mesh_attribute_name, nbmc_mesh_attribute
   public :: nbmc_abi_ok
 
   !> Uploads (copies) positions pos(3, n), real(c_float) or real(c_double).
@@ -219,6 +233,16 @@ module nbmc
   interface nbmc_context_set_particles
     module procedure nbmc_context_set_particles_f32, nbmc_context_set_particles_f64
   end interface nbmc_context_set_particles
+
+  !> Sets (copies) the per-particle attribute name for the particles uploaded
+  !> last: values(n) (a scalar) or values(3, n) (a vector, e.g. velocity),
+  !> real(c_float) or real(c_double), n the particle count. The next
+  !> reconstruction interpolates it onto the mesh (nbmc_mesh_attribute).
+  !> Every particle upload removes all attributes: set them after the
+  !> particles, each frame. Trailing blanks of name are ignored.
+  interface nbmc_context_set_attribute
+    module procedure set_attribute_f32_1, set_attribute_f64_1, set_attribute_f32_2, set_attribute_f64_2
+  end interface nbmc_context_set_attribute
 
   ! -------------------------------------------------- the C ABI (private)
   interface
@@ -414,6 +438,67 @@ module nbmc
       type(c_ptr) :: p
     end function c_mesh_triangles
 
+    function c_context_set_attribute_f32(ctx, name, data, components, byte_stride) &
+         bind(c, name="nbmc_context_set_attribute_f32") result(status)
+      import :: c_ptr, c_char, c_int32_t, c_int64_t
+      type(c_ptr), value :: ctx, data
+      character(kind=c_char), intent(in) :: name(*)
+      integer(c_int32_t), value :: components
+      integer(c_int64_t), value :: byte_stride
+      integer(c_int32_t) :: status
+    end function c_context_set_attribute_f32
+
+    function c_context_set_attribute_f64(ctx, name, data, components, byte_stride) &
+         bind(c, name="nbmc_context_set_attribute_f64") result(status)
+      import :: c_ptr, c_char, c_int32_t, c_int64_t
+      type(c_ptr), value :: ctx, data
+      character(kind=c_char), intent(in) :: name(*)
+      integer(c_int32_t), value :: components
+      integer(c_int64_t), value :: byte_stride
+      integer(c_int32_t) :: status
+    end function c_context_set_attribute_f64
+
+    function c_context_set_attribute_device_f32(ctx, name, data, components, byte_stride) &
+         bind(c, name="nbmc_context_set_attribute_device_f32") result(status)
+      import :: c_ptr, c_char, c_int32_t, c_int64_t
+      type(c_ptr), value :: ctx, data
+      character(kind=c_char), intent(in) :: name(*)
+      integer(c_int32_t), value :: components
+      integer(c_int64_t), value :: byte_stride
+      integer(c_int32_t) :: status
+    end function c_context_set_attribute_device_f32
+
+    function c_context_set_attribute_device_f64(ctx, name, data, components, byte_stride) &
+         bind(c, name="nbmc_context_set_attribute_device_f64") result(status)
+      import :: c_ptr, c_char, c_int32_t, c_int64_t
+      type(c_ptr), value :: ctx, data
+      character(kind=c_char), intent(in) :: name(*)
+      integer(c_int32_t), value :: components
+      integer(c_int64_t), value :: byte_stride
+      integer(c_int32_t) :: status
+    end function c_context_set_attribute_device_f64
+
+    function c_mesh_attribute_count(mesh) bind(c, name="nbmc_mesh_attribute_count") result(n)
+      import :: c_ptr, c_int32_t
+      type(c_ptr), value :: mesh
+      integer(c_int32_t) :: n
+    end function c_mesh_attribute_count
+
+    function c_mesh_attribute_name(mesh, i) bind(c, name="nbmc_mesh_attribute_name") result(p)
+      import :: c_ptr, c_int32_t
+      type(c_ptr), value :: mesh
+      integer(c_int32_t), value :: i
+      type(c_ptr) :: p
+    end function c_mesh_attribute_name
+
+    function c_mesh_attribute(mesh, name, components) bind(c, name="nbmc_mesh_attribute") result(p)
+      import :: c_ptr, c_char, c_int32_t
+      type(c_ptr), value :: mesh
+      character(kind=c_char), intent(in) :: name(*)
+      integer(c_int32_t), intent(out) :: components
+      type(c_ptr) :: p
+    end function c_mesh_attribute
+
     subroutine c_mesh_destroy(mesh) bind(c, name="nbmc_mesh_destroy")
       import :: c_ptr
       type(c_ptr), value :: mesh
@@ -566,6 +651,7 @@ contains
     type(nbmc_context), intent(inout) :: ctx
     call c_context_destroy(ctx%ptr)
     ctx%ptr = c_null_ptr
+    ctx%particles = 0
   end subroutine nbmc_context_close
 
   !> Message of the last failed call on ctx; for a null ctx, that of the last
@@ -594,6 +680,8 @@ contains
     else
       status = c_context_set_particles_f32(ctx%ptr, c_loc(pos), size(pos, 2, kind=c_int64_t), stride)
     end if
+    ctx%particles = 0
+    if (status == NBMC_OK) ctx%particles = size(pos, 2, kind=c_int64_t)
   end function nbmc_context_set_particles_f32
 
   function nbmc_context_set_particles_f64(ctx, pos) result(status)
@@ -607,6 +695,8 @@ contains
     else
       status = c_context_set_particles_f64(ctx%ptr, c_loc(pos), size(pos, 2, kind=c_int64_t), stride)
     end if
+    ctx%particles = 0
+    if (status == NBMC_OK) ctx%particles = size(pos, 2, kind=c_int64_t)
   end function nbmc_context_set_particles_f64
 
   !> Uploads (copies) count positions from CUDA device memory of the
@@ -621,6 +711,8 @@ contains
     integer(c_int64_t), intent(in) :: count, byte_stride
     integer(c_int32_t) :: status
     status = c_context_set_particles_device_f32(ctx%ptr, xyz, count, byte_stride)
+    ctx%particles = 0
+    if (status == NBMC_OK) ctx%particles = count
   end function nbmc_context_set_particles_device_f32
 
   !> The same for real(c_double) positions (byte_stride a multiple of 8).
@@ -630,6 +722,8 @@ contains
     integer(c_int64_t), intent(in) :: count, byte_stride
     integer(c_int32_t) :: status
     status = c_context_set_particles_device_f64(ctx%ptr, xyz, count, byte_stride)
+    ctx%particles = 0
+    if (status == NBMC_OK) ctx%particles = count
   end function nbmc_context_set_particles_device_f64
 
   !> Where the meshes of later reconstructions go: NBMC_MEMORY_HOST (default)
@@ -834,6 +928,8 @@ contains
       status = c_context_load_particles(ctx%ptr, trim(path) // c_null_char, c_null_ptr, n)
     end if
     if (present(count)) count = n
+    ctx%particles = 0
+    if (status == NBMC_OK) ctx%particles = n
   end function nbmc_context_load_particles
 
   !> Writes the mesh with nbmc's writers ('ply', 'obj', 'vtk', 'vtu', 'glb';
@@ -859,6 +955,146 @@ contains
     character(len=:), allocatable :: s
     s = from_c(c_last_error())
   end function nbmc_last_error
+
+  ! ------------------------------------------------------------ attributes
+
+  function set_attribute_f32_1(ctx, name, values) result(status)
+    type(nbmc_context), intent(inout) :: ctx
+    character(len=*), intent(in) :: name
+    real(c_float), intent(in), contiguous, target :: values(:)
+    integer(c_int32_t) :: status
+    type(c_ptr) :: p
+    p = c_null_ptr
+    if (size(values) > 0) p = c_loc(values)
+    status = attribute_checked(ctx, name, p, size(values, kind=c_int64_t), 1_c_int32_t, .false.)
+  end function set_attribute_f32_1
+
+  function set_attribute_f64_1(ctx, name, values) result(status)
+    type(nbmc_context), intent(inout) :: ctx
+    character(len=*), intent(in) :: name
+    real(c_double), intent(in), contiguous, target :: values(:)
+    integer(c_int32_t) :: status
+    type(c_ptr) :: p
+    p = c_null_ptr
+    if (size(values) > 0) p = c_loc(values)
+    status = attribute_checked(ctx, name, p, size(values, kind=c_int64_t), 1_c_int32_t, .true.)
+  end function set_attribute_f64_1
+
+  function set_attribute_f32_2(ctx, name, values) result(status)
+    type(nbmc_context), intent(inout) :: ctx
+    character(len=*), intent(in) :: name
+    real(c_float), intent(in), contiguous, target :: values(:, :)
+    integer(c_int32_t) :: status
+    type(c_ptr) :: p
+    p = c_null_ptr
+    if (size(values) > 0) p = c_loc(values)
+    status = attribute_checked(ctx, name, p, size(values, 2, kind=c_int64_t), int(size(values, 1), c_int32_t), .false.)
+  end function set_attribute_f32_2
+
+  function set_attribute_f64_2(ctx, name, values) result(status)
+    type(nbmc_context), intent(inout) :: ctx
+    character(len=*), intent(in) :: name
+    real(c_double), intent(in), contiguous, target :: values(:, :)
+    integer(c_int32_t) :: status
+    type(c_ptr) :: p
+    p = c_null_ptr
+    if (size(values) > 0) p = c_loc(values)
+    status = attribute_checked(ctx, name, p, size(values, 2, kind=c_int64_t), int(size(values, 1), c_int32_t), .true.)
+  end function set_attribute_f64_2
+
+  ! The C call, after checking that there is one item per particle: the C
+  ! function reads as many items as the particles it holds. An empty array
+  ! (nothing to take the address of) is refused here too.
+  function attribute_checked(ctx, name, p, items, components, f64) result(status)
+    type(nbmc_context), intent(inout) :: ctx
+    character(len=*), intent(in) :: name
+    type(c_ptr), intent(in) :: p
+    integer(c_int64_t), intent(in) :: items
+    integer(c_int32_t), intent(in) :: components
+    logical, intent(in) :: f64
+    integer(c_int32_t) :: status
+    integer(c_int64_t) :: n
+    n = ctx%particles
+    if (items /= n .or. .not. c_associated(p)) then
+      status = NBMC_ERROR_INVALID_ARGUMENT
+      if (n == 0) status = NBMC_ERROR_NO_PARTICLES
+      return
+    end if
+    if (f64) then
+      status = c_context_set_attribute_f64(ctx%ptr, trim(name) // c_null_char, p, components, 0_c_int64_t)
+    else
+      status = c_context_set_attribute_f32(ctx%ptr, trim(name) // c_null_char, p, components, 0_c_int64_t)
+    end if
+  end function attribute_checked
+
+  !> Removes the attribute name (NBMC_OK also when there is none).
+  function nbmc_context_remove_attribute(ctx, name) result(status)
+    type(nbmc_context), intent(inout) :: ctx
+    character(len=*), intent(in) :: name
+    integer(c_int32_t) :: status
+    status = c_context_set_attribute_f64(ctx%ptr, trim(name) // c_null_char, c_null_ptr, 1_c_int32_t, 0_c_int64_t)
+  end function nbmc_context_remove_attribute
+
+  !> The attribute from CUDA device memory of the context's GPU (data a
+  !> device address as for nbmc_context_set_particles_device_f32; one item
+  !> of components values per particle, byte_stride apart, 0 = packed). CUDA
+  !> backend only, else NBMC_ERROR_BACKEND_UNAVAILABLE.
+  function nbmc_context_set_attribute_device_f32(ctx, name, data, components, byte_stride) result(status)
+    type(nbmc_context), intent(inout) :: ctx
+    character(len=*), intent(in) :: name
+    type(c_ptr), intent(in) :: data
+    integer(c_int32_t), intent(in) :: components
+    integer(c_int64_t), intent(in) :: byte_stride
+    integer(c_int32_t) :: status
+    status = c_context_set_attribute_device_f32(ctx%ptr, trim(name) // c_null_char, data, components, byte_stride)
+  end function nbmc_context_set_attribute_device_f32
+
+  !> The same for real(c_double) values (byte_stride a multiple of 8).
+  function nbmc_context_set_attribute_device_f64(ctx, name, data, components, byte_stride) result(status)
+    type(nbmc_context), intent(inout) :: ctx
+    character(len=*), intent(in) :: name
+    type(c_ptr), intent(in) :: data
+    integer(c_int32_t), intent(in) :: components
+    integer(c_int64_t), intent(in) :: byte_stride
+    integer(c_int32_t) :: status
+    status = c_context_set_attribute_device_f64(ctx%ptr, trim(name) // c_null_char, data, components, byte_stride)
+  end function nbmc_context_set_attribute_device_f64
+
+  !> Attributes interpolated onto the mesh (0 without).
+  integer(c_int32_t) function nbmc_mesh_attribute_count(mesh)
+    type(nbmc_mesh), intent(in) :: mesh
+    nbmc_mesh_attribute_count = c_mesh_attribute_count(mesh%ptr)
+  end function nbmc_mesh_attribute_count
+
+  !> Name of attribute i, 1-based here (1 <= i <= nbmc_mesh_attribute_count);
+  !> '' out of range.
+  function nbmc_mesh_attribute_name(mesh, i) result(s)
+    type(nbmc_mesh), intent(in) :: mesh
+    integer(c_int32_t), intent(in) :: i
+    character(len=:), allocatable :: s
+    if (i < 1) then
+      s = ''
+    else
+      s = from_c(c_mesh_attribute_name(mesh%ptr, i - 1))
+    end if
+  end function nbmc_mesh_attribute_name
+
+  !> The values of attribute name as a pointer a(components, nv) into the
+  !> mesh (host memory for every mesh), valid until nbmc_mesh_close; not
+  !> associated when the mesh has no such attribute (nbmc_last_error() says
+  !> why) or no vertices. components (optional) is 1 or 3, 0 when absent.
+  function nbmc_mesh_attribute(mesh, name, components) result(a)
+    type(nbmc_mesh), intent(in) :: mesh
+    character(len=*), intent(in) :: name
+    integer(c_int32_t), intent(out), optional :: components
+    real(c_float), pointer :: a(:, :)
+    type(c_ptr) :: p
+    integer(c_int32_t) :: c
+    nullify(a)
+    p = c_mesh_attribute(mesh%ptr, trim(name) // c_null_char, c)
+    if (present(components)) components = c
+    if (c_associated(p)) call c_f_pointer(p, a, [int(c, c_int64_t), c_mesh_vertex_count(mesh%ptr)])
+  end function nbmc_mesh_attribute
 
   ! ----------------------------------------------------------------- Kokkos
 

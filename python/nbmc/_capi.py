@@ -62,6 +62,7 @@ STAGE_OUTPUT = 6
 STAGE_COUNT = 7
 STAGE_SLOTS = 16
 STAGE_POSTPROCESS = 7
+STAGE_ATTRIBUTES = 8
 SUBDOMAINS_AUTO = -1
 
 
@@ -236,6 +237,13 @@ _SIGNATURES = {
     "nbmc_context_subdomain_entry": (c_int32, [_ctx_p, c_uint64, POINTER(SubdomainEntry)]),
     "nbmc_mesh_global_vertex_ids": (c_void_p, [_mesh_p]),
     "nbmc_mesh_global_vertex_count": (c_uint64, [_mesh_p]),
+    "nbmc_context_set_attribute_f32": (c_int32, [_ctx_p, c_char_p, c_void_p, c_uint32, c_uint64]),
+    "nbmc_context_set_attribute_f64": (c_int32, [_ctx_p, c_char_p, c_void_p, c_uint32, c_uint64]),
+    "nbmc_context_set_attribute_device_f32": (c_int32, [_ctx_p, c_char_p, c_void_p, c_uint32, c_uint64]),
+    "nbmc_context_set_attribute_device_f64": (c_int32, [_ctx_p, c_char_p, c_void_p, c_uint32, c_uint64]),
+    "nbmc_mesh_attribute_count": (c_uint32, [_mesh_p]),
+    "nbmc_mesh_attribute_name": (c_char_p, [_mesh_p, c_uint32]),
+    "nbmc_mesh_attribute": (c_void_p, [_mesh_p, c_char_p, POINTER(c_uint32)]),
 }
 
 _NAMES = ("libnbmc.so.0", "libnbmc.so") if sys.platform.startswith("linux") else (

@@ -7,8 +7,8 @@ import os
 import re
 import threading
 import weakref
-from ctypes import byref, c_int32, c_uint64, c_void_p
-from typing import (Any, Callable, Dict, Iterable, Iterator, NamedTuple, Optional, Sequence,
+from ctypes import byref, c_int32, c_uint32, c_uint64, c_void_p
+from typing import (Any, Callable, Dict, Iterable, Iterator, Mapping, NamedTuple, Optional, Sequence,
                     Tuple, Union)
 
 import numpy as np
@@ -271,9 +271,21 @@ class Mesh:
 
     @property
     def attributes(self) -> Dict[str, np.ndarray]:
-        """Interpolated particle attributes: always empty, because the C ABI
-        (0.1) has no call that passes attributes (see docs/python.md)."""
-        return {}
+        """Particle attributes interpolated onto the vertices
+        (:meth:`Context.set_attribute`): name -> read-only float32 view of
+        shape (V,) for a scalar or (V, 3) for a vector, in host memory for
+        every mesh (``nbmc_mesh_attribute``); ``{}`` without attributes."""
+        if "attributes" not in self._cache:
+            out: Dict[str, np.ndarray] = {}
+            nv = self.vertex_count
+            for i in range(int(lib.nbmc_mesh_attribute_count(self._h.ptr))):
+                raw = lib.nbmc_mesh_attribute_name(self._h.ptr, i)
+                comps = c_uint32(0)
+                ptr = lib.nbmc_mesh_attribute(self._h.ptr, raw, byref(comps))
+                shape = (nv,) if comps.value == 1 else (nv, int(comps.value))
+                out[raw.decode("utf-8", "replace")] = A.host_view(ptr or 0, shape, np.float32, self._h)
+            self._cache["attributes"] = out
+        return dict(self._cache["attributes"])
 
     @property
     def timings(self) -> Dict[str, float]:
@@ -570,6 +582,50 @@ class Context:
         self._count = h.count  # h.keep held the array through the call
         return h.count
 
+    def set_attribute(self, name: str, values: Any) -> None:
+        """Sets (copies) the per-particle attribute ``name`` (velocity,
+        density, temperature, ...) for the particles uploaded last: an (N,)
+        array-like (a scalar) or (N, 3) (a vector), float32 or float64 (other
+        numeric types are converted to float64), N the particle count. The
+        next reconstruction interpolates it onto the mesh
+        (:attr:`Mesh.attributes`) with the field's kernel. Every particle
+        upload removes all attributes: set them after the particles. Setting
+        a name again replaces it; ``values=None`` removes it. NaN or infinite
+        values raise :class:`nbmc.InvalidParticles`; a wrong length
+        ValueError."""
+        with self._lock:
+            self._set_attribute(name, values)
+
+    def _set_attribute(self, name: str, values: Any) -> None:
+        key = name.encode()
+        if values is None:
+            self._check(lib.nbmc_context_set_attribute_f64(self._handle, key, None, 1, 0))
+            return
+        a = np.asarray(values)
+        if a.dtype not in (np.float32, np.float64) or not a.dtype.isnative:
+            if a.dtype.kind not in "fiub":
+                raise TypeError(f"attribute {name!r} must be numeric, not {a.dtype}")
+            a = np.asarray(a, dtype=np.float64)
+        if a.ndim == 1:
+            comps = 1
+        elif a.ndim == 2 and a.shape[1] in (1, 3):
+            comps = a.shape[1]
+        else:
+            raise ValueError(f"attribute {name!r} must have shape (N,) or (N, 3), not {a.shape}")
+        if not self._count:
+            raise error_for(C.ERROR_NO_PARTICLES, f"set_attribute({name!r}): no particles uploaded; "
+                            "upload the particles first (an upload removes all attributes)")
+        # The library reads one item per particle it holds: the length must match.
+        if a.shape[0] != self._count:
+            raise ValueError(f"attribute {name!r} has {a.shape[0]} items for {self._count} particles")
+        a = np.ascontiguousarray(a)
+        fn = lib.nbmc_context_set_attribute_f64 if a.dtype == np.float64 else lib.nbmc_context_set_attribute_f32
+        self._check(fn(self._handle, key, a.ctypes.data, comps, 0))
+
+    def remove_attribute(self, name: str) -> None:
+        """Removes the attribute ``name`` (no error when there is none)."""
+        self.set_attribute(name, None)
+
     def load_particles(self, path: PathLike, format: Optional[str] = None) -> int:
         """Reads a particle file with nbmc's readers (xyz, ply, vtk, vtu, vtp,
         bgeo, h5part, pysph, gadget/swift, hdf5; ``"run.h5:/PartType1"`` names
@@ -589,16 +645,17 @@ class Context:
     # -- reconstruction
     def reconstruct(self, points: Any = None, spacing: Optional[float] = None, *,
                     particle_radius: Optional[float] = None, bbox: Any = None,
-                    format: Optional[str] = None, attributes: Optional[Sequence[str]] = None,
+                    format: Optional[str] = None,
+                    attributes: Union[Mapping[str, Any], Sequence[str], None] = None,
                     **params: Any) -> Mesh:
         """Reconstructs the surface; see :func:`nbmc.reconstruct` for the
         parameters. ``points``: an array (uploaded first), a path (read with
         :meth:`load_particles`, ``format`` as there), a :class:`Particles`
         (its file is read), or None to reuse the particles uploaded last."""
-        if attributes:
+        if attributes and not isinstance(attributes, Mapping):
             raise NotImplementedError(
-                "attributes: the nbmc C ABI 0.1 cannot pass particle attributes or return "
-                "interpolated ones; use the CLI's --attributes (see docs/python.md)")
+                "attributes: the C ABI cannot read a particle file's attributes; pass arrays "
+                "instead, attributes={'vel': array, ...} (see docs/python.md)")
         p = make_params(spacing, particle_radius, bbox, **params)
         with self._lock:
             if isinstance(points, Particles):
@@ -607,6 +664,8 @@ class Context:
                 self._load(points, format)
             elif points is not None:
                 self._set_particles(points)
+            for name, values in (attributes or {}).items():
+                self._set_attribute(name, values)
             return self._reconstruct(p)
 
     def _reconstruct(self, p: C.Params) -> Mesh:
@@ -758,7 +817,7 @@ def reconstruct(points: Any, spacing: Optional[float] = None, *,
                 device_id: int = 0, memory_budget: Union[int, str, None] = None,
                 mesh_memory: str = "host", progress: Optional[ProgressFn] = None,
                 format: Optional[str] = None,
-                attributes: Optional[Sequence[str]] = None) -> Mesh:
+                attributes: Union[Mapping[str, Any], Sequence[str], None] = None) -> Mesh:
     """Reconstructs the surface of particles as a triangle mesh.
 
     points
@@ -789,7 +848,11 @@ def reconstruct(points: Any, spacing: Optional[float] = None, *,
     backend, threads, device_id, memory_budget, mesh_memory, progress
         As for :class:`Context`.
     attributes
-        Not available through the C ABI 0.1 (raises NotImplementedError).
+        ``{{name: values}}``: per-particle arrays, (N,) or (N, 3), interpolated
+        onto the vertices (:attr:`Mesh.attributes`; see
+        :meth:`Context.set_attribute`). A particle file's own attributes
+        cannot be read through the C ABI (a list of names raises
+        NotImplementedError).
 
     The defaults above are read from the loaded library (``nbmc_params_init``)
     and are what ``None`` means. Names follow the CLI's options

@@ -229,8 +229,33 @@ nbmc::io::MeshView mesh_view(const nbmc_mesh* mesh) {
   return view;
 }
 
-double absolute_radius(const nbmc_params& p) {
-  return p.length_unit == NBMC_UNIT_ABSOLUTE ? p.influence_radius : p.influence_radius * p.spacing;
+// Hands the particle attributes asked for with --attributes (under the
+// file's names) to the context, which interpolates them onto the mesh
+// (nbmc_context_set_attribute_f64). Returns the status; the message is the
+// context's.
+std::int32_t set_attributes(nbmc_context* ctx, const nbmc::io::Particles& p, const std::vector<std::string>& names) {
+  for (const std::string& n : names) {
+    const nbmc::io::Attribute* a = p.attribute(n);
+    if (!a) continue;  // check_attributes reported it
+    const std::int32_t st = nbmc_context_set_attribute_f64(ctx, a->name.c_str(), a->values.data(),
+                                                           static_cast<std::uint32_t>(a->components), 0);
+    if (st != NBMC_OK) return st;
+  }
+  return NBMC_OK;
+}
+
+// The attributes the library interpolated onto mesh, for the writers.
+std::vector<nbmc::io::Attribute> mesh_attributes(const nbmc_mesh* mesh) {
+  std::vector<nbmc::io::Attribute> out(nbmc_mesh_attribute_count(mesh));
+  const std::uint64_t nv = nbmc_mesh_vertex_count(mesh);
+  for (std::uint32_t i = 0; i < out.size(); ++i) {
+    out[i].name = nbmc_mesh_attribute_name(mesh, i);
+    std::uint32_t comps = 0;
+    const float* v = nbmc_mesh_attribute(mesh, out[i].name.c_str(), &comps);
+    out[i].components = static_cast<int>(comps);
+    if (v) out[i].values.assign(v, v + nv * comps);
+  }
+  return out;
 }
 
 // Every name asked for with --attributes must be in the file. The message
@@ -277,6 +302,9 @@ nbmc::cli::FrameResult run_frame(const Options& o, nbmc_context* ctx, const nbmc
       r.particles = particles.count();
       std::int32_t st = nbmc_context_set_particles_f64(ctx, particles.xyz.data(), particles.count(), 0);
       if (st != NBMC_OK) throw cli::FrameError(std::string(nbmc_status_string(st)) + ": " + nbmc_context_last_error(ctx));
+      st = set_attributes(ctx, particles, o.attributes);
+      if (st != NBMC_OK) throw cli::FrameError(std::string(nbmc_status_string(st)) + ": " + nbmc_context_last_error(ctx));
+      particles = io::Particles();  // the context has its copies
       nbmc_mesh* raw_mesh = nullptr;
       st = nbmc_context_reconstruct(ctx, &o.params, &raw_mesh);
       MeshPtr mesh(raw_mesh);
@@ -286,14 +314,9 @@ nbmc::cli::FrameResult run_frame(const Options& o, nbmc_context* ctx, const nbmc
       }
       if (st != NBMC_OK) throw cli::FrameError(std::string(nbmc_status_string(st)) + ": " + nbmc_context_last_error(ctx));
       io::MeshView view = mesh_view(mesh.get());
-      std::vector<io::Attribute> attrs;
-      if (!o.attributes.empty()) {
-        attrs = io::interpolate_attributes(particles.xyz, particles.attributes, o.attributes, view.positions,
-                                           view.vertex_count, absolute_radius(o.params));
-        view.attributes = attrs.data();
-        view.attribute_count = attrs.size();
-      }
-      particles = io::Particles();
+      const std::vector<io::Attribute> attrs = mesh_attributes(mesh.get());
+      view.attributes = attrs.empty() ? nullptr : attrs.data();
+      view.attribute_count = attrs.size();
       cli::make_parent_folders(f.output);
       io::write_mesh(f.output, view, "", [] { return cli::interrupted(); });
       r.vertices = view.vertex_count;
@@ -422,7 +445,9 @@ int reconstruct(Options& o) {
 
   st = nbmc_context_set_particles_f64(ctx.get(), particles.xyz.data(), particles.count(), 0);
   if (st != NBMC_OK) return library_error(st, nbmc_context_last_error(ctx.get()));
-  if (o.attributes.empty()) particles = io::Particles(); // the context has its copy
+  st = set_attributes(ctx.get(), particles, o.attributes);
+  if (st != NBMC_OK) return library_error(st, nbmc_context_last_error(ctx.get()));
+  particles = io::Particles(); // the context has its copies
 
   nbmc_mesh* raw_mesh = nullptr;
   st = nbmc_context_reconstruct(ctx.get(), &o.params, &raw_mesh);
@@ -454,12 +479,9 @@ int reconstruct(Options& o) {
   report.normals = view.normals != nullptr;
   std::vector<io::Attribute> vertex_attributes;
   try {
-    if (!o.attributes.empty()) {
-      const auto t0 = Clock::now();
-      vertex_attributes = io::interpolate_attributes(particles.xyz, particles.attributes, o.attributes,
-                                                     view.positions, view.vertex_count, absolute_radius(o.params));
-      report.interpolate_seconds = seconds_since(t0);
-      particles = io::Particles();
+    vertex_attributes = mesh_attributes(mesh.get());
+    if (!vertex_attributes.empty()) {
+      report.interpolate_seconds = report.stats.stage_seconds[NBMC_STAGE_ATTRIBUTES];
       view.attributes = vertex_attributes.data();
       view.attribute_count = vertex_attributes.size();
       for (const io::Attribute& a : vertex_attributes) report.attributes.push_back(a.name);

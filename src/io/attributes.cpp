@@ -3,6 +3,10 @@
 
 #include "io/detail.hpp"
 
+#if defined(_OPENMP)
+#include <omp.h>
+#endif
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -48,8 +52,7 @@ std::uint64_t hash(const Cell& c) {
 // of its particles.
 class HashGrid {
 public:
-  HashGrid(const std::vector<double>& xyz, double cell) : inv_(1.0 / cell) {
-    const std::size_t n = xyz.size() / 3;
+  HashGrid(const double* xyz, std::size_t n, double cell) : inv_(1.0 / cell) {
     for (int a = 0; a < 3; ++a) origin_[a] = std::numeric_limits<double>::infinity();
     for (std::size_t p = 0; p < n; ++p)
       for (int a = 0; a < 3; ++a) origin_[a] = std::min(origin_[a], xyz[3 * p + static_cast<std::size_t>(a)]);
@@ -116,9 +119,15 @@ private:
 std::vector<Attribute> interpolate_attributes(const std::vector<double>& xyz, const std::vector<Attribute>& attributes,
                                               const std::vector<std::string>& names, const float* vertices,
                                               std::uint64_t vertex_count, double radius) {
+  return interpolate_attributes(xyz.data(), xyz.size() / 3, attributes, names, vertices, vertex_count, radius);
+}
+
+std::vector<Attribute> interpolate_attributes(const double* xyz, std::size_t n, const std::vector<Attribute>& attributes,
+                                              const std::vector<std::string>& names, const float* vertices,
+                                              std::uint64_t vertex_count, double radius, int threads) {
   const std::string who = "attribute interpolation";
   if (!(radius > 0) || !std::isfinite(radius)) detail::fail_arg(who, "the radius must be positive and finite");
-  const std::size_t n = xyz.size() / 3;
+  if (n > 0 && !xyz) detail::fail_arg(who, "no particle positions");
   if (n == 0) detail::fail_arg(who, "there are no particles");
   if (n > std::numeric_limits<std::uint32_t>::max()) detail::fail_arg(who, "too many particles");
   if (vertex_count > 0 && !vertices) detail::fail_arg(who, "no vertex positions");
@@ -167,14 +176,18 @@ std::vector<Attribute> interpolate_attributes(const std::vector<double>& xyz, co
   }
   if (vertex_count == 0 || chosen.empty()) return out;
 
-  const HashGrid grid(xyz, radius);
+  const HashGrid grid(xyz, n, radius);
   const std::vector<std::uint32_t>& order = grid.order();
   const double r2 = radius * radius;
   const std::int64_t nvert = static_cast<std::int64_t>(vertex_count);
   // Beyond this many shells the nearest particle is found by a full scan.
   constexpr std::int64_t kMaxShells = 32;
 
-#pragma omp parallel
+#if defined(_OPENMP)
+  if (threads <= 0) threads = omp_get_max_threads();
+#endif
+  (void)threads;
+#pragma omp parallel num_threads(threads)
   {
     std::vector<double> acc(width);
 #pragma omp for schedule(dynamic, 256)

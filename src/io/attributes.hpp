@@ -50,6 +50,13 @@ std::vector<Attribute> interpolate_attributes(const std::vector<double>& particl
                                               const std::vector<std::string>& names, const float* vertices,
                                               std::uint64_t vertex_count, double radius);
 
+// The same over particle_count particles at xyz (3 doubles each), on threads
+// OpenMP threads (0: the OpenMP default); the result does not depend on it.
+std::vector<Attribute> interpolate_attributes(const double* xyz, std::size_t particle_count,
+                                              const std::vector<Attribute>& attributes,
+                                              const std::vector<std::string>& names, const float* vertices,
+                                              std::uint64_t vertex_count, double radius, int threads = 0);
+
 } // namespace nbmc::io
 
 #endif

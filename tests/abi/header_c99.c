@@ -68,7 +68,8 @@ int main(void) {
   CHECK(nbmc_stage_name(-1) == NULL);
   /* The post-processing stage (host) comes after the pipeline's stages. */
   CHECK(strcmp(nbmc_stage_name(NBMC_STAGE_POSTPROCESS), "postprocess") == 0);
-  CHECK(nbmc_stage_name(NBMC_STAGE_POSTPROCESS + 1) == NULL);
+  CHECK(strcmp(nbmc_stage_name(NBMC_STAGE_ATTRIBUTES), "attributes") == 0);
+  CHECK(nbmc_stage_name(NBMC_STAGE_ATTRIBUTES + 1) == NULL);
   CHECK(nbmc_backend_available(NBMC_BACKEND_SERIAL) == 1);
   CHECK(nbmc_backend_available(NBMC_BACKEND_AUTO) == 1);
   CHECK(nbmc_backend_available(-1) == 0);
@@ -113,6 +114,17 @@ int main(void) {
   CHECK(nbmc_context_set_mesh_memory(NULL, NBMC_MEMORY_HOST) == NBMC_ERROR_INVALID_ARGUMENT);
   CHECK(nbmc_mesh_memory(NULL) == NBMC_MEMORY_HOST);
   CHECK(nbmc_mesh_copy_to_host(NULL, NULL, NULL, NULL) == NBMC_ERROR_INVALID_ARGUMENT);
+  CHECK(nbmc_context_set_attribute_f32(NULL, "a", one, 1, 0) == NBMC_ERROR_INVALID_ARGUMENT);
+  CHECK(nbmc_context_set_attribute_f64(NULL, "a", NULL, 1, 0) == NBMC_ERROR_INVALID_ARGUMENT);
+  CHECK(nbmc_context_set_attribute_device_f32(NULL, "a", one, 1, 0) == NBMC_ERROR_INVALID_ARGUMENT);
+  CHECK(nbmc_context_set_attribute_device_f64(NULL, "a", NULL, 1, 0) == NBMC_ERROR_INVALID_ARGUMENT);
+  CHECK(nbmc_mesh_attribute_count(NULL) == 0 && nbmc_mesh_attribute_name(NULL, 0) == NULL);
+  {
+    uint32_t components = 9;
+    CHECK(nbmc_mesh_attribute(NULL, "a", &components) == NULL && components == 0);
+    CHECK(nbmc_last_error()[0] != '\0');
+  }
+  CHECK(strcmp(nbmc_stage_name(NBMC_STAGE_ATTRIBUTES), "attributes") == 0);
 
   /* Misuse of create: exact codes, a message, *out set to NULL. */
   ctx = (nbmc_context*)&desc;

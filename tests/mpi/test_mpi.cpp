@@ -288,6 +288,11 @@ void check_errors(const std::vector<double>& all, const nbmc_params& prm) {
     CHECK(nbmc_mpi_reconstruct(ctx, &bad, NBMC_MPI_GATHER, 0, &m) == NBMC_ERROR_INVALID_PARAMETER, "bad parameter");
     CHECK(nbmc_mpi_reconstruct(ctx, &prm, 5, 0, &m) == NBMC_ERROR_INVALID_ARGUMENT, "bad output");
     CHECK(nbmc_mpi_reconstruct(ctx, &prm, NBMC_MPI_GATHER, g_size, &m) == NBMC_ERROR_INVALID_ARGUMENT, "bad root");
+    // Attributes are not supported over MPI yet: refused before anything is read.
+    const double one = 1;
+    CHECK(nbmc_context_set_attribute_f64(ctx, "a", &one, 1, 0) == NBMC_ERROR_INVALID_ARGUMENT, "attribute on MPI");
+    CHECK(std::string(nbmc_context_last_error(ctx)).find("MPI") != std::string::npos, "%s",
+          nbmc_context_last_error(ctx));
     nbmc_context_destroy(ctx);
     nbmc_context* plain = context(false);
     CHECK(nbmc_mpi_reconstruct(plain, &prm, NBMC_MPI_GATHER, 0, &m) == NBMC_ERROR_INVALID_ARGUMENT, "unbound");

@@ -69,6 +69,7 @@ pub const NBMC_STAGE_OUTPUT: i32 = 6;
 pub const NBMC_STAGE_COUNT: i32 = 7;
 pub const NBMC_STAGE_SLOTS: usize = 16;
 pub const NBMC_STAGE_POSTPROCESS: i32 = 7;
+pub const NBMC_STAGE_ATTRIBUTES: i32 = 8;
 pub const NBMC_SUBDOMAINS_AUTO: i32 = -1;
 
 // ------------------------------------------------------------- opaque types
@@ -302,6 +303,41 @@ extern "C" {
     pub fn nbmc_context_subdomain_entry(ctx: *const nbmc_context, i: u64, out: *mut nbmc_subdomain_entry) -> i32;
     pub fn nbmc_mesh_global_vertex_ids(mesh: *const nbmc_mesh) -> *const u64;
     pub fn nbmc_mesh_global_vertex_count(mesh: *const nbmc_mesh) -> u64;
+
+    // particle attributes (`data` NULL removes the attribute `name`)
+    pub fn nbmc_context_set_attribute_f32(
+        ctx: *mut nbmc_context,
+        name: *const c_char,
+        data: *const f32,
+        components: u32,
+        byte_stride: u64,
+    ) -> i32;
+    pub fn nbmc_context_set_attribute_f64(
+        ctx: *mut nbmc_context,
+        name: *const c_char,
+        data: *const f64,
+        components: u32,
+        byte_stride: u64,
+    ) -> i32;
+    // `data` is CUDA device memory of the context's GPU (CUDA backend only).
+    pub fn nbmc_context_set_attribute_device_f32(
+        ctx: *mut nbmc_context,
+        name: *const c_char,
+        data: *const f32,
+        components: u32,
+        byte_stride: u64,
+    ) -> i32;
+    pub fn nbmc_context_set_attribute_device_f64(
+        ctx: *mut nbmc_context,
+        name: *const c_char,
+        data: *const f64,
+        components: u32,
+        byte_stride: u64,
+    ) -> i32;
+    pub fn nbmc_mesh_attribute_count(mesh: *const nbmc_mesh) -> u32;
+    pub fn nbmc_mesh_attribute_name(mesh: *const nbmc_mesh, i: u32) -> *const c_char;
+    // Host memory for every mesh (also one in device memory).
+    pub fn nbmc_mesh_attribute(mesh: *const nbmc_mesh, name: *const c_char, components: *mut u32) -> *const f32;
 }
 
 /// include/nbmc_mpi.h (feature `mpi`, links libnbmc_mpi): one frame over the

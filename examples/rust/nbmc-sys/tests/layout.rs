@@ -73,6 +73,7 @@ fn rust_constants() -> BTreeMap<&'static str, i128> {
         NBMC_STAGE_COUNT,
         NBMC_STAGE_SLOTS,
         NBMC_STAGE_POSTPROCESS,
+        NBMC_STAGE_ATTRIBUTES,
         NBMC_SUBDOMAINS_AUTO,
     ]
 }

@@ -468,6 +468,9 @@ impl Default for ContextOptions {
 pub struct Context {
     raw: NonNull<sys::nbmc_context>,
     progress: Option<ProgressSlot>,
+    // Particles of the last upload through this wrapper (None: unknown, after
+    // a failed upload or `as_raw`); attribute slices are checked against it.
+    particle_count: Option<usize>,
     // Send but not Sync: the C context has no internal locking.
     _not_sync: PhantomData<std::cell::Cell<()>>,
 }
@@ -504,7 +507,124 @@ impl Context {
             return Err(Error::new(status, c_str(unsafe { sys::nbmc_context_last_error(ptr::null()) })));
         }
         let raw = NonNull::new(raw).ok_or_else(|| Error::new(sys::NBMC_ERROR_INTERNAL, "context is NULL"))?;
-        Ok(Context { raw, progress: None, _not_sync: PhantomData })
+        Ok(Context { raw, progress: None, particle_count: None, _not_sync: PhantomData })
+    }
+
+    // The status of an upload of count particles; remembers the count.
+    fn uploaded(&mut self, status: i32, count: usize) -> Result<()> {
+        self.particle_count = if status == sys::NBMC_OK { Some(count) } else { None };
+        self.check(status)
+    }
+
+    fn attribute_name(name: &str) -> Result<CString> {
+        CString::new(name).map_err(|_| Error::new(sys::NBMC_ERROR_INVALID_ARGUMENT, "name contains a NUL byte"))
+    }
+
+    fn check_attribute(&self, len: usize, components: u32) -> Result<()> {
+        let n = self.particle_count.ok_or_else(|| {
+            Error::new(sys::NBMC_ERROR_NO_PARTICLES, "no particles uploaded through this Context (upload them first)")
+        })?;
+        if components != 1 && components != 3 {
+            return Err(Error::new(
+                sys::NBMC_ERROR_INVALID_ARGUMENT,
+                format!("components must be 1 (scalar) or 3 (vector), got {components}"),
+            ));
+        }
+        if Some(len) != n.checked_mul(components as usize) {
+            return Err(Error::new(
+                sys::NBMC_ERROR_INVALID_ARGUMENT,
+                format!("{len} values for {n} particles of {components} component(s)"),
+            ));
+        }
+        Ok(())
+    }
+
+    /// Sets (copies) the per-particle attribute `name` (velocity, density,
+    /// ...): `components` (1 or 3) values per particle of the last upload,
+    /// particle after particle; the next reconstruction interpolates it onto
+    /// the mesh's vertices ([`Mesh::attribute`]). Every particle upload
+    /// removes all attributes: set them after the particles. Setting a name
+    /// again replaces it. NaN or infinite values give
+    /// [`Error::INVALID_PARTICLES`]; a slice of the wrong length
+    /// [`Error::INVALID_ARGUMENT`].
+    pub fn set_attribute_f32(&mut self, name: &str, values: &[f32], components: u32) -> Result<()> {
+        self.check_attribute(values.len(), components)?;
+        let n = Self::attribute_name(name)?;
+        let s = unsafe {
+            sys::nbmc_context_set_attribute_f32(self.raw.as_ptr(), n.as_ptr(), values.as_ptr(), components, 0)
+        };
+        self.check(s)
+    }
+
+    /// Double-precision version of [`Context::set_attribute_f32`].
+    pub fn set_attribute_f64(&mut self, name: &str, values: &[f64], components: u32) -> Result<()> {
+        self.check_attribute(values.len(), components)?;
+        let n = Self::attribute_name(name)?;
+        let s = unsafe {
+            sys::nbmc_context_set_attribute_f64(self.raw.as_ptr(), n.as_ptr(), values.as_ptr(), components, 0)
+        };
+        self.check(s)
+    }
+
+    /// Removes the attribute `name` (Ok also when there is none).
+    pub fn remove_attribute(&mut self, name: &str) -> Result<()> {
+        let n = Self::attribute_name(name)?;
+        let s = unsafe { sys::nbmc_context_set_attribute_f64(self.raw.as_ptr(), n.as_ptr(), ptr::null(), 1, 0) };
+        self.check(s)
+    }
+
+    /// Sets the attribute `name` from CUDA device memory: item i's
+    /// `components` f32 values at byte offset `i * byte_stride` from `data`
+    /// (0 = packed; otherwise a multiple of 4), one item per particle of the
+    /// last upload. CUDA backend only, else [`Error::BACKEND_UNAVAILABLE`].
+    ///
+    /// # Safety
+    /// `data` must be CUDA device (or managed) memory of the context's GPU in
+    /// which those items are allocated and unchanged for the duration of the
+    /// call (see [`Context::set_particles_device_f32`]).
+    pub unsafe fn set_attribute_device_f32(
+        &mut self,
+        name: &str,
+        data: *const f32,
+        components: u32,
+        byte_stride: usize,
+    ) -> Result<()> {
+        let n = Self::attribute_name(name)?;
+        let s = unsafe {
+            sys::nbmc_context_set_attribute_device_f32(
+                self.raw.as_ptr(),
+                n.as_ptr(),
+                data,
+                components,
+                byte_stride as u64,
+            )
+        };
+        self.check(s)
+    }
+
+    /// Double-precision version of [`Context::set_attribute_device_f32`].
+    ///
+    /// # Safety
+    /// As for [`Context::set_attribute_device_f32`], with f64 values aligned
+    /// to 8 bytes.
+    pub unsafe fn set_attribute_device_f64(
+        &mut self,
+        name: &str,
+        data: *const f64,
+        components: u32,
+        byte_stride: usize,
+    ) -> Result<()> {
+        let n = Self::attribute_name(name)?;
+        let s = unsafe {
+            sys::nbmc_context_set_attribute_device_f64(
+                self.raw.as_ptr(),
+                n.as_ptr(),
+                data,
+                components,
+                byte_stride as u64,
+            )
+        };
+        self.check(s)
     }
 
     fn check(&self, status: i32) -> Result<()> {
@@ -516,8 +636,11 @@ impl Context {
     }
 
     /// The raw handle, for calls this crate does not wrap. It stays owned by
-    /// the context.
+    /// the context. The wrapper forgets the particle count (the caller may
+    /// upload through the handle): upload again through the wrapper before
+    /// [`Context::set_attribute_f32`].
     pub fn as_raw(&mut self) -> *mut sys::nbmc_context {
+        self.particle_count = None;
         self.raw.as_ptr()
     }
 
@@ -566,7 +689,7 @@ impl Context {
     pub unsafe fn set_particles_f32_raw(&mut self, xyz: *const f32, count: usize, byte_stride: usize) -> Result<()> {
         let s =
             unsafe { sys::nbmc_context_set_particles_f32(self.raw.as_ptr(), xyz, count as u64, byte_stride as u64) };
-        self.check(s)
+        self.uploaded(s, count)
     }
 
     /// Raw upload of f64 positions; see [`Context::set_particles_f32_raw`].
@@ -576,7 +699,7 @@ impl Context {
     pub unsafe fn set_particles_f64_raw(&mut self, xyz: *const f64, count: usize, byte_stride: usize) -> Result<()> {
         let s =
             unsafe { sys::nbmc_context_set_particles_f64(self.raw.as_ptr(), xyz, count as u64, byte_stride as u64) };
-        self.check(s)
+        self.uploaded(s, count)
     }
 
     /// Uploads (copies) `count` f32 positions from CUDA device memory: particle
@@ -602,7 +725,7 @@ impl Context {
         let s = unsafe {
             sys::nbmc_context_set_particles_device_f32(self.raw.as_ptr(), xyz, count as u64, byte_stride as u64)
         };
-        self.check(s)
+        self.uploaded(s, count)
     }
 
     /// Double-precision version of [`Context::set_particles_device_f32`]
@@ -615,7 +738,7 @@ impl Context {
         let s = unsafe {
             sys::nbmc_context_set_particles_device_f64(self.raw.as_ptr(), xyz, count as u64, byte_stride as u64)
         };
-        self.check(s)
+        self.uploaded(s, count)
     }
 
     /// Where the meshes of later reconstructions on this context are put:
@@ -643,7 +766,7 @@ impl Context {
                 &mut count,
             )
         };
-        self.check(s)?;
+        self.uploaded(s, count as usize)?;
         Ok(count)
     }
 
@@ -950,6 +1073,32 @@ impl Mesh {
             // Thread-local message; this thread made the call just now.
             Err(Error::new(s, thread_last_error()))
         }
+    }
+
+    /// Names of the attributes interpolated onto the mesh, in the order they
+    /// were first set on the context.
+    pub fn attribute_names(&self) -> Vec<String> {
+        let n = unsafe { sys::nbmc_mesh_attribute_count(self.raw.as_ptr()) };
+        (0..n).map(|i| c_str(unsafe { sys::nbmc_mesh_attribute_name(self.raw.as_ptr(), i) })).collect()
+    }
+
+    /// The values of attribute `name`, `components` (1 or 3) per vertex, and
+    /// that count; None when the mesh has no such attribute. Host memory for
+    /// every mesh (also one in device memory).
+    pub fn attribute(&self, name: &str) -> Option<(&[f32], usize)> {
+        let n = CString::new(name).ok()?;
+        let mut comps = 0u32;
+        let p = unsafe { sys::nbmc_mesh_attribute(self.raw.as_ptr(), n.as_ptr(), &mut comps) };
+        if comps == 0 {
+            return None;
+        }
+        let len = self.vertex_count() * comps as usize;
+        if p.is_null() || len == 0 {
+            return Some((&[], comps as usize));
+        }
+        // SAFETY: host memory of components * vertex_count floats, alive
+        // until nbmc_mesh_destroy (drop).
+        Some((unsafe { std::slice::from_raw_parts(p, len) }, comps as usize))
     }
 
     /// The raw handle; it stays owned by the mesh.

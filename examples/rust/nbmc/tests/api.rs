@@ -396,6 +396,47 @@ fn auto_traits() {
     // Not Sync: checked by the compile_fail doctest on `assert_context_not_sync`.
 }
 
+fn attributes_follow_the_particles_onto_the_mesh() {
+    let particles = sample();
+    let mut ctx = Context::new().unwrap();
+    // Before any upload through the wrapper.
+    assert_eq!(ctx.set_attribute_f32("a", &[1.0], 1).unwrap_err().code, Error::NO_PARTICLES);
+    ctx.set_particles_f32(&particles).unwrap();
+    let height: Vec<f32> = particles.iter().map(|p| p[1]).collect();
+    let vel: Vec<f64> = particles.iter().flat_map(|p| [1.0, 2.0 * p[0] as f64, -3.0]).collect();
+    ctx.set_attribute_f32("height", &height, 1).unwrap();
+    ctx.set_attribute_f64("vel", &vel, 3).unwrap();
+    // Wrong length, components, NaN.
+    assert_eq!(ctx.set_attribute_f32("h", &height[1..], 1).unwrap_err().code, Error::INVALID_ARGUMENT);
+    assert_eq!(ctx.set_attribute_f32("h", &height, 2).unwrap_err().code, Error::INVALID_ARGUMENT);
+    let mut bad = height.clone();
+    bad[7] = f32::NAN;
+    let e = ctx.set_attribute_f32("h", &bad, 1).unwrap_err();
+    assert_eq!(e.code, Error::INVALID_PARTICLES);
+    assert!(e.message.contains("particle 7"), "{e}");
+    let mesh = ctx.reconstruct(&Params::new(SPACING)).unwrap();
+    assert_eq!(mesh.attribute_names(), vec!["height".to_string(), "vel".to_string()]);
+    assert!(mesh.attribute("nope").is_none());
+    let (h, c) = mesh.attribute("height").unwrap();
+    assert_eq!((h.len(), c), (mesh.vertex_count(), 1));
+    let (lo, hi) = particles.iter().fold((f32::MAX, f32::MIN), |(lo, hi), p| (lo.min(p[1]), hi.max(p[1])));
+    for (v, p) in h.iter().zip(mesh.positions()) {
+        // A kernel mean of the particles' heights within R = 4 spacings.
+        assert!(*v >= lo && *v <= hi, "{v} outside [{lo}, {hi}]");
+        assert!((v - p[1]).abs() < 4.0 * SPACING as f32, "{v} vs vertex height {}", p[1]);
+    }
+    let (v, c) = mesh.attribute("vel").unwrap();
+    assert_eq!(c, 3);
+    for item in v.chunks_exact(3) {
+        assert!((item[0] - 1.0).abs() < 1e-6 && (item[2] + 3.0).abs() < 1e-6, "{item:?}");
+    }
+    // Removed, then all gone with the next upload.
+    ctx.remove_attribute("height").unwrap();
+    assert_eq!(ctx.reconstruct(&Params::new(SPACING)).unwrap().attribute_names(), vec!["vel".to_string()]);
+    ctx.set_particles_f32(&particles).unwrap();
+    assert!(ctx.reconstruct(&Params::new(SPACING)).unwrap().attribute_names().is_empty());
+}
+
 // ------------------------------------------------------------------ runner
 
 fn main() -> std::process::ExitCode {
@@ -417,6 +458,7 @@ fn main() -> std::process::ExitCode {
         ("device_mesh_without_slices_when_cuda_is_available", device_mesh_without_slices_when_cuda_is_available),
         ("names_and_version", names_and_version),
         ("auto_traits", auto_traits),
+        ("attributes_follow_the_particles_onto_the_mesh", attributes_follow_the_particles_onto_the_mesh),
     ];
     // libtest-like arguments: options are ignored, the first free word filters.
     let filter = std::env::args().skip(1).find(|a| !a.starts_with('-')).unwrap_or_default();
