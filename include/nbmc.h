@@ -458,7 +458,10 @@ NBMC_API int32_t nbmc_mesh_check(const nbmc_mesh* mesh, nbmc_mesh_check_result* 
  * of the frame exceeds 80% of the memory budget (nbmc_context_set_memory_budget;
  * on a CUDA context without one, 80% of the GPU's free memory), into as many
  * subdomains as the estimate asks, and further if one still exceeds the
- * budget. Applies to the following reconstructions. Returns NBMC_OK or
+ * budget; also when a run fails with OUT_OF_MEMORY, MEMORY_BUDGET or, for a
+ * GPU band over its size limit, DOMAIN_TOO_LARGE (then into 2, 4, ...
+ * subdomains, with or without a budget). Applies to the following
+ * reconstructions. Returns NBMC_OK or
  * NBMC_ERROR_INVALID_ARGUMENT. */
 NBMC_API int32_t nbmc_context_set_subdomains(nbmc_context* ctx, int32_t nx, int32_t ny, int32_t nz);
 
