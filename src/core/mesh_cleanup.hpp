@@ -40,7 +40,6 @@
 #include "parallel.hpp"
 
 #include <algorithm>
-#include <atomic>
 #include <cstdint>
 #include <iterator>
 #include <tuple>
@@ -74,26 +73,27 @@ class Cleaner {
     for (std::size_t v = 0; v < nv; ++v) tail_[v] = std::uint32_t(v);
     const double extent = bounding_extent(positions, nv);
     degenerate_double_area_ = 2 * kDegenerateAreaFraction * extent * extent;
-    // Triangles around each vertex (CSR, ascending triangle index): counted
-    // and filled on all host threads, each vertex's list sorted after.
+    // Triangles around each vertex (CSR, ascending triangle index). Each
+    // host thread owns a range of vertices and reads every triangle: no
+    // atomics, and the lists come out in triangle order by construction.
     {
-      std::vector<std::atomic<std::uint32_t>> count(nv + 1);
-      const std::size_t chunks = chunk_count(nt, 16384);
-      for_chunks(nt, chunks, [&](std::size_t, std::size_t b, std::size_t e) {
-        for (std::size_t i = 3 * b; i < 3 * e; ++i) count[tri[i] + 1].fetch_add(1, std::memory_order_relaxed);
+      const std::size_t chunks = chunk_count(nv, 16384);
+      std::vector<std::uint32_t> count(nv + 1, 0);
+      for_chunks(nv, chunks, [&](std::size_t, std::size_t b, std::size_t e) {
+        for (std::size_t i = 0; i < 3 * nt; ++i)
+          if (tri[i] >= b && tri[i] < e) ++count[tri[i] + 1];
       });
       start_.resize(nv + 1);
       start_[0] = 0;
-      for (std::size_t v = 0; v < nv; ++v) start_[v + 1] = start_[v] + count[v + 1].load(std::memory_order_relaxed);
-      for (std::size_t v = 0; v < nv; ++v) count[v].store(start_[v], std::memory_order_relaxed);
+      for (std::size_t v = 0; v < nv; ++v) start_[v + 1] = start_[v] + count[v + 1];
       incident_.resize(start_[nv]);
-      for_chunks(nt, chunks, [&](std::size_t, std::size_t b, std::size_t e) {
-        for (std::size_t t = b; t < e; ++t)
-          for (int k = 0; k < 3; ++k)
-            incident_[count[tri[3 * t + k]].fetch_add(1, std::memory_order_relaxed)] = std::uint32_t(t);
-      });
-      for_chunks(nv, chunk_count(nv, 16384), [&](std::size_t, std::size_t b, std::size_t e) {
-        for (std::size_t v = b; v < e; ++v) std::sort(incident_.begin() + start_[v], incident_.begin() + start_[v + 1]);
+      for_chunks(nv, chunks, [&](std::size_t, std::size_t b, std::size_t e) {
+        std::vector<std::uint32_t> fill(start_.begin() + std::ptrdiff_t(b), start_.begin() + std::ptrdiff_t(e));
+        for (std::size_t t = 0; t < nt; ++t)
+          for (int k = 0; k < 3; ++k) {
+            const std::uint32_t v = tri[3 * t + k];
+            if (v >= b && v < e) incident_[fill[v - b]++] = std::uint32_t(t);
+          }
       });
     }
     mark_irregular();
