@@ -84,6 +84,8 @@ extern "C" {
 /* Scalar field methods (nbmc_params.method). */
 #define NBMC_METHOD_SSP07  0  /* Solenthaler, Schlaefli, Pajarola 2007 (default) */
 #define NBMC_METHOD_ZB05   1  /* Zhu & Bridson 2005 */
+#define NBMC_METHOD_SPH    2  /* normalised SPH density (cubic spline), splashsurf's level set;
+                                 iso level nbmc_params.iso_threshold */
 
 /* Field evaluation strategies (nbmc_params.field). */
 #define NBMC_FIELD_NARROW_BAND  0  /* gather on band vertices only (the method; default) */
@@ -241,7 +243,9 @@ typedef struct nbmc_params {
   int32_t use_bbox;         /* non-zero: only particles within R of [bbox_min, bbox_max] (absolute)
                                are used and the grid covers the box plus a margin of
                                max(band_width, iso_radius + cell_size) + 2 cells; the mesh is
-                               not clipped to the box and may reach into that margin */
+                               not clipped to the box and may reach into that margin
+                               (NBMC_METHOD_SPH: particles within 2R, margin with R in place
+                               of iso_radius) */
   int32_t reserved0;
   double bbox_min[3];
   double bbox_max[3];
@@ -251,6 +255,11 @@ typedef struct nbmc_params {
   int32_t cleanup;          /* non-zero (default): remove degenerate and sliver triangles by edge
                                collapses and flips; 0: the raw marching-cubes mesh */
   int32_t smooth_iterations; /* Taubin lambda|mu smoothing steps after the clean-up; default 0 */
+  /* Appended with NBMC_METHOD_SPH (older callers: the default). */
+  double iso_threshold;     /* NBMC_METHOD_SPH: iso level of the normalised density, a fraction of
+                               the rest density, 0 < iso_threshold < 1; default 0.6 (splashsurf's
+                               --surface-threshold). The kernel's compact support is
+                               influence_radius. Ignored by the other methods. */
 } nbmc_params;
 
 /* Fills *params with the defaults (spacing is 0 and must be set). */

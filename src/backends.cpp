@@ -278,7 +278,8 @@ Params resolve_params(const nbmc_params& in) {
   require(std::isfinite(in.spacing) && in.spacing > 0, "spacing must be a positive number (got " + num(in.spacing) + ")");
   require(in.length_unit == NBMC_UNIT_SPACING || in.length_unit == NBMC_UNIT_ABSOLUTE,
           "length_unit must be NBMC_UNIT_SPACING or NBMC_UNIT_ABSOLUTE");
-  require(in.method == NBMC_METHOD_SSP07 || in.method == NBMC_METHOD_ZB05, "unknown method " + std::to_string(in.method));
+  require(in.method == NBMC_METHOD_SSP07 || in.method == NBMC_METHOD_ZB05 || in.method == NBMC_METHOD_SPH,
+          "unknown method " + std::to_string(in.method));
   require(in.field >= NBMC_FIELD_NARROW_BAND && in.field <= NBMC_FIELD_SCATTER,
           "unknown field strategy " + std::to_string(in.field));
   const struct {
@@ -291,6 +292,11 @@ Params resolve_params(const nbmc_params& in) {
     require(std::isfinite(l.v) && l.v > 0, std::string(l.name) + " must be a positive number (got " + num(l.v) + ")");
   require(std::isfinite(in.t_low) && std::isfinite(in.t_high) && in.t_low < in.t_high,
           "t_low must be smaller than t_high (got " + num(in.t_low) + ", " + num(in.t_high) + ")");
+  // Checked whatever the method, like t_low and t_high (a caller built
+  // against an older header gets the default 0.6).
+  require(std::isfinite(in.iso_threshold) && in.iso_threshold > 0 && in.iso_threshold < 1,
+          "iso_threshold must lie strictly between 0 and 1, a fraction of the rest density (got " +
+              num(in.iso_threshold) + ")");
   require(std::isfinite(in.color_threshold) && in.color_threshold >= 0, "color_threshold must be >= 0");
   require(in.neighbour_threshold >= 0, "neighbour_threshold must be >= 0");
   Params p;
@@ -301,7 +307,9 @@ Params resolve_params(const nbmc_params& in) {
   p.band_width = length(in, in.band_width, r);
   p.surface_radius = length(in, in.surface_radius, r);
   p.iso_radius = length(in, in.iso_radius, r);
-  require(p.iso_radius < p.influence_radius, "iso_radius must be smaller than influence_radius");
+  // (the SPH density does not use iso_radius)
+  require(in.method == NBMC_METHOD_SPH || p.iso_radius < p.influence_radius,
+          "iso_radius must be smaller than influence_radius");
   require(p.surface_radius <= 2 * p.influence_radius,
           "surface_radius may be at most twice the influence radius (got " + num(p.surface_radius) + " and " +
               num(p.influence_radius) + ")");
@@ -309,6 +317,7 @@ Params resolve_params(const nbmc_params& in) {
   p.field = FieldKind(in.field);
   p.t_low = in.t_low;
   p.t_high = in.t_high;
+  p.iso_threshold = in.iso_threshold;
   p.color_threshold = in.color_threshold;
   p.neighbour_threshold = in.neighbour_threshold;
   p.normals = in.compute_normals != 0;

@@ -360,6 +360,7 @@ void nbmc_params_init(nbmc_params* p) {
   p->neighbour_threshold = 25;
   p->compute_normals = 1;
   p->cleanup = 1;
+  p->iso_threshold = 0.6;
 }
 
 int32_t nbmc_context_reconstruct(nbmc_context* ctx, const nbmc_params* params, nbmc_mesh** mesh) {

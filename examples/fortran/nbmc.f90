@@ -88,6 +88,7 @@ module nbmc
 
   integer(c_int32_t), parameter, public :: NBMC_METHOD_SSP07 = 0
   integer(c_int32_t), parameter, public :: NBMC_METHOD_ZB05  = 1
+  integer(c_int32_t), parameter, public :: NBMC_METHOD_SPH   = 2
 
   integer(c_int32_t), parameter, public :: NBMC_FIELD_NARROW_BAND = 0
   integer(c_int32_t), parameter, public :: NBMC_FIELD_DENSE       = 1
@@ -156,6 +157,7 @@ module nbmc
     real(c_double)     :: bbox_max(3) = 0
     integer(c_int32_t) :: cleanup = 0             ! appended (post-processing)
     integer(c_int32_t) :: smooth_iterations = 0
+    real(c_double)     :: iso_threshold = 0       ! appended (NBMC_METHOD_SPH)
   end type nbmc_params
 
   type, bind(c), public :: nbmc_stats

@@ -39,6 +39,7 @@ BACKEND_CUDA = 3
 
 METHOD_SSP07 = 0
 METHOD_ZB05 = 1
+METHOD_SPH = 2
 
 FIELD_NARROW_BAND = 0
 FIELD_DENSE = 1
@@ -101,6 +102,8 @@ class Params(Structure):
         # appended with the mesh post-processing (nbmc_params_init writes them)
         ("cleanup", c_int32),
         ("smooth_iterations", c_int32),
+        # appended with METHOD_SPH
+        ("iso_threshold", c_double),
     ]
 
 

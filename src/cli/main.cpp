@@ -51,7 +51,7 @@ struct Named {
   const char* name;
   std::int32_t value;
 };
-const Named kMethods[] = {{"ssp07", NBMC_METHOD_SSP07}, {"zb05", NBMC_METHOD_ZB05}};
+const Named kMethods[] = {{"ssp07", NBMC_METHOD_SSP07}, {"zb05", NBMC_METHOD_ZB05}, {"sph", NBMC_METHOD_SPH}};
 const Named kFields[] = {
     {"narrow-band", NBMC_FIELD_NARROW_BAND}, {"dense", NBMC_FIELD_DENSE}, {"scatter", NBMC_FIELD_SCATTER}};
 const Named kBackends[] = {{"auto", NBMC_BACKEND_AUTO},
@@ -941,11 +941,17 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   rec->add_option("--iso-radius", p.iso_radius, "Iso radius (SSP07) or particle radius (ZB05) of the field")
       ->capture_default_str();
-  rec->add_option("--method", o.method, "Scalar field")
+  rec->add_option("--method", o.method,
+                  "Scalar field: ssp07, zb05, or sph (splashsurf's normalised SPH density, cubic spline of "
+                  "support --influence-radius, surface at --iso-threshold)")
       ->check(CLI::IsMember(names(kMethods), CLI::ignore_case))
       ->capture_default_str();
   rec->add_option("--field", o.field, "Field evaluation: on the band only, or baselines")
       ->check(CLI::IsMember(names(kFields), CLI::ignore_case))
+      ->capture_default_str();
+  rec->add_option("--iso-threshold", p.iso_threshold,
+                  "SPH: iso level of the normalised density, a fraction of the rest density in (0, 1) "
+                  "(splashsurf's --surface-threshold)")
       ->capture_default_str();
   rec->add_option("--t-low", p.t_low, "SSP07 lower eigenvalue threshold")->capture_default_str();
   rec->add_option("--t-high", p.t_high, "SSP07 upper eigenvalue threshold")->capture_default_str();

@@ -93,7 +93,9 @@ std::vector<std::pair<const char*, std::uint64_t>> check_counts(const nbmc_mesh_
 
 const char* yes_no(std::int32_t v) { return v ? "yes" : "no"; }
 
-const char* method_name(std::int32_t m) { return m == NBMC_METHOD_ZB05 ? "zb05" : "ssp07"; }
+const char* method_name(std::int32_t m) {
+  return m == NBMC_METHOD_ZB05 ? "zb05" : m == NBMC_METHOD_SPH ? "sph" : "ssp07";
+}
 const char* field_name(std::int32_t f) {
   return f == NBMC_FIELD_DENSE ? "dense" : f == NBMC_FIELD_SCATTER ? "scatter" : "narrow-band";
 }
@@ -183,7 +185,10 @@ std::string format_report(const Report& r) {
     line("attributes", names + " (interpolated, " + printf_string("%.4f", r.interpolate_seconds) + " s)");
   }
   line("backend", r.backend);
-  line("method", std::string(method_name(r.params.method)) + ", " + field_name(r.params.field) + " field");
+  line("method", std::string(method_name(r.params.method)) +
+                    (r.params.method == NBMC_METHOD_SPH ? printf_string(" (iso threshold %g)", r.params.iso_threshold)
+                                                        : std::string()) +
+                    ", " + field_name(r.params.field) + " field");
   line("mesh", (r.params.cleanup ? "cleaned up (" + grouped(s.raw_triangle_count) + " triangles before)"
                                   : std::string("raw (no clean-up)")) +
                    (r.params.smooth_iterations > 0
@@ -293,7 +298,7 @@ std::string format_json(const Report& r) {
       {"spacing", p.spacing},           {"cell_size", p.cell_size},   {"influence_radius", p.influence_radius},
       {"band_width", p.band_width},     {"surface_radius", p.surface_radius},
       {"iso_radius", p.iso_radius},     {"t_low", p.t_low},           {"t_high", p.t_high},
-      {"color_threshold", p.color_threshold}};
+      {"color_threshold", p.color_threshold}, {"iso_threshold", p.iso_threshold}};
   for (const auto& [k, v] : reals) o += std::string(", \"") + k + "\": " + json_number(v);
   o += ", \"method\": " + json_string(method_name(p.method));
   o += ", \"field\": " + json_string(field_name(p.field));

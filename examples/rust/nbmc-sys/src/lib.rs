@@ -43,6 +43,7 @@ pub const NBMC_BACKEND_CUDA: i32 = 3;
 
 pub const NBMC_METHOD_SSP07: i32 = 0;
 pub const NBMC_METHOD_ZB05: i32 = 1;
+pub const NBMC_METHOD_SPH: i32 = 2;
 
 pub const NBMC_FIELD_NARROW_BAND: i32 = 0;
 pub const NBMC_FIELD_DENSE: i32 = 1;
@@ -124,6 +125,8 @@ pub struct nbmc_params {
     // appended with the mesh post-processing
     pub cleanup: i32,
     pub smooth_iterations: i32,
+    // appended with NBMC_METHOD_SPH
+    pub iso_threshold: f64,
 }
 
 #[repr(C)]

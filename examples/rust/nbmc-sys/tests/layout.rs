@@ -55,6 +55,7 @@ fn rust_constants() -> BTreeMap<&'static str, i128> {
         NBMC_BACKEND_CUDA,
         NBMC_METHOD_SSP07,
         NBMC_METHOD_ZB05,
+        NBMC_METHOD_SPH,
         NBMC_FIELD_NARROW_BAND,
         NBMC_FIELD_DENSE,
         NBMC_FIELD_SCATTER,
@@ -134,7 +135,8 @@ fn rust_layouts() -> Vec<Layout> {
             bbox_min,
             bbox_max,
             cleanup,
-            smooth_iterations
+            smooth_iterations,
+            iso_threshold
         }),
         layout!(nbmc_stats {
             struct_size,

@@ -205,6 +205,9 @@ int_enum!(
         Ssp07 = sys::NBMC_METHOD_SSP07,
         /// Zhu & Bridson 2005.
         Zb05 = sys::NBMC_METHOD_ZB05,
+        /// Normalised SPH density (cubic spline of support `influence_radius`),
+        /// splashsurf's level set, at `iso_threshold`.
+        Sph = sys::NBMC_METHOD_SPH,
     }
 );
 
@@ -294,6 +297,9 @@ pub struct Params {
     /// SSP07 eigenvalue thresholds (defaults 0.4 and 3.5).
     pub t_low: f64,
     pub t_high: f64,
+    /// `Method::Sph`: iso level of the normalised density, a fraction of the
+    /// rest density in (0, 1) (default 0.6).
+    pub iso_threshold: f64,
     /// Colour-field gradient threshold of the surface test (default 0.75).
     pub color_threshold: f64,
     /// Fewer neighbours than this means surface (default 25).
@@ -321,6 +327,7 @@ impl Params {
             field: FieldStrategy::from_raw(p.field).unwrap_or(FieldStrategy::NarrowBand),
             t_low: p.t_low,
             t_high: p.t_high,
+            iso_threshold: p.iso_threshold,
             color_threshold: p.color_threshold,
             neighbour_threshold: p.neighbour_threshold,
             compute_normals: p.compute_normals != 0,
@@ -343,6 +350,7 @@ impl Params {
         p.field = self.field.raw();
         p.t_low = self.t_low;
         p.t_high = self.t_high;
+        p.iso_threshold = self.iso_threshold;
         p.color_threshold = self.color_threshold;
         p.neighbour_threshold = self.neighbour_threshold;
         p.compute_normals = i32::from(self.compute_normals);
