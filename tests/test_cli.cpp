@@ -252,3 +252,41 @@ TEST_F(CliTest, SubdomainsGiveTheSameFile) {
   }
   EXPECT_FALSE(fs::exists(path("bad.ply")));
 }
+
+// --method sph with splashsurf's parameters: the same mesh as the C API,
+// the method and threshold in the report and the JSON, a split gives the
+// same file, and a threshold out of (0, 1) is the library's error (exit 1).
+TEST_F(CliTest, SphMethodLikeSplashsurf) {
+  const std::string frame = std::string(NBMC_SOURCE_DIR) + "/examples/data/double_dam_break_4732.xyz";
+  const std::string base = "reconstruct " + quote(frame) +
+                           " --particle-radius 0.025 --method sph --influence-radius 2 --cell-size 0.75"
+                           " --iso-threshold 0.55 --progress never";
+  Result r = run(base + " -o " + quote(path("sph.ply")) + " --json " + quote(path("sph.json")));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(contains(r.out, "sph (iso threshold 0.55)")) << r.out;
+  const std::string json = slurp(path("sph.json"));
+  EXPECT_TRUE(contains(json, "\"method\": \"sph\"")) << json;
+  EXPECT_TRUE(contains(json, "\"iso_threshold\": 0.55")) << json;
+  const auto mesh = nbmc::io::read_mesh_ply(path("sph.ply"));
+  const auto particles = nbmc::io::read_particles(frame);
+  nbmc_params p = nbmc_test::params(0.05);
+  p.method = NBMC_METHOD_SPH;
+  p.influence_radius = 2;
+  p.cell_size = 0.75;
+  p.iso_threshold = 0.55;
+  const nbmc_test::Result direct = nbmc_test::reconstruct(particles.xyz, p, NBMC_BACKEND_AUTO);
+  ASSERT_EQ(direct.status, NBMC_OK) << direct.message;
+  EXPECT_GT(mesh.triangle_count(), 0u);
+  EXPECT_EQ(mesh.triangle_count(), direct.mesh.triangle_count());
+  EXPECT_EQ(mesh.vertex_count(), direct.mesh.vertex_count());
+  Result split = run(base + " -o " + quote(path("split.ply")) + " --subdomains 2x2x1");
+  ASSERT_EQ(split.exit_code, 0) << split.err;
+  EXPECT_EQ(slurp(path("sph.ply")), slurp(path("split.ply")));
+  for (const char* bad : {"0", "1", "-0.2", "nan"}) {
+    Result b = run("reconstruct " + quote(frame) + " -o " + quote(path("bad.ply")) +
+                   " --particle-radius 0.025 --method sph --iso-threshold " + bad);
+    EXPECT_NE(b.exit_code, 0) << bad;
+    EXPECT_TRUE(contains(b.err, "iso_threshold") || contains(b.err, "--iso-threshold")) << bad << ": " << b.err;
+  }
+  EXPECT_FALSE(fs::exists(path("bad.ply")));
+}
