@@ -325,6 +325,10 @@ int main(int argc, char** argv) {
   coarse.cell_size = 1;
   coarse.method = NBMC_METHOD_ZB05;
   check_case("zb05", b, coarse, "slabs", 4, 1, 1);
+  nbmc_params sph = prm;  // per-particle densities: ghosts 2R wide
+  sph.method = NBMC_METHOD_SPH;
+  sph.influence_radius = 2;
+  check_case("sph", b, sph, "random", 0, 0, 0);
   const char* dir = std::getenv("NBMC_DATA_DIR");
   if (dir) {
     const std::vector<double> f = read_xyz(std::string(dir) + "/xyz/splashsurf_dambreak_f23_24389.xyz");
