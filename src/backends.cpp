@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
 #include "backends.hpp"
 #include "subdomains.hpp"
+#include "core/clusters.hpp"
 
 #include <Kokkos_Core.hpp>
 
@@ -297,6 +298,9 @@ Params resolve_params(const nbmc_params& in) {
   require(std::isfinite(in.iso_threshold) && in.iso_threshold > 0 && in.iso_threshold < 1,
           "iso_threshold must lie strictly between 0 and 1, a fraction of the rest density (got " +
               num(in.iso_threshold) + ")");
+  require(in.isolated == NBMC_ISOLATED_KEEP || in.isolated == NBMC_ISOLATED_DROP,
+          "isolated must be NBMC_ISOLATED_KEEP or NBMC_ISOLATED_DROP (got " + std::to_string(in.isolated) + ")");
+  require(in.min_cluster >= 1, "min_cluster must be at least 1 (got " + std::to_string(in.min_cluster) + ")");
   require(std::isfinite(in.color_threshold) && in.color_threshold >= 0, "color_threshold must be >= 0");
   require(in.neighbour_threshold >= 0, "neighbour_threshold must be >= 0");
   Params p;
@@ -318,6 +322,8 @@ Params resolve_params(const nbmc_params& in) {
   p.t_low = in.t_low;
   p.t_high = in.t_high;
   p.iso_threshold = in.iso_threshold;
+  p.drop_isolated = in.isolated == NBMC_ISOLATED_DROP;
+  p.min_cluster = std::uint32_t(in.min_cluster);
   p.color_threshold = in.color_threshold;
   p.neighbour_threshold = in.neighbour_threshold;
   p.normals = in.compute_normals != 0;
@@ -439,7 +445,28 @@ void run_backend(nbmc_context& ctx, const Params& p, HostMesh& mesh, RunStats& s
     dispatch(ctx, in, p, progress, mesh_on_device, mesh, st);
   };
   ctx.subdomain_report = SubdomainReport();
+  ClusterFilter clusters;
+  ParticleVector kept;  // the particles the isolated-particle filter keeps
   auto job = [&]() {
+    if (p.drop_isolated) {
+      ParticleVector host;
+      const double* xyz = in.xyz;
+      if (in.on_device) {
+        host.resize(3 * in.count);
+        download_particles(in.xyz, in.count, host.data());
+        xyz = host.data();
+      }
+      clusters = drop_small_clusters(xyz, in.count, p.surface_radius, p.min_cluster);
+      if (clusters.kept.empty())
+        throw Error(NBMC_ERROR_NO_PARTICLES, "every particle lies in a cluster of fewer than min_cluster (" +
+                                                 std::to_string(p.min_cluster) + ") particles (isolated = drop)");
+      kept.resize(3 * clusters.kept.size());
+      for (std::size_t i = 0; i < clusters.kept.size(); ++i)
+        for (int a = 0; a < 3; ++a) kept[3 * i + a] = xyz[3 * std::size_t(clusters.kept[i]) + a];
+      in.xyz = kept.data();
+      in.count = clusters.kept.size();
+      in.on_device = false;
+    }
     if (ctx.subdomains.split()) {
       // Subdomains work on host positions: particles in device memory are
       // copied to the host first (the GPU then holds one subdomain at a time).
@@ -463,6 +490,8 @@ void run_backend(nbmc_context& ctx, const Params& p, HostMesh& mesh, RunStats& s
     run_one(in, p, mesh_on_device, mesh, st);
   };
   kokkos_thread().run(job);
+  st.dropped_particles = clusters.dropped_particles;
+  st.dropped_clusters = clusters.dropped_clusters;
   ctx.peak_memory = ctx.memory.peak.load();
 }
 

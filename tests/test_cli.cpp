@@ -290,3 +290,33 @@ TEST_F(CliTest, SphMethodLikeSplashsurf) {
   }
   EXPECT_FALSE(fs::exists(path("bad.ply")));
 }
+
+// --isolated drop: the report says what was dropped, the JSON counts it, and
+// the counts are the C API's; bad values are usage errors (exit 2) or the
+// library's (exit 1).
+TEST_F(CliTest, IsolatedDrop) {
+  const std::string frame = std::string(NBMC_SOURCE_DIR) + "/examples/data/double_dam_break_4732.xyz";
+  const std::string base = "reconstruct " + quote(frame) + " --particle-radius 0.025 --progress never";
+  Result r = run(base + " -o " + quote(path("drop.ply")) + " --isolated drop --min-cluster 20 --json " +
+                 quote(path("drop.json")));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto particles = nbmc::io::read_particles(frame);
+  nbmc_params p = nbmc_test::params(0.05);
+  p.isolated = NBMC_ISOLATED_DROP;
+  p.min_cluster = 20;
+  const nbmc_test::Result direct = nbmc_test::reconstruct(particles.xyz, p, NBMC_BACKEND_AUTO);
+  ASSERT_EQ(direct.status, NBMC_OK) << direct.message;
+  EXPECT_GT(direct.stats.dropped_particle_count, 0u) << "the frame has splashes of fewer than 20 particles";
+  EXPECT_TRUE(contains(r.out, "dropped " + std::to_string(direct.stats.dropped_particle_count) + " particles in " +
+                                  std::to_string(direct.stats.dropped_cluster_count) + " clusters"))
+      << r.out;
+  const std::string json = slurp(path("drop.json"));
+  EXPECT_EQ(json_uint(json, "dropped_particle_count"), static_cast<long long>(direct.stats.dropped_particle_count));
+  EXPECT_EQ(json_uint(json, "dropped_cluster_count"), static_cast<long long>(direct.stats.dropped_cluster_count));
+  EXPECT_TRUE(contains(json, "\"isolated\": \"drop\"")) << json;
+  EXPECT_EQ(nbmc::io::read_mesh_ply(path("drop.ply")).triangle_count(), direct.mesh.triangle_count());
+  EXPECT_EQ(run(base + " -o " + quote(path("bad.ply")) + " --isolated sometimes").exit_code, 2);
+  Result bad = run(base + " -o " + quote(path("bad.ply")) + " --isolated drop --min-cluster 0");
+  EXPECT_EQ(bad.exit_code, 1);
+  EXPECT_TRUE(contains(bad.err, "min_cluster")) << bad.err;
+}

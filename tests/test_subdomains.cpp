@@ -159,6 +159,17 @@ TEST(Subdomains, SphDensity) {
   expect_identical(nbmc_test::box(lo, hi, r), prm, 4, 3, 2);
 }
 
+// Isolated particles dropped before the split: the same mesh for any split.
+TEST(Subdomains, IsolatedDropped) {
+  const double r = 0.05;
+  Points p = jittered_blob(5, r);
+  p.insert(p.end(), {0.9, 0.6, 0.6, 0.92, 0.6, 0.6, -0.9, -0.6, 0.5});  // a pair and a lone particle
+  nbmc_params prm = nbmc_test::params(r);
+  prm.isolated = NBMC_ISOLATED_DROP;
+  prm.min_cluster = 3;
+  expect_identical(p, prm, 2, 2, 1);
+}
+
 // A regular lattice puts particles and surface crossings exactly on the
 // grid vertices and cell faces where subdomains meet.
 TEST(Subdomains, FacesThroughParticlesAndGridVertices) {

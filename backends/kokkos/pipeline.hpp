@@ -78,6 +78,7 @@ struct RunStats {
   std::uint64_t particles = 0, surface_particles = 0, occupied_cells = 0, band_vertices = 0, band_blocks = 0,
                 grid_vertices = 0, cells = 0, vertices = 0, triangles = 0, evaluations = 0;
   std::uint64_t band_growth_rounds = 0, band_growth_cells = 0;
+  std::uint64_t dropped_particles = 0, dropped_clusters = 0;  // isolated-particle filter (run_backend)
   std::uint64_t dims[3] = {0, 0, 0};
   double stage[16] = {0};
   double total = 0;

@@ -29,6 +29,7 @@ BACKENDS = {"auto": C.BACKEND_AUTO, "serial": C.BACKEND_SERIAL, "openmp": C.BACK
 METHODS = {"ssp07": C.METHOD_SSP07, "zb05": C.METHOD_ZB05, "sph": C.METHOD_SPH}
 FIELDS = {"narrow-band": C.FIELD_NARROW_BAND, "dense": C.FIELD_DENSE, "scatter": C.FIELD_SCATTER}
 UNITS = {"spacing": C.UNIT_SPACING, "absolute": C.UNIT_ABSOLUTE}
+ISOLATED = {"keep": C.ISOLATED_KEEP, "drop": C.ISOLATED_DROP}
 MEMORIES = {"host": C.MEMORY_HOST, "device": C.MEMORY_DEVICE}
 
 
@@ -63,7 +64,7 @@ def stage_name(stage: int) -> str:
 # CLI's options (--cell-size -> cell_size); 'normals' is the inverse of --no-normals.
 _LENGTHS = ("cell_size", "influence_radius", "band_width", "surface_radius", "iso_radius")
 _PARAM_KEYS = _LENGTHS + ("method", "field", "t_low", "t_high", "iso_threshold", "color_threshold",
-                          "neighbour_threshold", "normals", "length_unit")
+                          "neighbour_threshold", "normals", "length_unit", "isolated", "min_cluster")
 
 
 def defaults() -> Dict[str, Any]:
@@ -77,7 +78,8 @@ def defaults() -> Dict[str, Any]:
     d.update(method=_name_of(METHODS, p.method), field=_name_of(FIELDS, p.field), t_low=p.t_low,
              t_high=p.t_high, iso_threshold=p.iso_threshold, color_threshold=p.color_threshold,
              neighbour_threshold=p.neighbour_threshold, normals=bool(p.compute_normals),
-             length_unit=_name_of(UNITS, p.length_unit))
+             length_unit=_name_of(UNITS, p.length_unit),
+             isolated=_name_of(ISOLATED, p.isolated), min_cluster=p.min_cluster)
     return d
 
 
@@ -108,6 +110,10 @@ def make_params(spacing: Optional[float] = None, particle_radius: Optional[float
             setattr(p, k, float(kw[k]))
     if kw.get("neighbour_threshold") is not None:
         p.neighbour_threshold = int(kw["neighbour_threshold"])
+    if kw.get("isolated") is not None:
+        p.isolated = _enum(ISOLATED, kw["isolated"], "isolated")
+    if kw.get("min_cluster") is not None:
+        p.min_cluster = int(kw["min_cluster"])
     if kw.get("method") is not None:
         p.method = _enum(METHODS, kw["method"], "method")
     if kw.get("field") is not None:
@@ -162,6 +168,9 @@ class Stats:
     grid_origin: Tuple[float, float, float]
     #: absolute marching-cubes cell edge
     cell_size: float
+    #: particles left out by ``isolated="drop"``, and the clusters they formed
+    dropped_particle_count: int = 0
+    dropped_cluster_count: int = 0
 
     @classmethod
     def _from_c(cls, s: C.Stats) -> "Stats":
@@ -174,7 +183,8 @@ class Stats:
             peak_memory_bytes=s.peak_memory_bytes, neighbour_evaluations=s.neighbour_evaluations,
             stage_seconds={STAGES[i]: s.stage_seconds[i] for i in range(C.STAGE_COUNT)},
             total_seconds=s.total_seconds, grid_origin=tuple(s.grid_origin),  # type: ignore[arg-type]
-            cell_size=s.cell_size)
+            cell_size=s.cell_size, dropped_particle_count=s.dropped_particle_count,
+            dropped_cluster_count=s.dropped_cluster_count)
 
 
 # ---------------------------------------------------------------------- mesh
@@ -755,6 +765,7 @@ def reconstruct(points: Any, spacing: Optional[float] = None, *,
                 color_threshold: Optional[float] = None,
                 neighbour_threshold: Optional[int] = None, normals: Optional[bool] = None,
                 length_unit: Optional[str] = None, bbox: Any = None,
+                isolated: Optional[str] = None, min_cluster: Optional[int] = None,
                 backend: Union[str, int] = "auto", threads: Optional[int] = None,
                 device_id: int = 0, memory_budget: Union[int, str, None] = None,
                 mesh_memory: str = "host", progress: Optional[ProgressFn] = None,
@@ -789,6 +800,11 @@ def reconstruct(points: Any, spacing: Optional[float] = None, *,
         {neighbour_threshold}.
     normals
         Compute vertex normals (default {normals}).
+    isolated, min_cluster
+        "drop": clusters (particles linked when closer than
+        ``surface_radius``) of fewer than ``min_cluster`` particles make no
+        surface; defaults {isolated!r}, {min_cluster}. ``Context.stats``
+        counts what was dropped.
     bbox
         Only reconstruct near this box (absolute): (xmin, ymin, zmin, xmax,
         ymax, zmax) or ((xmin, ymin, zmin), (xmax, ymax, zmax)).
@@ -812,7 +828,8 @@ def reconstruct(points: Any, spacing: Optional[float] = None, *,
                                method=method, field=field, t_low=t_low, t_high=t_high,
                                iso_threshold=iso_threshold, color_threshold=color_threshold,
                                neighbour_threshold=neighbour_threshold, normals=normals,
-                               length_unit=length_unit)
+                               length_unit=length_unit, isolated=isolated,
+                               min_cluster=min_cluster)
 
 
 def _show_library_defaults(fn: Callable[..., Any]) -> None:

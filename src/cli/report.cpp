@@ -73,6 +73,8 @@ std::vector<std::pair<const char*, std::uint64_t>> counts(const nbmc_stats& s) {
           {"vertex_count", s.vertex_count},
           {"triangle_count", s.triangle_count},
           {"raw_triangle_count", s.raw_triangle_count},
+          {"dropped_particle_count", s.dropped_particle_count},
+          {"dropped_cluster_count", s.dropped_cluster_count},
           {"neighbour_evaluations", s.neighbour_evaluations}};
 }
 
@@ -195,6 +197,10 @@ std::string format_report(const Report& r) {
                         ? ", " + std::to_string(r.params.smooth_iterations) + " smoothing iterations (volume " +
                               printf_string("%+.3f%%", 100.0 * s.smoothing_volume_change) + ")"
                         : std::string()));
+  if (r.params.isolated == NBMC_ISOLATED_DROP)
+    line("isolated", "dropped " + grouped(s.dropped_particle_count) + " particles in " +
+                         grouped(s.dropped_cluster_count) + " clusters of fewer than " +
+                         std::to_string(r.params.min_cluster) + " particles");
   line("spacing", printf_string("%g", r.params.spacing) + " (cell size " + printf_string("%g", s.cell_size) + ")");
   line("grid", grouped(s.grid_dims[0]) + " x " + grouped(s.grid_dims[1]) + " x " + grouped(s.grid_dims[2]) +
                    " vertices, origin (" + printf_string("%g", s.grid_origin[0]) + ", " +
@@ -303,6 +309,8 @@ std::string format_json(const Report& r) {
   o += ", \"method\": " + json_string(method_name(p.method));
   o += ", \"field\": " + json_string(field_name(p.field));
   o += ", \"neighbour_threshold\": " + std::to_string(p.neighbour_threshold);
+  o += ", \"isolated\": " + json_string(p.isolated == NBMC_ISOLATED_DROP ? "drop" : "keep");
+  o += ", \"min_cluster\": " + std::to_string(p.min_cluster);
   o += std::string(", \"compute_normals\": ") + (p.compute_normals ? "true" : "false");
   o += std::string(", \"cleanup\": ") + (p.cleanup ? "true" : "false");
   o += ", \"smooth_iterations\": " + std::to_string(p.smooth_iterations);

@@ -66,6 +66,8 @@ struct Params {
   FieldKind field = FieldKind::NarrowBand;
   double t_low = 0.4, t_high = 3.5;
   double iso_threshold = 0.6;  // SPH: iso level of the normalised density
+  bool drop_isolated = false;  // NBMC_ISOLATED_DROP
+  std::uint32_t min_cluster = 10;
   double color_threshold = 0.75;
   int neighbour_threshold = 25;
   bool normals = true;

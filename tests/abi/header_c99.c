@@ -90,6 +90,7 @@ int main(void) {
   CHECK(params.neighbour_threshold == 25 && params.compute_normals != 0 && params.use_bbox == 0);
   CHECK(params.cleanup == 1 && params.smooth_iterations == 0 && params.iso_threshold == 0.6);
   CHECK(NBMC_METHOD_SPH == 2);
+  CHECK(params.isolated == NBMC_ISOLATED_KEEP && params.min_cluster == 10 && NBMC_ISOLATED_DROP == 1);
   memset(&stats, 0xff, sizeof stats);
   nbmc_stats_init(&stats);
   CHECK(stats.struct_size == sizeof(nbmc_stats) && stats.triangle_count == 0);

@@ -56,6 +56,8 @@ fn rust_constants() -> BTreeMap<&'static str, i128> {
         NBMC_METHOD_SSP07,
         NBMC_METHOD_ZB05,
         NBMC_METHOD_SPH,
+        NBMC_ISOLATED_KEEP,
+        NBMC_ISOLATED_DROP,
         NBMC_FIELD_NARROW_BAND,
         NBMC_FIELD_DENSE,
         NBMC_FIELD_SCATTER,
@@ -136,7 +138,9 @@ fn rust_layouts() -> Vec<Layout> {
             bbox_max,
             cleanup,
             smooth_iterations,
-            iso_threshold
+            iso_threshold,
+            isolated,
+            min_cluster
         }),
         layout!(nbmc_stats {
             struct_size,
@@ -158,7 +162,9 @@ fn rust_layouts() -> Vec<Layout> {
             grid_origin,
             cell_size,
             raw_triangle_count,
-            smoothing_volume_change
+            smoothing_volume_change,
+            dropped_particle_count,
+            dropped_cluster_count
         }),
         layout!(nbmc_mesh_check_result {
             struct_size,

@@ -212,6 +212,17 @@ int_enum!(
 );
 
 int_enum!(
+    /// What becomes of small clusters of particles.
+    Isolated {
+        /// Every particle makes surface (default).
+        Keep = sys::NBMC_ISOLATED_KEEP,
+        /// Clusters (particles linked when closer than the surface radius)
+        /// of fewer than `min_cluster` particles make none.
+        Drop = sys::NBMC_ISOLATED_DROP,
+    }
+);
+
+int_enum!(
     /// Where the scalar field is evaluated.
     FieldStrategy {
         /// Only on narrow-band vertices (the method; default).
@@ -306,6 +317,10 @@ pub struct Params {
     pub neighbour_threshold: i32,
     /// Per-vertex normals (default true).
     pub compute_normals: bool,
+    /// Small clusters of particles: kept (default) or dropped.
+    pub isolated: Isolated,
+    /// `Isolated::Drop`: the smallest cluster kept (default 10).
+    pub min_cluster: i32,
     /// Only reconstruct inside this box (absolute units), if set.
     pub bbox: Option<([f64; 3], [f64; 3])>,
 }
@@ -331,6 +346,8 @@ impl Params {
             color_threshold: p.color_threshold,
             neighbour_threshold: p.neighbour_threshold,
             compute_normals: p.compute_normals != 0,
+            isolated: Isolated::from_raw(p.isolated).unwrap_or(Isolated::Keep),
+            min_cluster: p.min_cluster,
             bbox: None,
         }
     }
@@ -354,6 +371,8 @@ impl Params {
         p.color_threshold = self.color_threshold;
         p.neighbour_threshold = self.neighbour_threshold;
         p.compute_normals = i32::from(self.compute_normals);
+        p.isolated = self.isolated.raw();
+        p.min_cluster = self.min_cluster;
         if let Some((lo, hi)) = self.bbox {
             p.use_bbox = 1;
             p.bbox_min = lo;
