@@ -4,7 +4,7 @@
 // narrow band; 1 thread and all threads; two cell sizes).
 //
 //   nbmc_bench FRAME.xyz --spacing R [--cell-size C] [--threads N]
-//              [--field narrow-band|dense|scatter] [--method ssp07|zb05] [--backend B]
+//              [--field narrow-band|dense|scatter] [--method ssp07|zb05|sph] [--backend B]
 //              [--repeat K] [--device-resident] [--tile N] [--subdomains auto|NxMxK]
 //              [--memory-budget MIB]
 //
@@ -64,7 +64,7 @@ struct Options {
 
 [[noreturn]] void usage(const char* msg) {
   std::fprintf(stderr, "nbmc_bench: %s\nusage: nbmc_bench FRAME.xyz --spacing R [--cell-size C] [--threads N] "
-                       "[--field narrow-band|dense|scatter] [--method ssp07|zb05] [--backend auto|serial|openmp|cuda] "
+                       "[--field narrow-band|dense|scatter] [--method ssp07|zb05|sph] [--backend auto|serial|openmp|cuda] "
                        "[--repeat K] [--device-resident] | --table [--cell-sizes 1,0.5] [--skip-scatter] [--max-threads N]\n", msg);
   std::exit(2);
 }
@@ -226,7 +226,7 @@ std::string child(const Options& o, int field, int threads, double cell) {
   std::ostringstream cmd;
   cmd << "'" << self_path() << "' '" << o.file << "' --one --spacing " << o.spacing << " --cell-size " << cell
       << " --threads " << threads << " --field " << field_name(field) << " --method "
-      << (o.method == NBMC_METHOD_ZB05 ? "zb05" : "ssp07") << " --backend "
+      << (o.method == NBMC_METHOD_ZB05 ? "zb05" : o.method == NBMC_METHOD_SPH ? "sph" : "ssp07") << " --backend "
       << (o.backend == NBMC_BACKEND_SERIAL   ? "serial"
           : o.backend == NBMC_BACKEND_CUDA   ? "cuda"
           : o.backend == NBMC_BACKEND_OPENMP ? "openmp"
@@ -243,7 +243,7 @@ std::string child(const Options& o, int field, int threads, double cell) {
 int run_table(const Options& o) {
   const int all = o.max_threads > 0 ? o.max_threads : int(std::max(1u, std::thread::hardware_concurrency()));
   std::printf("frame: %s, spacing %g, influence radius 4r, method %s, %d hardware threads\n\n", o.file.c_str(),
-              o.spacing, o.method == NBMC_METHOD_ZB05 ? "zb05" : "ssp07", all);
+              o.spacing, o.method == NBMC_METHOD_ZB05 ? "zb05" : o.method == NBMC_METHOD_SPH ? "sph" : "ssp07", all);
   for (double cell : o.cells) {
     std::printf("### cell size %g r\n\n", cell);
     std::printf("| method | threads | t_sf [s] | t_tri [s] | total [s] | nbmc peak [MiB] | process peak RSS [MiB] | "
@@ -300,7 +300,10 @@ int main(int argc, char** argv) {
       else if (std::sscanf(v.c_str(), "%dx%dx%d", &o.sub[0], &o.sub[1], &o.sub[2]) != 3) usage("--subdomains NxMxK|auto");
     }
     else if (a == "--field") o.field = field_of(next());
-    else if (a == "--method") o.method = next() == "zb05" ? NBMC_METHOD_ZB05 : NBMC_METHOD_SSP07;
+    else if (a == "--method") {
+      const std::string m = next();
+      o.method = m == "zb05" ? NBMC_METHOD_ZB05 : m == "sph" ? NBMC_METHOD_SPH : NBMC_METHOD_SSP07;
+    }
     else if (a == "--backend") {
       const std::string b = next();
       o.backend = b == "serial" ? NBMC_BACKEND_SERIAL : b == "openmp" ? NBMC_BACKEND_OPENMP : b == "cuda" ? NBMC_BACKEND_CUDA : NBMC_BACKEND_AUTO;

@@ -39,6 +39,7 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstddef>
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
@@ -573,11 +574,23 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     }
   }
 
+  // Appended draws (NBMC_METHOD_SPH), after all the others so that inputs
+  // made before them keep their meaning (a used-up input reads zeros: no SPH).
+  const bool sph = in.one_in(5);
+  const double sph_threshold = in.range(0.05, 0.95);
+  const unsigned sph_corrupt = in.small_below(4);
+  if (sph) {
+    prm.method = NBMC_METHOD_SPH;
+    prm.iso_threshold = sph_threshold;
+  }
+
   // Keep the work small: an estimate of the field evaluations (band or dense
   // vertices times the most neighbours any particle has within R) bounds the
   // cell size from below; a dense grid that stays too large becomes a band.
   {
-    const double R = prm.influence_radius / L, bw = prm.band_width / L, iso = prm.iso_radius / L;  // units of r
+    // (iso: how far the surface lies beyond the particles; R for the SPH density)
+    const double R = prm.influence_radius / L, bw = prm.band_width / L,
+                 iso = (sph ? prm.influence_radius : prm.iso_radius) / L;  // units of r
     std::size_t max_nb = 1;
     for (std::size_t i = 0; i < n; ++i) {
       std::size_t c = 0;
@@ -629,10 +642,16 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       case 3: prm.influence_radius = alt ? nan : -1.0; break;
       case 4: prm.band_width = alt ? 0.0 : inf; break;
       case 5: prm.surface_radius = alt ? -prm.surface_radius : prm.influence_radius * (2.01 + corrupt_u); break;
-      case 6: prm.iso_radius = prm.influence_radius * (1.0 + corrupt_u); break;
+      case 6:
+        if (sph && sph_corrupt == 0) {  // the SPH method ignores iso_radius: a bad threshold instead
+          prm.iso_threshold = alt ? std::numeric_limits<double>::quiet_NaN() : (corrupt_b & 1 ? 0.0 : 1.0 + corrupt_u);
+        } else {
+          prm.iso_radius = prm.influence_radius * (1.0 + corrupt_u);
+        }
+        break;
       case 7: std::swap(prm.t_low, prm.t_high); break;
       case 8: prm.t_high = nan; break;
-      case 9: prm.method = alt ? 2 : -1; break;
+      case 9: prm.method = alt ? 3 : -1; break;
       case 10: prm.field = alt ? 3 : -1; break;  // not 2: the scatter baseline is valid but slow
       case 11: prm.length_unit = alt ? 2 : -7; break;
       case 12: prm.color_threshold = alt ? -0.5 : nan; break;
@@ -658,19 +677,27 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   // iso < R and surface radius <= 2 R in absolute units, t_low < t_high,
   // bounding box finite with min < max.
   Expect ex;
-  ex.struct_ok = prm.struct_size >= sizeof(nbmc_params);
+  // A shorter struct (a caller built against an older header) is accepted
+  // down to `cleanup`; the fields it lacks keep their defaults.
+  ex.struct_ok = prm.struct_size >= offsetof(nbmc_params, cleanup);
+  nbmc_params eff;
+  nbmc_params_init(&eff);
+  std::memcpy(&eff, &prm, std::min<std::size_t>(prm.struct_size, sizeof eff));
   {
     auto pos = [](double v) { return std::isfinite(v) && v > 0; };
     bool ok = pos(prm.spacing) &&
               (prm.length_unit == NBMC_UNIT_SPACING || prm.length_unit == NBMC_UNIT_ABSOLUTE) &&
-              (prm.method == NBMC_METHOD_SSP07 || prm.method == NBMC_METHOD_ZB05) &&
+              (prm.method == NBMC_METHOD_SSP07 || prm.method == NBMC_METHOD_ZB05 ||
+               prm.method == NBMC_METHOD_SPH) &&
+              std::isfinite(eff.iso_threshold) && eff.iso_threshold > 0 && eff.iso_threshold < 1 &&
+              (eff.isolated == NBMC_ISOLATED_KEEP || eff.isolated == NBMC_ISOLATED_DROP) && eff.min_cluster >= 1 &&
               (prm.field >= NBMC_FIELD_NARROW_BAND && prm.field <= NBMC_FIELD_SCATTER) && pos(prm.cell_size) &&
               pos(prm.influence_radius) && pos(prm.band_width) && pos(prm.surface_radius) && pos(prm.iso_radius) &&
               std::isfinite(prm.t_low) && std::isfinite(prm.t_high) && prm.t_low < prm.t_high &&
               std::isfinite(prm.color_threshold) && prm.color_threshold >= 0 && prm.neighbour_threshold >= 0;
     if (ok) {
       const double f = prm.length_unit == NBMC_UNIT_SPACING ? prm.spacing : 1.0;
-      ok = prm.iso_radius * f < prm.influence_radius * f &&
+      ok = (prm.method == NBMC_METHOD_SPH || prm.iso_radius * f < prm.influence_radius * f) &&
            prm.surface_radius * f <= 2 * (prm.influence_radius * f);
     }
     if (ok && prm.use_bbox)
@@ -679,8 +706,12 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     ex.params_ok = ok;
   }
   const double f = prm.length_unit == NBMC_UNIT_SPACING ? prm.spacing : 1.0;
+  // iso_abs: how far beyond the particles the surface can lie (R for the SPH
+  // density); reach_abs: how far beyond the box particles are kept (nbmc.h:
+  // R, 2R for the SPH density).
+  const bool is_sph = prm.method == NBMC_METHOD_SPH;
   const double cell_abs = prm.cell_size * f, R_abs = prm.influence_radius * f, bw_abs = prm.band_width * f,
-               iso_abs = prm.iso_radius * f;
+               iso_abs = (is_sph ? prm.influence_radius : prm.iso_radius) * f, reach_abs = is_sph ? 2 * R_abs : R_abs;
   if (ex.params_ok) {
     ex.domain_small = !absurd_cell;
     // Particles the reconstruction keeps, and the extent of its grid.
@@ -690,7 +721,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       bool inside = true;
       for (int a = 0; a < 3; ++a) {
         const double x = seen[3 * i + a];
-        inside = inside && (!prm.use_bbox || (x >= prm.bbox_min[a] - R_abs && x <= prm.bbox_max[a] + R_abs));
+        inside = inside && (!prm.use_bbox || (x >= prm.bbox_min[a] - reach_abs && x <= prm.bbox_max[a] + reach_abs));
       }
       if (!inside) continue;
       ++kept;
@@ -722,10 +753,10 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   char desc[512];
   std::snprintf(desc, sizeof desc,
                 "n=%zu r=%g offset=%g %s stride=%llu count=%llu bad=%ld unit=%s cell=%g R=%g band=%g surf=%g iso=%g "
-                "method=%d field=%d t=[%g,%g] color=%g nbr=%d normals=%d bbox=%d budget=%llu cancel=%d",
+                "method=%d field=%d t=[%g,%g] iso_t=%g color=%g nbr=%d normals=%d bbox=%d budget=%llu cancel=%d",
                 n, r, offset, f64 ? "f64" : "f32", (unsigned long long)stride, (unsigned long long)count, bad_index,
                 absolute ? "abs" : "rel", prm.cell_size, prm.influence_radius, prm.band_width, prm.surface_radius,
-                prm.iso_radius, prm.method, prm.field, prm.t_low, prm.t_high, prm.color_threshold,
+                prm.iso_radius, prm.method, prm.field, prm.t_low, prm.t_high, prm.iso_threshold, prm.color_threshold,
                 prm.neighbour_threshold, prm.compute_normals, prm.use_bbox, (unsigned long long)budget, cancel_at);
   g_case = desc;
 

@@ -84,6 +84,12 @@ extern "C" {
 /* Scalar field methods (nbmc_params.method). */
 #define NBMC_METHOD_SSP07  0  /* Solenthaler, Schlaefli, Pajarola 2007 (default) */
 #define NBMC_METHOD_ZB05   1  /* Zhu & Bridson 2005 */
+#define NBMC_METHOD_SPH    2  /* normalised SPH density (cubic spline), splashsurf's level set;
+                                 iso level nbmc_params.iso_threshold */
+
+/* Isolated particles (nbmc_params.isolated). */
+#define NBMC_ISOLATED_KEEP  0  /* every particle makes surface (default) */
+#define NBMC_ISOLATED_DROP  1  /* clusters of fewer than min_cluster particles make none */
 
 /* Field evaluation strategies (nbmc_params.field). */
 #define NBMC_FIELD_NARROW_BAND  0  /* gather on band vertices only (the method; default) */
@@ -242,7 +248,9 @@ typedef struct nbmc_params {
   int32_t use_bbox;         /* non-zero: only particles within R of [bbox_min, bbox_max] (absolute)
                                are used and the grid covers the box plus a margin of
                                max(band_width, iso_radius + cell_size) + 2 cells; the mesh is
-                               not clipped to the box and may reach into that margin */
+                               not clipped to the box and may reach into that margin
+                               (NBMC_METHOD_SPH: particles within 2R, margin with R in place
+                               of iso_radius) */
   int32_t reserved0;
   double bbox_min[3];
   double bbox_max[3];
@@ -252,6 +260,18 @@ typedef struct nbmc_params {
   int32_t cleanup;          /* non-zero (default): remove degenerate and sliver triangles by edge
                                collapses and flips; 0: the raw marching-cubes mesh */
   int32_t smooth_iterations; /* Taubin lambda|mu smoothing steps after the clean-up; default 0 */
+  /* Appended with NBMC_METHOD_SPH (older callers: the default). */
+  double iso_threshold;     /* NBMC_METHOD_SPH: iso level of the normalised density, a fraction of
+                               the rest density, 0 < iso_threshold < 1; default 0.6 (splashsurf's
+                               --surface-threshold). The kernel's compact support is
+                               influence_radius. Ignored by the other methods. */
+  /* Appended with the isolated-particle filter (older callers: the defaults). */
+  int32_t isolated;         /* NBMC_ISOLATED_KEEP (default) or NBMC_ISOLATED_DROP: a cluster is a
+                               connected component of the particles linked when closer than
+                               surface_radius; clusters of fewer than min_cluster particles are
+                               left out before the reconstruction (nbmc_stats counts them). Host
+                               work, O(particles); not available over MPI */
+  int32_t min_cluster;      /* NBMC_ISOLATED_DROP: smallest cluster kept, >= 1; default 10 */
 } nbmc_params;
 
 /* Fills *params with the defaults (spacing is 0 and must be set). */
@@ -289,6 +309,9 @@ typedef struct nbmc_stats {
      the fields it has. */
   uint64_t raw_triangle_count;     /* triangles of the marching-cubes mesh, before the clean-up */
   double smoothing_volume_change;  /* enclosed volume after smoothing / before - 1; 0 without */
+  /* Appended with the isolated-particle filter (nbmc_params.isolated). */
+  uint64_t dropped_particle_count; /* particles left out as isolated (0 with NBMC_ISOLATED_KEEP) */
+  uint64_t dropped_cluster_count;  /* the clusters they formed */
 } nbmc_stats;
 
 NBMC_API void nbmc_stats_init(nbmc_stats* stats);

@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
 #include "backends.hpp"
 #include "subdomains.hpp"
+#include "core/clusters.hpp"
 
 #include <Kokkos_Core.hpp>
 
@@ -278,7 +279,8 @@ Params resolve_params(const nbmc_params& in) {
   require(std::isfinite(in.spacing) && in.spacing > 0, "spacing must be a positive number (got " + num(in.spacing) + ")");
   require(in.length_unit == NBMC_UNIT_SPACING || in.length_unit == NBMC_UNIT_ABSOLUTE,
           "length_unit must be NBMC_UNIT_SPACING or NBMC_UNIT_ABSOLUTE");
-  require(in.method == NBMC_METHOD_SSP07 || in.method == NBMC_METHOD_ZB05, "unknown method " + std::to_string(in.method));
+  require(in.method == NBMC_METHOD_SSP07 || in.method == NBMC_METHOD_ZB05 || in.method == NBMC_METHOD_SPH,
+          "unknown method " + std::to_string(in.method));
   require(in.field >= NBMC_FIELD_NARROW_BAND && in.field <= NBMC_FIELD_SCATTER,
           "unknown field strategy " + std::to_string(in.field));
   const struct {
@@ -291,6 +293,14 @@ Params resolve_params(const nbmc_params& in) {
     require(std::isfinite(l.v) && l.v > 0, std::string(l.name) + " must be a positive number (got " + num(l.v) + ")");
   require(std::isfinite(in.t_low) && std::isfinite(in.t_high) && in.t_low < in.t_high,
           "t_low must be smaller than t_high (got " + num(in.t_low) + ", " + num(in.t_high) + ")");
+  // Checked whatever the method, like t_low and t_high (a caller built
+  // against an older header gets the default 0.6).
+  require(std::isfinite(in.iso_threshold) && in.iso_threshold > 0 && in.iso_threshold < 1,
+          "iso_threshold must lie strictly between 0 and 1, a fraction of the rest density (got " +
+              num(in.iso_threshold) + ")");
+  require(in.isolated == NBMC_ISOLATED_KEEP || in.isolated == NBMC_ISOLATED_DROP,
+          "isolated must be NBMC_ISOLATED_KEEP or NBMC_ISOLATED_DROP (got " + std::to_string(in.isolated) + ")");
+  require(in.min_cluster >= 1, "min_cluster must be at least 1 (got " + std::to_string(in.min_cluster) + ")");
   require(std::isfinite(in.color_threshold) && in.color_threshold >= 0, "color_threshold must be >= 0");
   require(in.neighbour_threshold >= 0, "neighbour_threshold must be >= 0");
   Params p;
@@ -301,7 +311,9 @@ Params resolve_params(const nbmc_params& in) {
   p.band_width = length(in, in.band_width, r);
   p.surface_radius = length(in, in.surface_radius, r);
   p.iso_radius = length(in, in.iso_radius, r);
-  require(p.iso_radius < p.influence_radius, "iso_radius must be smaller than influence_radius");
+  // (the SPH density does not use iso_radius)
+  require(in.method == NBMC_METHOD_SPH || p.iso_radius < p.influence_radius,
+          "iso_radius must be smaller than influence_radius");
   require(p.surface_radius <= 2 * p.influence_radius,
           "surface_radius may be at most twice the influence radius (got " + num(p.surface_radius) + " and " +
               num(p.influence_radius) + ")");
@@ -309,6 +321,9 @@ Params resolve_params(const nbmc_params& in) {
   p.field = FieldKind(in.field);
   p.t_low = in.t_low;
   p.t_high = in.t_high;
+  p.iso_threshold = in.iso_threshold;
+  p.drop_isolated = in.isolated == NBMC_ISOLATED_DROP;
+  p.min_cluster = std::uint32_t(in.min_cluster);
   p.color_threshold = in.color_threshold;
   p.neighbour_threshold = in.neighbour_threshold;
   p.normals = in.compute_normals != 0;
@@ -430,7 +445,28 @@ void run_backend(nbmc_context& ctx, const Params& p, HostMesh& mesh, RunStats& s
     dispatch(ctx, in, p, progress, mesh_on_device, mesh, st);
   };
   ctx.subdomain_report = SubdomainReport();
+  ClusterFilter clusters;
+  ParticleVector kept;  // the particles the isolated-particle filter keeps
   auto job = [&]() {
+    if (p.drop_isolated) {
+      ParticleVector host;
+      const double* xyz = in.xyz;
+      if (in.on_device) {
+        host.resize(3 * in.count);
+        download_particles(in.xyz, in.count, host.data());
+        xyz = host.data();
+      }
+      clusters = drop_small_clusters(xyz, in.count, p.surface_radius, p.min_cluster);
+      if (clusters.kept.empty())
+        throw Error(NBMC_ERROR_NO_PARTICLES, "every particle lies in a cluster of fewer than min_cluster (" +
+                                                 std::to_string(p.min_cluster) + ") particles (isolated = drop)");
+      kept.resize(3 * clusters.kept.size());
+      for (std::size_t i = 0; i < clusters.kept.size(); ++i)
+        for (int a = 0; a < 3; ++a) kept[3 * i + a] = xyz[3 * std::size_t(clusters.kept[i]) + a];
+      in.xyz = kept.data();
+      in.count = clusters.kept.size();
+      in.on_device = false;
+    }
     if (ctx.subdomains.split()) {
       // Subdomains work on host positions: particles in device memory are
       // copied to the host first (the GPU then holds one subdomain at a time).
@@ -471,6 +507,8 @@ void run_backend(nbmc_context& ctx, const Params& p, HostMesh& mesh, RunStats& s
     run_one(in, p, mesh_on_device, mesh, st);
   };
   kokkos_thread().run(job);
+  st.dropped_particles = clusters.dropped_particles;
+  st.dropped_clusters = clusters.dropped_clusters;
   ctx.peak_memory = ctx.memory.peak.load();
 }
 

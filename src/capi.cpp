@@ -374,6 +374,9 @@ void nbmc_params_init(nbmc_params* p) {
   p->neighbour_threshold = 25;
   p->compute_normals = 1;
   p->cleanup = 1;
+  p->iso_threshold = 0.6;
+  p->isolated = NBMC_ISOLATED_KEEP;
+  p->min_cluster = 10;
 }
 
 int32_t nbmc_context_reconstruct(nbmc_context* ctx, const nbmc_params* params, nbmc_mesh** mesh) {
@@ -454,6 +457,8 @@ int32_t nbmc_context_stats(const nbmc_context* ctx, nbmc_stats* s) {
   s->cell_size = st.cell;
   s->raw_triangle_count = ctx->postprocess.raw_triangles;
   s->smoothing_volume_change = ctx->postprocess.volume_change;
+  s->dropped_particle_count = st.dropped_particles;
+  s->dropped_cluster_count = st.dropped_clusters;
   std::memcpy(caller, &full, caller_size);
   caller->struct_size = uint32_t(caller_size);
   return NBMC_OK;

@@ -323,6 +323,9 @@ void reconstruct_collective(nbmc_context& ctx, const nbmc_params& full, const nb
     check_domain(p);
     if (p.field != FieldKind::NarrowBand)
       throw Error(NBMC_ERROR_INVALID_PARAMETER, "MPI reconstruction needs the narrow-band field");
+    if (p.drop_isolated)
+      throw Error(NBMC_ERROR_INVALID_PARAMETER,
+                  "isolated = drop is not available over MPI (clusters may span the ranks)");
     if (output != NBMC__OUTPUT_GATHER && output != NBMC__OUTPUT_PIECES)
       throw Error(NBMC_ERROR_INVALID_ARGUMENT, "unknown MPI output mode " + std::to_string(output));
     if (root < 0 || root >= c.size())

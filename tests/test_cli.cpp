@@ -252,3 +252,71 @@ TEST_F(CliTest, SubdomainsGiveTheSameFile) {
   }
   EXPECT_FALSE(fs::exists(path("bad.ply")));
 }
+
+// --method sph with splashsurf's parameters: the same mesh as the C API,
+// the method and threshold in the report and the JSON, a split gives the
+// same file, and a threshold out of (0, 1) is the library's error (exit 1).
+TEST_F(CliTest, SphMethodLikeSplashsurf) {
+  const std::string frame = std::string(NBMC_SOURCE_DIR) + "/examples/data/double_dam_break_4732.xyz";
+  const std::string base = "reconstruct " + quote(frame) +
+                           " --particle-radius 0.025 --method sph --influence-radius 2 --cell-size 0.75"
+                           " --iso-threshold 0.55 --progress never";
+  Result r = run(base + " -o " + quote(path("sph.ply")) + " --json " + quote(path("sph.json")));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(contains(r.out, "sph (iso threshold 0.55)")) << r.out;
+  const std::string json = slurp(path("sph.json"));
+  EXPECT_TRUE(contains(json, "\"method\": \"sph\"")) << json;
+  EXPECT_TRUE(contains(json, "\"iso_threshold\": 0.55")) << json;
+  const auto mesh = nbmc::io::read_mesh_ply(path("sph.ply"));
+  const auto particles = nbmc::io::read_particles(frame);
+  nbmc_params p = nbmc_test::params(0.05);
+  p.method = NBMC_METHOD_SPH;
+  p.influence_radius = 2;
+  p.cell_size = 0.75;
+  p.iso_threshold = 0.55;
+  const nbmc_test::Result direct = nbmc_test::reconstruct(particles.xyz, p, NBMC_BACKEND_AUTO);
+  ASSERT_EQ(direct.status, NBMC_OK) << direct.message;
+  EXPECT_GT(mesh.triangle_count(), 0u);
+  EXPECT_EQ(mesh.triangle_count(), direct.mesh.triangle_count());
+  EXPECT_EQ(mesh.vertex_count(), direct.mesh.vertex_count());
+  Result split = run(base + " -o " + quote(path("split.ply")) + " --subdomains 2x2x1");
+  ASSERT_EQ(split.exit_code, 0) << split.err;
+  EXPECT_EQ(slurp(path("sph.ply")), slurp(path("split.ply")));
+  for (const char* bad : {"0", "1", "-0.2", "nan"}) {
+    Result b = run("reconstruct " + quote(frame) + " -o " + quote(path("bad.ply")) +
+                   " --particle-radius 0.025 --method sph --iso-threshold " + bad);
+    EXPECT_NE(b.exit_code, 0) << bad;
+    EXPECT_TRUE(contains(b.err, "iso_threshold") || contains(b.err, "--iso-threshold")) << bad << ": " << b.err;
+  }
+  EXPECT_FALSE(fs::exists(path("bad.ply")));
+}
+
+// --isolated drop: the report says what was dropped, the JSON counts it, and
+// the counts are the C API's; bad values are usage errors (exit 2) or the
+// library's (exit 1).
+TEST_F(CliTest, IsolatedDrop) {
+  const std::string frame = std::string(NBMC_SOURCE_DIR) + "/examples/data/double_dam_break_4732.xyz";
+  const std::string base = "reconstruct " + quote(frame) + " --particle-radius 0.025 --progress never";
+  Result r = run(base + " -o " + quote(path("drop.ply")) + " --isolated drop --min-cluster 20 --json " +
+                 quote(path("drop.json")));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const auto particles = nbmc::io::read_particles(frame);
+  nbmc_params p = nbmc_test::params(0.05);
+  p.isolated = NBMC_ISOLATED_DROP;
+  p.min_cluster = 20;
+  const nbmc_test::Result direct = nbmc_test::reconstruct(particles.xyz, p, NBMC_BACKEND_AUTO);
+  ASSERT_EQ(direct.status, NBMC_OK) << direct.message;
+  EXPECT_GT(direct.stats.dropped_particle_count, 0u) << "the frame has splashes of fewer than 20 particles";
+  EXPECT_TRUE(contains(r.out, "dropped " + std::to_string(direct.stats.dropped_particle_count) + " particles in " +
+                                  std::to_string(direct.stats.dropped_cluster_count) + " clusters"))
+      << r.out;
+  const std::string json = slurp(path("drop.json"));
+  EXPECT_EQ(json_uint(json, "dropped_particle_count"), static_cast<long long>(direct.stats.dropped_particle_count));
+  EXPECT_EQ(json_uint(json, "dropped_cluster_count"), static_cast<long long>(direct.stats.dropped_cluster_count));
+  EXPECT_TRUE(contains(json, "\"isolated\": \"drop\"")) << json;
+  EXPECT_EQ(nbmc::io::read_mesh_ply(path("drop.ply")).triangle_count(), direct.mesh.triangle_count());
+  EXPECT_EQ(run(base + " -o " + quote(path("bad.ply")) + " --isolated sometimes").exit_code, 2);
+  Result bad = run(base + " -o " + quote(path("bad.ply")) + " --isolated drop --min-cluster 0");
+  EXPECT_EQ(bad.exit_code, 1);
+  EXPECT_TRUE(contains(bad.err, "min_cluster")) << bad.err;
+}

@@ -15,12 +15,14 @@
 #include <gtest/gtest.h>
 
 #include "common.hpp"
+#include "field_sph.hpp"
 #include "field_ssp07.hpp"
 #include "field_zb05.hpp"
 #include "grid.hpp"
 #include "narrow_band.hpp"
 #include "neighbourhood.hpp"
 #include "scalar_field.hpp"
+#include "sph_density.hpp"
 #include "surface_particles.hpp"
 
 #include <cmath>
@@ -209,7 +211,7 @@ float reference_field(const NeighbourView<Host>& nb, const float x[3], float S, 
           const float dx = X[j] - x[0], dy = Y[j] - x[1], dz = Z[j] - x[2];
           const float s2 = (dx * dx + dy * dy + dz * dz) * fc.inv_R2;
           evals += s2 < 1.f ? 1 : 0;
-          Method::add(acc, dx, dy, dz, s2 < 1.f ? 1.f - s2 : 0.f);
+          Method::add(acc, dx, dy, dz, s2 < 1.f ? 1.f - s2 : 0.f, Method::weighted ? nb.weight(j) : 1.f);
         }
       }
   return Method::value(acc, fc);
@@ -218,7 +220,7 @@ float reference_field(const NeighbourView<Host>& nb, const float x[3], float S, 
 // ------------------------------------------------------------ the check
 struct Outcome {
   std::size_t particles = 0, surface = 0, band_vertices = 0, flag_mismatches = 0, field_mismatches = 0,
-              direct_mismatches = 0;
+              direct_mismatches = 0, weight_mismatches = 0;
   std::uint64_t evals = 0, ref_evals = 0;
   std::string first;  // the first mismatch, described
 };
@@ -238,7 +240,18 @@ Outcome run(const Exec& space, const Points& xyz, const Params& p, bool dense) {
   const Grid g = make_grid(lo, hi, p);
   Neighbourhood<Host> nbh;
   build_neighbourhood(space, tracker, xyz.data(), n, {}, g, nbh);
+  const FieldConstants fc = field_constants(p.influence_radius, p.iso_radius, p.t_low, p.t_high, p.iso_threshold);
+  if (Method::weighted) compute_sph_weights(space, tracker, nbh, g, fc);
   const NeighbourView<Host> nb = view_of(nbh, g);
+  if (Method::weighted) {
+    // Each particle's weight: 1 / (its density summed in the serial order).
+    std::uint64_t unused = 0;
+    for (std::size_t j = 0; j < n; ++j) {
+      const float x[3] = {nb.pos(j), nb.pos(n + j), nb.pos(2 * n + j)};
+      const float ref = 1.f / reference_field<SphDensity>(nb, x, float(g.nb_cell), fc, unused);
+      out.weight_mismatches += bits(nb.weight(j)) != bits(ref);
+    }
+  }
 
   // Surface particles against the serial reference: with the parameters
   // given, then with the colour threshold set to the reference gradient of
@@ -287,7 +300,6 @@ Outcome run(const Exec& space, const Points& xyz, const Params& p, bool dense) {
     build_narrow_band(space, tracker, g, p, Kokkos::View<const float*, Host>(nbh.pos.view()),
                       Kokkos::View<const std::uint8_t*, Host>(flags), n, band);
   out.band_vertices = band.n_vertices;
-  const FieldConstants fc = field_constants(p.influence_radius, p.iso_radius, p.t_low, p.t_high);
   Kokkos::View<float*, Host> phi("phi", band.n_vertices);
   const BandView<Host> bv = view_of(band, g);
   out.evals = gather_field<Method>(space, nb, bv, band.n_blocks * 8, g, fc, phi, Progress{});
@@ -319,7 +331,10 @@ Outcome run(const Exec& space, const Points& xyz, const Params& p, bool dense) {
 template <class Method>
 void check(const char* name, const Points& xyz, double r, double cell, bool dense = false,
            std::size_t min_surface = 1) {
-  const Params p = make_params(r, cell, std::is_same<Method, FieldZB05>::value ? 1 : 0);
+  const Params p = make_params(r, cell,
+                               std::is_same<Method, FieldZB05>::value  ? NBMC_METHOD_ZB05
+                               : std::is_same<Method, FieldSPH>::value ? NBMC_METHOD_SPH
+                                                                       : NBMC_METHOD_SSP07);
   for (int backend = 0; backend < 2; ++backend) {
     const Outcome o = backend == 0 ? run<Method>(Kokkos::Serial(), xyz, p, dense)
 #if defined(KOKKOS_ENABLE_OPENMP)
@@ -335,6 +350,7 @@ void check(const char* name, const Points& xyz, double r, double cell, bool dens
     EXPECT_EQ(o.field_mismatches, 0u) << what << ": " << o.field_mismatches << " of " << o.band_vertices
                                       << " field values differ from the serial per-vertex order; first: " << o.first;
     EXPECT_EQ(o.direct_mismatches, 0u) << what << ": eval_vertex_direct does not sum in plain serial order";
+    EXPECT_EQ(o.weight_mismatches, 0u) << what << ": SPH particle weights differ from the serial order";
     EXPECT_EQ(o.evals, o.ref_evals) << what << ": contributing-particle count";
   }
 }
@@ -348,6 +364,7 @@ TEST(FieldOrder, RandomCloud) {
   for (double cell : {1.0, 0.5}) {
     check<FieldSSP07>("random cloud", p, kR, cell);
     check<FieldZB05>("random cloud", p, kR, cell);
+    check<FieldSPH>("random cloud", p, kR, cell);
   }
 }
 
@@ -356,6 +373,7 @@ TEST(FieldOrder, JitteredLatticeBall) {
   for (double cell : {1.0, 0.5, 0.7}) {
     check<FieldSSP07>("jittered ball", p, kR, cell);
     check<FieldZB05>("jittered ball", p, kR, cell);
+    check<FieldSPH>("jittered ball", p, kR, cell);
   }
 }
 
@@ -367,6 +385,7 @@ TEST(FieldOrder, LatticeBall) {
   for (double cell : {1.0, 0.5, 0.8}) {
     check<FieldSSP07>("lattice ball", p, kR, cell);
     check<FieldZB05>("lattice ball", p, kR, cell);
+    check<FieldSPH>("lattice ball", p, kR, cell);
   }
 }
 
@@ -375,6 +394,7 @@ TEST(FieldOrder, DenseGridWithEmptyVertices) {
   const Points p = jittered_ball(0, 0, 0, 0.3, kR, 0.25, 5);
   check<FieldSSP07>("dense grid", p, kR, 1.0, true);
   check<FieldZB05>("dense grid", p, kR, 1.0, true);
+  check<FieldSPH>("dense grid", p, kR, 1.0, true);
 }
 
 TEST(FieldOrder, CrowdedTile) {
@@ -384,6 +404,7 @@ TEST(FieldOrder, CrowdedTile) {
   const Points p = crowded(kR, 12000);
   check<FieldSSP07>("crowded tile", p, kR, 1.0);
   check<FieldZB05>("crowded tile", p, kR, 0.5);
+  check<FieldSPH>("crowded tile", p, kR, 0.5);
 }
 
 TEST(FieldOrder, CoarseCells) {
@@ -392,6 +413,7 @@ TEST(FieldOrder, CoarseCells) {
   const Points p = jittered_ball(0, 0, 0, 0.6, kR, 0.25, 9);
   check<FieldSSP07>("coarse cells", p, kR, 6.0);
   check<FieldZB05>("coarse cells", p, kR, 6.0);
+  check<FieldSPH>("coarse cells", p, kR, 6.0);
 }
 
 TEST(FieldOrder, RealFrame) {
@@ -399,4 +421,5 @@ TEST(FieldOrder, RealFrame) {
   const Points p = read_xyz(f);
   if (p.empty()) GTEST_SKIP() << f << " not present";
   check<FieldSSP07>("cbd46k", p, 0.0156, 1.0, false, 1000);
+  check<FieldSPH>("cbd46k", p, 0.0156, 1.0, false, 1000);
 }

@@ -81,7 +81,7 @@ TEST(Baselines, NarrowBandEqualsDenseWhereBothTriangulate) {
 
 TEST(Baselines, ScatterAndGatherFieldsAgree) {
   const double r = 0.05;
-  for (int method : {NBMC_METHOD_SSP07, NBMC_METHOD_ZB05}) {
+  for (int method : {NBMC_METHOD_SSP07, NBMC_METHOD_ZB05, NBMC_METHOD_SPH}) {
     nbmc_params gather = params(r), scatter = params(r);
     gather.field = NBMC_FIELD_DENSE;
     scatter.field = NBMC_FIELD_SCATTER;

@@ -139,6 +139,37 @@ TEST(Subdomains, Zb05AndNoNormalsAndNoCleanup) {
   expect_identical(p, prm, 3, 1, 2);
 }
 
+// The SPH density needs each particle's own density, a sum over R around
+// it: the ghost layer is 2R wide, and a split gives the same mesh. Also with
+// a small kernel (splashsurf's usual -l 2, R = 2r) and on a lattice.
+TEST(Subdomains, SphDensity) {
+  const double r = 0.05;
+  const Points p = jittered_blob(4, r);
+  nbmc_params prm = nbmc_test::params(r);
+  prm.method = NBMC_METHOD_SPH;
+  for (const auto& s : std::vector<std::array<int, 3>>{{2, 1, 1}, {1, 3, 1}, {2, 2, 2}}) {
+    SCOPED_TRACE(std::to_string(s[0]) + "x" + std::to_string(s[1]) + "x" + std::to_string(s[2]));
+    expect_identical(p, prm, s[0], s[1], s[2]);
+  }
+  prm.influence_radius = 2;
+  prm.iso_threshold = 0.5;
+  expect_identical(p, prm, 3, 2, 2);
+  const double lo[3] = {0, 0, 0}, hi[3] = {0.8, 0.6, 0.7};
+  prm.cell_size = 1;
+  expect_identical(nbmc_test::box(lo, hi, r), prm, 4, 3, 2);
+}
+
+// Isolated particles dropped before the split: the same mesh for any split.
+TEST(Subdomains, IsolatedDropped) {
+  const double r = 0.05;
+  Points p = jittered_blob(5, r);
+  p.insert(p.end(), {0.9, 0.6, 0.6, 0.92, 0.6, 0.6, -0.9, -0.6, 0.5});  // a pair and a lone particle
+  nbmc_params prm = nbmc_test::params(r);
+  prm.isolated = NBMC_ISOLATED_DROP;
+  prm.min_cluster = 3;
+  expect_identical(p, prm, 2, 2, 1);
+}
+
 // A regular lattice puts particles and surface crossings exactly on the
 // grid vertices and cell faces where subdomains meet.
 TEST(Subdomains, FacesThroughParticlesAndGridVertices) {

@@ -5,12 +5,18 @@
 //
 // A method is a type with
 //   static constexpr int N;                       // accumulator size (floats, zero-initialised)
-//   static void add(float* a, dx, dy, dz, k)      // contribution of one particle, d = x_j - x,
-//                                                 // k = max(0, 1 - |d|^2/R^2) (0: no contribution)
-//   static uint32_t accumulate(a, X, Y, Z, b, e, x0, x1, x2, inv_R2)
+//   static constexpr bool weighted;               // reads a per-particle weight (below)
+//   static void add(float* a, dx, dy, dz, k, w)   // contribution of one particle, d = x_j - x,
+//                                                 // k = max(0, 1 - |d|^2/R^2) (0: no contribution),
+//                                                 // w = weight of particle j (1 if not weighted)
+//   static uint32_t accumulate(a, X, Y, Z, W, b, e, x0, x1, x2, inv_R2)
 //                                                 // the same for particles [b, e), in order
+//                                                 // (W: the weights, nullptr if not weighted)
 //   static float value(const float* a, const FieldConstants&)  // phi(x); negative inside
 // so the gather (narrow band, dense) and the scatter drivers are written once.
+// A weighted method's weights come from a pass over the particles before the
+// field (NeighbourView::weight; see field_sph.hpp); a particle that
+// contributes nothing (k = 0) must add exactly +0 whatever its weight.
 //
 // Summation order: every backend adds a vertex's contributions one at a time,
 // in the order of eval_vertex_direct (cells in z, y, x order, particles in
@@ -52,16 +58,19 @@ struct FieldConstants {
   float inv_R2 = 0;      // 1 / R^2
   float iso_radius = 0;  // r-bar
   float t_low = 0.4f, t_high = 3.5f;
+  float iso_threshold = 0.6f;  // SPH: iso level of the normalised density
   float outside = 0;     // phi where no particle contributes
 };
 
-inline FieldConstants field_constants(double R, double iso_radius, double t_low, double t_high) {
+inline FieldConstants field_constants(double R, double iso_radius, double t_low, double t_high,
+                                      double iso_threshold = 0.6) {
   FieldConstants f;
   f.R = float(R);
   f.inv_R2 = float(1.0 / (R * R));
   f.iso_radius = float(iso_radius);
   f.t_low = float(t_low);
   f.t_high = float(t_high);
+  f.iso_threshold = float(iso_threshold);
   f.outside = float(R);
   return f;
 }

@@ -28,6 +28,7 @@ struct Neighbourhood {
   Buffer<std::uint64_t, MemSpace> cell_keys;
   Buffer<std::uint32_t, MemSpace> cell_start;  // n_cells + 1
   HashMapStorage<MemSpace> cells;              // Morton key -> cell index
+  Buffer<float, MemSpace> weight;              // n, sorted order: weighted methods only (field_sph.hpp)
 };
 
 // Read-only device view of a neighbourhood for kernels.
@@ -39,6 +40,9 @@ struct NeighbourView {
   HashMap<MemSpace> cells;
   std::int64_t nb_dims[3];
   float inv_nb_cell;
+  // Per-particle weights of a weighted field method (sorted order); empty
+  // for the others.
+  Kokkos::View<const float*, MemSpace> weight;
 
   // Range of particles of neighbour cell (x, y, z); empty if unoccupied.
   KOKKOS_INLINE_FUNCTION bool cell_range(std::int64_t x, std::int64_t y, std::int64_t z, std::uint32_t& b,
@@ -60,6 +64,7 @@ NeighbourView<MemSpace> view_of(const Neighbourhood<MemSpace>& nb, const Grid& g
   v.cells = nb.cells.map;
   for (int a = 0; a < 3; ++a) v.nb_dims[a] = g.nb_dims[a];
   v.inv_nb_cell = float(1.0 / g.nb_cell);
+  v.weight = nb.weight.view();
   return v;
 }
 

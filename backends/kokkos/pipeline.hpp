@@ -10,6 +10,7 @@
 #include "narrow_band.hpp"
 #include "neighbourhood.hpp"
 #include "scalar_field.hpp"
+#include "sph_density.hpp"
 #include "surface_particles.hpp"
 #include "../../src/core/piece.hpp"
 
@@ -77,6 +78,7 @@ struct RunStats {
   std::uint64_t particles = 0, surface_particles = 0, occupied_cells = 0, band_vertices = 0, band_blocks = 0,
                 grid_vertices = 0, cells = 0, vertices = 0, triangles = 0, evaluations = 0;
   std::uint64_t band_growth_rounds = 0, band_growth_cells = 0;
+  std::uint64_t dropped_particles = 0, dropped_clusters = 0;  // isolated-particle filter (run_backend)
   std::uint64_t dims[3] = {0, 0, 0};
   double stage[16] = {0};
   double total = 0;
@@ -86,14 +88,14 @@ struct RunStats {
 
 namespace Details {
 
-// The bounding box extended by the influence radius: the particles a
-// clipped reconstruction keeps (host and device paths).
+// The bounding box extended by particle_reach (R; 2R for the SPH density):
+// the particles a clipped reconstruction keeps (host and device paths).
 struct ExtendedBox {
   double lo[3], hi[3];
   explicit ExtendedBox(const Params& p) {
     for (int a = 0; a < 3; ++a) {
-      lo[a] = p.bbox_min[a] - p.influence_radius;
-      hi[a] = p.bbox_max[a] + p.influence_radius;
+      lo[a] = p.bbox_min[a] - particle_reach(p);
+      hi[a] = p.bbox_max[a] + particle_reach(p);
     }
   }
   KOKKOS_INLINE_FUNCTION bool contains(double x, double y, double z) const {
@@ -306,7 +308,10 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
     tracker.require(need, "the field and triangulation of " + std::to_string(band.n_vertices) +
                               " band vertices (estimated)");
   }
-  const FieldConstants fc = field_constants(p.influence_radius, p.iso_radius, p.t_low, p.t_high);
+  const FieldConstants fc = field_constants(p.influence_radius, p.iso_radius, p.t_low, p.t_high, p.iso_threshold);
+  // The SPH density's per-particle weights (its pass over the particles).
+  if (p.method == Method::SPH) compute_sph_weights(space, tracker, nbh, g, fc);
+  const NeighbourView<MemSpace> nbf = view_of(nbh, g);
   Buffer<float, MemSpace> phi(tracker, "scalar_field::values", band.n_vertices);
   const BandView<MemSpace> bv0 = view_of(band, g);
   const std::size_t n_words0 = band.n_blocks * 8;
@@ -315,13 +320,14 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
     if (p.field == FieldKind::Scatter) {
       if constexpr (Kokkos::SpaceAccessibility<Kokkos::HostSpace, MemSpace>::accessible) {
         return scatter_field<Method>(space, tracker, Kokkos::View<const float*, Kokkos::HostSpace>(nbh.pos.view()),
-                                     nbh.n, bv0, n_words0, g, fc, phi.view(), progress);
+                                     Kokkos::View<const float*, Kokkos::HostSpace>(nbh.weight.view()), nbh.n, bv0,
+                                     n_words0, g, fc, phi.view(), progress);
       } else {
         throw Error(4, "the scatter baseline runs on the CPU backends only");
         return std::uint64_t(0);
       }
     }
-    return gather_field<Method>(space, nb, bv0, n_words0, g, fc, phi.view(), progress);
+    return gather_field<Method>(space, nbf, bv0, n_words0, g, fc, phi.view(), progress);
   };
   st.evaluations = with_field_method(p.method, run_field);
 
@@ -371,7 +377,7 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
         trace("growth: carry values", band.n_blocks * 8);
         const WordList<MemSpace> list{list_words.view(), list_bits.view()};
         auto grow = [&](auto method) {
-          return gather_field<decltype(method)>(space, nb, view_of(grown, g), growth.words.size(), g, fc,
+          return gather_field<decltype(method)>(space, nbf, view_of(grown, g), growth.words.size(), g, fc,
                                                 grown_phi.view(), progress, list);
         };
         if (!growth.words.empty()) st.evaluations += with_field_method(p.method, grow);

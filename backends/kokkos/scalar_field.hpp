@@ -132,6 +132,7 @@ KOKKOS_INLINE_FUNCTION bool eval_tile_host(const NeighbourView<MemSpace>& nb, co
   const float* X = nb.pos.data();
   const float* Y = X + nb.n;
   const float* Z = Y + nb.n;
+  const float* Wt = nb.weight.data();  // weighted methods only
   int bits[64], n_bits = 0;
   for (int o = 0; o < 64; ++o)
     if ((word >> tile_order(o)) & 1) bits[n_bits++] = tile_order(o);
@@ -176,7 +177,7 @@ KOKKOS_INLINE_FUNCTION bool eval_tile_host(const NeighbourView<MemSpace>& nb, co
         const HostVecI inside = (s2 < one) & visit;  // -1 where the particle contributes
         const HostVecF k = (HostVecF)((HostVecI)(one - s2) & inside);
         count -= inside;
-        Method::add(acc, dx, dy, dz, k);
+        Method::add(acc, dx, dy, dz, k, Method::weighted ? host_splat(Wt[p]) : one);
       }
     }
     for (int l = 0; l < m; ++l) {
@@ -208,7 +209,8 @@ KOKKOS_INLINE_FUNCTION float eval_vertex_direct(const NeighbourView<MemSpace>& n
         if (!nb.cell_range(xx, y, z, b, e)) continue;
         const float clo[3] = {float(xx) * S, float(y) * S, float(z) * S};
         if (box_distance2(clo, S, x) >= fc.R * fc.R) continue;
-        evals += Method::accumulate(acc, X, X + nb.n, X + 2 * nb.n, b, e, x[0], x[1], x[2], fc.inv_R2);
+        evals += Method::accumulate(acc, X, X + nb.n, X + 2 * nb.n, Method::weighted ? nb.weight.data() : nullptr, b,
+                                    e, x[0], x[1], x[2], fc.inv_R2);
       }
   return Method::value(acc, fc);
 }
@@ -320,7 +322,8 @@ std::uint64_t gather_words_team(const ExecSpace& space, const NeighbourView<type
   using U32 = Kokkos::View<std::uint32_t*, Scratch, Kokkos::MemoryUnmanaged>;
   using F32 = Kokkos::View<float*, Scratch, Kokkos::MemoryUnmanaged>;
   const float c = float(g.cell), S = float(g.nb_cell);
-  const std::size_t shmem = 3 * U32::shmem_size(kMaxTileCells + 1) + F32::shmem_size(3 * kTeamChunk);
+  constexpr int kStaged = Method::weighted ? 4 : 3;  // x, y, z (and the weight) of each staged particle
+  const std::size_t shmem = 3 * U32::shmem_size(kMaxTileCells + 1) + F32::shmem_size(kStaged * kTeamChunk);
   Kokkos::View<std::uint64_t, MemSpace> counter("nbmc::scalar_field::evals");
   Policy policy(space, int(w1 - w0), 64);
   Kokkos::parallel_for(
@@ -352,7 +355,7 @@ std::uint64_t gather_words_team(const ExecSpace& space, const NeighbourView<type
         }
         U32 begin(team.team_scratch(0), kMaxTileCells + 1), count(team.team_scratch(0), kMaxTileCells + 1),
             start(team.team_scratch(0), kMaxTileCells + 1);
-        F32 px(team.team_scratch(0), 3 * kTeamChunk);
+        F32 px(team.team_scratch(0), kStaged * kTeamChunk);
         const float R2 = fc.R * fc.R;
         // 1. the cells of the span (in order), empty or too far from the tile: count 0
         Kokkos::parallel_for(Kokkos::TeamThreadRange(team, int(n_span)), [&](const int q) {
@@ -396,11 +399,13 @@ std::uint64_t gather_words_team(const ExecSpace& space, const NeighbourView<type
             px(e) = nb.pos(j);
             px(kTeamChunk + e) = nb.pos(nb.n + j);
             px(2 * kTeamChunk + e) = nb.pos(2 * nb.n + j);
+            if (Method::weighted) px(3 * kTeamChunk + e) = nb.weight(j);
           });
           team.team_barrier();
           if (mine)
-            evals += Method::accumulate(acc, px.data(), px.data() + kTeamChunk, px.data() + 2 * kTeamChunk, 0, m,
-                                        x[0], x[1], x[2], fc.inv_R2);
+            evals += Method::accumulate(acc, px.data(), px.data() + kTeamChunk, px.data() + 2 * kTeamChunk,
+                                        Method::weighted ? px.data() + 3 * kTeamChunk : nullptr, 0, m, x[0], x[1],
+                                        x[2], fc.inv_R2);
           team.team_barrier();
         }
         if (mine) {
@@ -490,7 +495,8 @@ std::uint64_t gather_field(const ExecSpace& space, const NeighbourView<typename 
 // Host memory only. Writes phi for every vertex of a dense band.
 template <class Method, class ExecSpace>
 std::uint64_t scatter_field(const ExecSpace& space, MemoryTracker& tracker,
-                            const Kokkos::View<const float*, Kokkos::HostSpace>& pos, std::size_t n,
+                            const Kokkos::View<const float*, Kokkos::HostSpace>& pos,
+                            const Kokkos::View<const float*, Kokkos::HostSpace>& weight, std::size_t n,
                             const BandView<typename ExecSpace::memory_space>& band, std::size_t n_words,
                             const Grid& g, const FieldConstants& fc,
                             const Kokkos::View<float*, typename ExecSpace::memory_space>& phi,
@@ -505,6 +511,7 @@ std::uint64_t scatter_field(const ExecSpace& space, MemoryTracker& tracker,
   std::uint64_t evals = 0;
   for (std::size_t p = 0; p < n; ++p) {
     const float px = pos(p), py = pos(n + p), pz = pos(2 * n + p);
+    const float wp = Method::weighted ? weight(p) : 1.f;
     const std::int64_t lo[3] = {std::max<std::int64_t>(0, std::int64_t(std::ceil((px - fc.R) / c))),
                                 std::max<std::int64_t>(0, std::int64_t(std::ceil((py - fc.R) / c))),
                                 std::max<std::int64_t>(0, std::int64_t(std::ceil((pz - fc.R) / c)))};
@@ -520,7 +527,7 @@ std::uint64_t scatter_field(const ExecSpace& space, MemoryTracker& tracker,
           const float dx = px - float(i) * float(c);
           const float s2 = (dx * dx + dy * dy + dz * dz) * fc.inv_R2;
           if (s2 >= 1.f) continue;
-          Method::add(row + N * i, dx, dy, dz, 1.f - s2);
+          Method::add(row + N * i, dx, dy, dz, 1.f - s2, wp);
           ++evals;
         }
       }

@@ -95,6 +95,10 @@ module nbmc
 
   integer(c_int32_t), parameter, public :: NBMC_METHOD_SSP07 = 0
   integer(c_int32_t), parameter, public :: NBMC_METHOD_ZB05  = 1
+  integer(c_int32_t), parameter, public :: NBMC_METHOD_SPH   = 2
+
+  integer(c_int32_t), parameter, public :: NBMC_ISOLATED_KEEP = 0
+  integer(c_int32_t), parameter, public :: NBMC_ISOLATED_DROP = 1
 
   integer(c_int32_t), parameter, public :: NBMC_FIELD_NARROW_BAND = 0
   integer(c_int32_t), parameter, public :: NBMC_FIELD_DENSE       = 1
@@ -167,6 +171,9 @@ module nbmc
     real(c_double)     :: bbox_max(3) = 0
     integer(c_int32_t) :: cleanup = 0             ! appended (post-processing)
     integer(c_int32_t) :: smooth_iterations = 0
+    real(c_double)     :: iso_threshold = 0       ! appended (NBMC_METHOD_SPH)
+    integer(c_int32_t) :: isolated = 0            ! appended (isolated-particle filter)
+    integer(c_int32_t) :: min_cluster = 0
   end type nbmc_params
 
   type, bind(c), public :: nbmc_stats
@@ -190,6 +197,8 @@ module nbmc
     real(c_double)     :: cell_size = 0
     integer(c_int64_t) :: raw_triangle_count = 0  ! appended (post-processing)
     real(c_double)     :: smoothing_volume_change = 0
+    integer(c_int64_t) :: dropped_particle_count = 0  ! appended (isolated-particle filter)
+    integer(c_int64_t) :: dropped_cluster_count = 0
   end type nbmc_stats
 
   ! Signature of a progress callback (nbmc_progress_fn); pass c_funloc(f).

@@ -70,6 +70,11 @@ def pieces(*ps):
     return u8(len(ps) - 1) + b"".join(ps)
 
 
+def sph(threshold=0.6, corrupt_threshold=False):
+    """The draws appended after the particle pieces: NBMC_METHOD_SPH."""
+    return flag(5, True) + rng(0.05, 0.95, threshold) + u8(0 if corrupt_threshold else 1)
+
+
 def centre(c):
     return b"".join(rng(-6, 6, x) for x in c)
 
@@ -126,6 +131,16 @@ SEEDS = {
     # A few points placed by hand, some almost coincident; ZB05, no normals.
     "points-zb05": header(zb05=True, normals=False, iso=0.8, R=3.0) +
                    pieces(points([(0, 0, 0), (1, 0, 0), (0, 1, 0), (0, 0, 1), (0.001, 0, 0), (3, 3, 3)])),
+    # NBMC_METHOD_SPH (the draws after the pieces): a lattice ball; a sheet
+    # cut by a box (particles kept within 2R); R = 1.5 on the dense grid; a
+    # threshold of 1 and a NaN one (INVALID_PARAMETER).
+    "sph-ball": header() + pieces(ball((0, 0, 0), 3.0)) + sph(0.6),
+    "sph-sheet-bbox": header(cell=0.6, bbox=[(0.1, 0.8), (0.0, 1.0), (-0.3, 1.3)]) +
+                      pieces(sheet((-4, -4, 0), 10, 10, 2)) + sph(0.5),
+    "sph-dense-small-kernel": header(R=1.5, surf=2.0, iso=0.5, dense=True, cell=0.8) +
+                              pieces(cloud((-2, -2, -2), 150, 5.0), ball((3, 3, 3), 1.0)) + sph(0.3),
+    "sph-threshold-one": header(corrupt=(6, 0, 0)) + pieces(ball((0, 0, 0), 2.0)) + sph(0.6, True),
+    "sph-threshold-nan": header(corrupt=(6, 1, 0)) + pieces(ball((0, 0, 0), 2.0)) + sph(0.6, True),
     # Regression inputs for the core findings of the fuzzer (fuzz/README_api.md),
     # fixed or documented in eedcfb7.
     # 1: cancelled on the 8th progress call (stage 5 done) under a 32 KiB

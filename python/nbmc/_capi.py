@@ -39,6 +39,10 @@ BACKEND_CUDA = 3
 
 METHOD_SSP07 = 0
 METHOD_ZB05 = 1
+METHOD_SPH = 2
+
+ISOLATED_KEEP = 0
+ISOLATED_DROP = 1
 
 FIELD_NARROW_BAND = 0
 FIELD_DENSE = 1
@@ -102,6 +106,11 @@ class Params(Structure):
         # appended with the mesh post-processing (nbmc_params_init writes them)
         ("cleanup", c_int32),
         ("smooth_iterations", c_int32),
+        # appended with METHOD_SPH
+        ("iso_threshold", c_double),
+        # appended with the isolated-particle filter
+        ("isolated", c_int32),
+        ("min_cluster", c_int32),
     ]
 
 
@@ -128,6 +137,9 @@ class Stats(Structure):
         # appended with the mesh post-processing
         ("raw_triangle_count", c_uint64),
         ("smoothing_volume_change", c_double),
+        # appended with the isolated-particle filter
+        ("dropped_particle_count", c_uint64),
+        ("dropped_cluster_count", c_uint64),
     ]
 
 

@@ -26,9 +26,10 @@ ProgressFn = Callable[[str, float], Any]
 
 BACKENDS = {"auto": C.BACKEND_AUTO, "serial": C.BACKEND_SERIAL, "openmp": C.BACKEND_OPENMP,
             "cuda": C.BACKEND_CUDA}
-METHODS = {"ssp07": C.METHOD_SSP07, "zb05": C.METHOD_ZB05}
+METHODS = {"ssp07": C.METHOD_SSP07, "zb05": C.METHOD_ZB05, "sph": C.METHOD_SPH}
 FIELDS = {"narrow-band": C.FIELD_NARROW_BAND, "dense": C.FIELD_DENSE, "scatter": C.FIELD_SCATTER}
 UNITS = {"spacing": C.UNIT_SPACING, "absolute": C.UNIT_ABSOLUTE}
+ISOLATED = {"keep": C.ISOLATED_KEEP, "drop": C.ISOLATED_DROP}
 MEMORIES = {"host": C.MEMORY_HOST, "device": C.MEMORY_DEVICE}
 
 
@@ -62,8 +63,8 @@ def stage_name(stage: int) -> str:
 # Keyword arguments of reconstruct() that map onto nbmc_params, named like the
 # CLI's options (--cell-size -> cell_size); 'normals' is the inverse of --no-normals.
 _LENGTHS = ("cell_size", "influence_radius", "band_width", "surface_radius", "iso_radius")
-_PARAM_KEYS = _LENGTHS + ("method", "field", "t_low", "t_high", "color_threshold",
-                          "neighbour_threshold", "normals", "length_unit")
+_PARAM_KEYS = _LENGTHS + ("method", "field", "t_low", "t_high", "iso_threshold", "color_threshold",
+                          "neighbour_threshold", "normals", "length_unit", "isolated", "min_cluster")
 
 
 def defaults() -> Dict[str, Any]:
@@ -75,9 +76,10 @@ def defaults() -> Dict[str, Any]:
     lib.nbmc_params_init(byref(p))
     d: Dict[str, Any] = {k: p.__getattribute__(k) for k in _LENGTHS}
     d.update(method=_name_of(METHODS, p.method), field=_name_of(FIELDS, p.field), t_low=p.t_low,
-             t_high=p.t_high, color_threshold=p.color_threshold,
+             t_high=p.t_high, iso_threshold=p.iso_threshold, color_threshold=p.color_threshold,
              neighbour_threshold=p.neighbour_threshold, normals=bool(p.compute_normals),
-             length_unit=_name_of(UNITS, p.length_unit))
+             length_unit=_name_of(UNITS, p.length_unit),
+             isolated=_name_of(ISOLATED, p.isolated), min_cluster=p.min_cluster)
     return d
 
 
@@ -103,11 +105,15 @@ def make_params(spacing: Optional[float] = None, particle_radius: Optional[float
     p = C.Params()
     lib.nbmc_params_init(byref(p))
     p.spacing = float(spacing) if spacing is not None else 2.0 * float(particle_radius)  # type: ignore[arg-type]
-    for k in _LENGTHS + ("t_low", "t_high", "color_threshold"):
+    for k in _LENGTHS + ("t_low", "t_high", "iso_threshold", "color_threshold"):
         if kw.get(k) is not None:
             setattr(p, k, float(kw[k]))
     if kw.get("neighbour_threshold") is not None:
         p.neighbour_threshold = int(kw["neighbour_threshold"])
+    if kw.get("isolated") is not None:
+        p.isolated = _enum(ISOLATED, kw["isolated"], "isolated")
+    if kw.get("min_cluster") is not None:
+        p.min_cluster = int(kw["min_cluster"])
     if kw.get("method") is not None:
         p.method = _enum(METHODS, kw["method"], "method")
     if kw.get("field") is not None:
@@ -162,6 +168,9 @@ class Stats:
     grid_origin: Tuple[float, float, float]
     #: absolute marching-cubes cell edge
     cell_size: float
+    #: particles left out by ``isolated="drop"``, and the clusters they formed
+    dropped_particle_count: int = 0
+    dropped_cluster_count: int = 0
 
     @classmethod
     def _from_c(cls, s: C.Stats) -> "Stats":
@@ -174,7 +183,8 @@ class Stats:
             peak_memory_bytes=s.peak_memory_bytes, neighbour_evaluations=s.neighbour_evaluations,
             stage_seconds={STAGES[i]: s.stage_seconds[i] for i in range(C.STAGE_COUNT)},
             total_seconds=s.total_seconds, grid_origin=tuple(s.grid_origin),  # type: ignore[arg-type]
-            cell_size=s.cell_size)
+            cell_size=s.cell_size, dropped_particle_count=s.dropped_particle_count,
+            dropped_cluster_count=s.dropped_cluster_count)
 
 
 # ---------------------------------------------------------------------- mesh
@@ -810,9 +820,11 @@ def reconstruct(points: Any, spacing: Optional[float] = None, *,
                 band_width: Optional[float] = None, surface_radius: Optional[float] = None,
                 iso_radius: Optional[float] = None, method: Optional[str] = None,
                 field: Optional[str] = None, t_low: Optional[float] = None,
-                t_high: Optional[float] = None, color_threshold: Optional[float] = None,
+                t_high: Optional[float] = None, iso_threshold: Optional[float] = None,
+                color_threshold: Optional[float] = None,
                 neighbour_threshold: Optional[int] = None, normals: Optional[bool] = None,
                 length_unit: Optional[str] = None, bbox: Any = None,
+                isolated: Optional[str] = None, min_cluster: Optional[int] = None,
                 backend: Union[str, int] = "auto", threads: Optional[int] = None,
                 device_id: int = 0, memory_budget: Union[int, str, None] = None,
                 mesh_memory: str = "host", progress: Optional[ProgressFn] = None,
@@ -833,8 +845,13 @@ def reconstruct(points: Any, spacing: Optional[float] = None, *,
         units of the positions); defaults {cell_size}, {influence_radius},
         {band_width}, {surface_radius}, {iso_radius}.
     method
-        "ssp07" (Solenthaler et al. 2007) or "zb05" (Zhu & Bridson 2005);
-        default {method!r}.
+        "ssp07" (Solenthaler et al. 2007), "zb05" (Zhu & Bridson 2005) or
+        "sph" (splashsurf's normalised SPH density, cubic spline kernel of
+        support ``influence_radius``); default {method!r}.
+    iso_threshold
+        "sph" only: the iso level of the normalised density, a fraction of
+        the rest density in (0, 1) (splashsurf's ``--surface-threshold``);
+        default {iso_threshold}.
     field
         "narrow-band", or the baselines "dense" and "scatter"; default {field!r}.
     t_low, t_high, color_threshold, neighbour_threshold
@@ -842,6 +859,11 @@ def reconstruct(points: Any, spacing: Optional[float] = None, *,
         {neighbour_threshold}.
     normals
         Compute vertex normals (default {normals}).
+    isolated, min_cluster
+        "drop": clusters (particles linked when closer than
+        ``surface_radius``) of fewer than ``min_cluster`` particles make no
+        surface; defaults {isolated!r}, {min_cluster}. ``Context.stats``
+        counts what was dropped.
     bbox
         Only reconstruct near this box (absolute): (xmin, ymin, zmin, xmax,
         ymax, zmax) or ((xmin, ymin, zmin), (xmax, ymax, zmax)).
@@ -867,9 +889,10 @@ def reconstruct(points: Any, spacing: Optional[float] = None, *,
                                influence_radius=influence_radius, band_width=band_width,
                                surface_radius=surface_radius, iso_radius=iso_radius,
                                method=method, field=field, t_low=t_low, t_high=t_high,
-                               color_threshold=color_threshold,
+                               iso_threshold=iso_threshold, color_threshold=color_threshold,
                                neighbour_threshold=neighbour_threshold, normals=normals,
-                               length_unit=length_unit)
+                               length_unit=length_unit, isolated=isolated,
+                               min_cluster=min_cluster)
 
 
 def _show_library_defaults(fn: Callable[..., Any]) -> None:

@@ -71,6 +71,8 @@ def test_invalid_parameter(frame):
                      (dict(spacing=0.05, iso_radius=5), "iso_radius"),
                      (dict(spacing=0.05, cell_size=-1), "cell_size"),
                      (dict(spacing=0.05, method=7), "method"),
+                     (dict(spacing=0.05, method="sph", iso_threshold=1.2), "iso_threshold"),
+                     (dict(spacing=0.05, method="sph", iso_threshold=float("nan")), "iso_threshold"),
                      (dict(spacing=0.05, bbox=(0, 0, 0, -1, 1, 1)), "")]:
         e = bad(nbmc.InvalidParameter, 4, lambda: nbmc.reconstruct(frame, **kw), word)
         assert isinstance(e, ValueError)

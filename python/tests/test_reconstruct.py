@@ -35,6 +35,9 @@ def test_equals_cli_bit_for_bit(mesh, cli_ply, tmp_path):
 @pytest.mark.parametrize("cli, kw", [
     (["--cell-size", "1", "--method", "zb05", "--no-normals"],
      dict(cell_size=1, method="zb05", normals=False)),
+    (["--method", "sph", "--influence-radius", "2", "--iso-threshold", "0.5"],
+     dict(method="sph", influence_radius=2, iso_threshold=0.5)),
+    (["--isolated", "drop", "--min-cluster", "20"], dict(isolated="drop", min_cluster=20)),
     (["--cell-size", "0.75", "--influence-radius", "3", "--surface-radius", "1.5",
       "--t-low", "0.5", "--neighbour-threshold", "20", "--bbox", "-1", "0", "-1", "0", "0.6", "0"],
      dict(cell_size=0.75, influence_radius=3, surface_radius=1.5, t_low=0.5,

@@ -51,7 +51,8 @@ struct Named {
   const char* name;
   std::int32_t value;
 };
-const Named kMethods[] = {{"ssp07", NBMC_METHOD_SSP07}, {"zb05", NBMC_METHOD_ZB05}};
+const Named kMethods[] = {{"ssp07", NBMC_METHOD_SSP07}, {"zb05", NBMC_METHOD_ZB05}, {"sph", NBMC_METHOD_SPH}};
+const Named kIsolated[] = {{"keep", NBMC_ISOLATED_KEEP}, {"drop", NBMC_ISOLATED_DROP}};
 const Named kFields[] = {
     {"narrow-band", NBMC_FIELD_NARROW_BAND}, {"dense", NBMC_FIELD_DENSE}, {"scatter", NBMC_FIELD_SCATTER}};
 const Named kBackends[] = {{"auto", NBMC_BACKEND_AUTO},
@@ -88,7 +89,7 @@ struct Options {
   double particle_radius = 0;
   nbmc_params params{};
   nbmc_context_desc desc{};
-  std::string method, field, backend;
+  std::string method, field, backend, isolated;
   std::vector<double> bbox;
   bool no_normals = false;
   bool no_cleanup = false;  // --no-cleanup
@@ -922,6 +923,7 @@ int main(int argc, char** argv) {
   nbmc_params& p = o.params;
   o.method = name_of(kMethods, p.method);
   o.field = name_of(kFields, p.field);
+  o.isolated = name_of(kIsolated, p.isolated);
   o.backend = name_of(kBackends, o.desc.backend);
 
   CLI::App app{"nbmc: narrow-band marching cubes surface reconstruction of particle-based fluids"};
@@ -963,11 +965,24 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   rec->add_option("--iso-radius", p.iso_radius, "Iso radius (SSP07) or particle radius (ZB05) of the field")
       ->capture_default_str();
-  rec->add_option("--method", o.method, "Scalar field")
+  rec->add_option("--method", o.method,
+                  "Scalar field: ssp07, zb05, or sph (splashsurf's normalised SPH density, cubic spline of "
+                  "support --influence-radius, surface at --iso-threshold)")
       ->check(CLI::IsMember(names(kMethods), CLI::ignore_case))
       ->capture_default_str();
   rec->add_option("--field", o.field, "Field evaluation: on the band only, or baselines")
       ->check(CLI::IsMember(names(kFields), CLI::ignore_case))
+      ->capture_default_str();
+  rec->add_option("--iso-threshold", p.iso_threshold,
+                  "SPH: iso level of the normalised density, a fraction of the rest density in (0, 1) "
+                  "(splashsurf's --surface-threshold)")
+      ->capture_default_str();
+  rec->add_option("--isolated", o.isolated,
+                  "keep: every particle makes surface; drop: clusters (particles linked closer than "
+                  "--surface-radius) of fewer than --min-cluster particles make none")
+      ->check(CLI::IsMember(names(kIsolated), CLI::ignore_case))
+      ->capture_default_str();
+  rec->add_option("--min-cluster", p.min_cluster, "--isolated drop: smallest cluster kept (particles)")
       ->capture_default_str();
   rec->add_option("--t-low", p.t_low, "SSP07 lower eigenvalue threshold")->capture_default_str();
   rec->add_option("--t-high", p.t_high, "SSP07 upper eigenvalue threshold")->capture_default_str();
@@ -1055,6 +1070,7 @@ int main(int argc, char** argv) {
   p.spacing = sp->count() > 0 ? o.spacing : 2.0 * o.particle_radius;
   p.method = value_of(kMethods, o.method);
   p.field = value_of(kFields, o.field);
+  p.isolated = value_of(kIsolated, o.isolated);
   o.desc.backend = value_of(kBackends, o.backend);
   if (o.no_normals) p.compute_normals = 0;
   if (o.no_cleanup) p.cleanup = 0;

@@ -73,6 +73,8 @@ std::vector<std::pair<const char*, std::uint64_t>> counts(const nbmc_stats& s) {
           {"vertex_count", s.vertex_count},
           {"triangle_count", s.triangle_count},
           {"raw_triangle_count", s.raw_triangle_count},
+          {"dropped_particle_count", s.dropped_particle_count},
+          {"dropped_cluster_count", s.dropped_cluster_count},
           {"neighbour_evaluations", s.neighbour_evaluations}};
 }
 
@@ -93,7 +95,9 @@ std::vector<std::pair<const char*, std::uint64_t>> check_counts(const nbmc_mesh_
 
 const char* yes_no(std::int32_t v) { return v ? "yes" : "no"; }
 
-const char* method_name(std::int32_t m) { return m == NBMC_METHOD_ZB05 ? "zb05" : "ssp07"; }
+const char* method_name(std::int32_t m) {
+  return m == NBMC_METHOD_ZB05 ? "zb05" : m == NBMC_METHOD_SPH ? "sph" : "ssp07";
+}
 const char* field_name(std::int32_t f) {
   return f == NBMC_FIELD_DENSE ? "dense" : f == NBMC_FIELD_SCATTER ? "scatter" : "narrow-band";
 }
@@ -183,13 +187,20 @@ std::string format_report(const Report& r) {
     line("attributes", names + " (interpolated, " + printf_string("%.4f", r.interpolate_seconds) + " s)");
   }
   line("backend", r.backend);
-  line("method", std::string(method_name(r.params.method)) + ", " + field_name(r.params.field) + " field");
+  line("method", std::string(method_name(r.params.method)) +
+                    (r.params.method == NBMC_METHOD_SPH ? printf_string(" (iso threshold %g)", r.params.iso_threshold)
+                                                        : std::string()) +
+                    ", " + field_name(r.params.field) + " field");
   line("mesh", (r.params.cleanup ? "cleaned up (" + grouped(s.raw_triangle_count) + " triangles before)"
                                   : std::string("raw (no clean-up)")) +
                    (r.params.smooth_iterations > 0
                         ? ", " + std::to_string(r.params.smooth_iterations) + " smoothing iterations (volume " +
                               printf_string("%+.3f%%", 100.0 * s.smoothing_volume_change) + ")"
                         : std::string()));
+  if (r.params.isolated == NBMC_ISOLATED_DROP)
+    line("isolated", "dropped " + grouped(s.dropped_particle_count) + " particles in " +
+                         grouped(s.dropped_cluster_count) + " clusters of fewer than " +
+                         std::to_string(r.params.min_cluster) + " particles");
   line("spacing", printf_string("%g", r.params.spacing) + " (cell size " + printf_string("%g", s.cell_size) + ")");
   line("grid", grouped(s.grid_dims[0]) + " x " + grouped(s.grid_dims[1]) + " x " + grouped(s.grid_dims[2]) +
                    " vertices, origin (" + printf_string("%g", s.grid_origin[0]) + ", " +
@@ -293,11 +304,13 @@ std::string format_json(const Report& r) {
       {"spacing", p.spacing},           {"cell_size", p.cell_size},   {"influence_radius", p.influence_radius},
       {"band_width", p.band_width},     {"surface_radius", p.surface_radius},
       {"iso_radius", p.iso_radius},     {"t_low", p.t_low},           {"t_high", p.t_high},
-      {"color_threshold", p.color_threshold}};
+      {"color_threshold", p.color_threshold}, {"iso_threshold", p.iso_threshold}};
   for (const auto& [k, v] : reals) o += std::string(", \"") + k + "\": " + json_number(v);
   o += ", \"method\": " + json_string(method_name(p.method));
   o += ", \"field\": " + json_string(field_name(p.field));
   o += ", \"neighbour_threshold\": " + std::to_string(p.neighbour_threshold);
+  o += ", \"isolated\": " + json_string(p.isolated == NBMC_ISOLATED_DROP ? "drop" : "keep");
+  o += ", \"min_cluster\": " + std::to_string(p.min_cluster);
   o += std::string(", \"compute_normals\": ") + (p.compute_normals ? "true" : "false");
   o += std::string(", \"cleanup\": ") + (p.cleanup ? "true" : "false");
   o += ", \"smooth_iterations\": " + std::to_string(p.smooth_iterations);

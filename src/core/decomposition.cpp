@@ -43,9 +43,11 @@ void ghost_box(const Grid& g, const Params& p, const std::int64_t vert_lo[3], co
     // test reads.
     const std::int64_t band_lo = std::int64_t(std::floor((x0 - p.band_width - c) / S)) - range;
     const std::int64_t band_hi = std::int64_t(std::floor((x1 + p.band_width + c) / S)) + range;
-    // Particles within R of a vertex of the box.
-    const std::int64_t field_lo = std::int64_t(std::floor((x0 - p.influence_radius - c) / S));
-    const std::int64_t field_hi = std::int64_t(std::floor((x1 + p.influence_radius + c) / S));
+    // Particles within R of a vertex of the box (2R for the SPH density:
+    // the particles within R of those, for their densities).
+    const double reach = particle_reach(p);
+    const std::int64_t field_lo = std::int64_t(std::floor((x0 - reach - c) / S));
+    const std::int64_t field_hi = std::int64_t(std::floor((x1 + reach + c) / S));
     // One more cell against rounding between these doubles and the floats of
     // the kernels.
     nb_lo[a] = std::max<std::int64_t>(0, std::min(band_lo, field_lo) - 1);
@@ -107,8 +109,8 @@ std::vector<std::vector<std::uint32_t>> select_particles(const Decomposition& d,
   const double inv = 1.0 / g.nb_cell;
   double lo[3], hi[3];
   for (int a = 0; a < 3; ++a) {
-    lo[a] = p.bbox_min[a] - p.influence_radius;
-    hi[a] = p.bbox_max[a] + p.influence_radius;
+    lo[a] = p.bbox_min[a] - particle_reach(p);
+    hi[a] = p.bbox_max[a] + particle_reach(p);
   }
   const int px = d.parts[0], py = d.parts[1];
   // Contiguous chunks of the particles on the host's threads, each into its

@@ -43,7 +43,7 @@ inline Grid make_grid(const double lo[3], const double hi[3], const Params& p) {
   Grid g;
   g.cell = p.cell_size;
   g.nb_cell = 0.5 * p.influence_radius;
-  const double pad = std::max(p.band_width, p.iso_radius + p.cell_size) + 2 * p.cell_size;
+  const double pad = std::max(p.band_width, surface_reach(p) + p.cell_size) + 2 * p.cell_size;
   for (int a = 0; a < 3; ++a) {
     g.origin[a] = lo[a] - pad;
     const double extent = (hi[a] + pad) - g.origin[a];

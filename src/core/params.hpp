@@ -49,7 +49,7 @@ struct NoInitAllocator : std::allocator<T> {
 
 // The field method (the kernel of the scalar field): one value per
 // NBMC_METHOD_*; backends/kokkos/field_methods.hpp maps it to a kernel type.
-enum class Method : int32_t { SSP07 = NBMC_METHOD_SSP07, ZB05 = NBMC_METHOD_ZB05 };
+enum class Method : int32_t { SSP07 = NBMC_METHOD_SSP07, ZB05 = NBMC_METHOD_ZB05, SPH = NBMC_METHOD_SPH };
 // Where the field is evaluated: the narrow band (the method of the paper) or
 // one of its baselines.
 enum class FieldKind : int32_t {
@@ -69,11 +69,29 @@ struct Params {
   Method method = Method::SSP07;
   FieldKind field = FieldKind::NarrowBand;
   double t_low = 0.4, t_high = 3.5;
+  double iso_threshold = 0.6;  // SPH: iso level of the normalised density
+  bool drop_isolated = false;  // NBMC_ISOLATED_DROP
+  std::uint32_t min_cluster = 10;
   double color_threshold = 0.75;
   int neighbour_threshold = 25;
   bool normals = true;
   bool use_bbox = false;
   double bbox_min[3] = {0, 0, 0}, bbox_max[3] = {0, 0, 0};
 };
+
+// How far from a point the particles that change its field value can lie:
+// R, or 2R for the SPH density, whose value at a point also depends on the
+// densities of the particles within R of it (each a sum over R around that
+// particle). Ghost layers and the particles kept around a clipping box are
+// this wide.
+inline double particle_reach(const Params& p) {
+  return p.method == Method::SPH ? 2 * p.influence_radius : p.influence_radius;
+}
+
+// How far beyond the particles the iso-surface can lie: iso_radius for the
+// distance-like fields (SSP07, ZB05), R for the SPH density (zero beyond R).
+inline double surface_reach(const Params& p) {
+  return p.method == Method::SPH ? p.influence_radius : p.iso_radius;
+}
 
 }  // namespace nbmc

@@ -89,6 +89,9 @@ int main(void) {
   CHECK(params.method == NBMC_METHOD_SSP07 && params.field == NBMC_FIELD_NARROW_BAND);
   CHECK(params.t_low == 0.4 && params.t_high == 3.5 && params.color_threshold == 0.75);
   CHECK(params.neighbour_threshold == 25 && params.compute_normals != 0 && params.use_bbox == 0);
+  CHECK(params.cleanup == 1 && params.smooth_iterations == 0 && params.iso_threshold == 0.6);
+  CHECK(NBMC_METHOD_SPH == 2);
+  CHECK(params.isolated == NBMC_ISOLATED_KEEP && params.min_cluster == 10 && NBMC_ISOLATED_DROP == 1);
   memset(&stats, 0xff, sizeof stats);
   nbmc_stats_init(&stats);
   CHECK(stats.struct_size == sizeof(nbmc_stats) && stats.triangle_count == 0);

@@ -266,6 +266,20 @@ void check_errors(const std::vector<double>& all, const nbmc_params& prm) {
     nbmc_mesh_destroy(m);
     nbmc_context_destroy(ctx);
   }
+  // Isolated-particle dropping is not available over MPI: every rank says so.
+  {
+    nbmc_context* ctx = context(true);
+    nbmc_context_set_particles_f64(ctx, mine.data(), mine.size() / 3, 0);
+    nbmc_params drop = prm;
+    drop.isolated = NBMC_ISOLATED_DROP;
+    nbmc_mesh* m = nullptr;
+    const int32_t st = nbmc_mpi_reconstruct(ctx, &drop, NBMC_MPI_GATHER, 0, &m);
+    CHECK(st == NBMC_ERROR_INVALID_PARAMETER && m == nullptr, "isolated drop over MPI: status %d (%s)", st,
+          nbmc_context_last_error(ctx));
+    CHECK(std::string(nbmc_context_last_error(ctx)).find("isolated") != std::string::npos, "%s",
+          nbmc_context_last_error(ctx));
+    nbmc_context_destroy(ctx);
+  }
   // A memory budget on rank 0 only.
   {
     nbmc_context* ctx = context(true);
@@ -330,6 +344,10 @@ int main(int argc, char** argv) {
   coarse.cell_size = 1;
   coarse.method = NBMC_METHOD_ZB05;
   check_case("zb05", b, coarse, "slabs", 4, 1, 1);
+  nbmc_params sph = prm;  // per-particle densities: ghosts 2R wide
+  sph.method = NBMC_METHOD_SPH;
+  sph.influence_radius = 2;
+  check_case("sph", b, sph, "random", 0, 0, 0);
   const char* dir = std::getenv("NBMC_DATA_DIR");
   if (dir) {
     const std::vector<double> f = read_xyz(std::string(dir) + "/xyz/splashsurf_dambreak_f23_24389.xyz");

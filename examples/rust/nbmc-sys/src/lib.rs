@@ -43,6 +43,10 @@ pub const NBMC_BACKEND_CUDA: i32 = 3;
 
 pub const NBMC_METHOD_SSP07: i32 = 0;
 pub const NBMC_METHOD_ZB05: i32 = 1;
+pub const NBMC_METHOD_SPH: i32 = 2;
+
+pub const NBMC_ISOLATED_KEEP: i32 = 0;
+pub const NBMC_ISOLATED_DROP: i32 = 1;
 
 pub const NBMC_FIELD_NARROW_BAND: i32 = 0;
 pub const NBMC_FIELD_DENSE: i32 = 1;
@@ -125,6 +129,11 @@ pub struct nbmc_params {
     // appended with the mesh post-processing
     pub cleanup: i32,
     pub smooth_iterations: i32,
+    // appended with NBMC_METHOD_SPH
+    pub iso_threshold: f64,
+    // appended with the isolated-particle filter
+    pub isolated: i32,
+    pub min_cluster: i32,
 }
 
 #[repr(C)]
@@ -151,6 +160,9 @@ pub struct nbmc_stats {
     // appended with the mesh post-processing
     pub raw_triangle_count: u64,
     pub smoothing_volume_change: f64,
+    // appended with the isolated-particle filter
+    pub dropped_particle_count: u64,
+    pub dropped_cluster_count: u64,
 }
 
 #[repr(C)]

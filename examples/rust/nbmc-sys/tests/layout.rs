@@ -55,6 +55,9 @@ fn rust_constants() -> BTreeMap<&'static str, i128> {
         NBMC_BACKEND_CUDA,
         NBMC_METHOD_SSP07,
         NBMC_METHOD_ZB05,
+        NBMC_METHOD_SPH,
+        NBMC_ISOLATED_KEEP,
+        NBMC_ISOLATED_DROP,
         NBMC_FIELD_NARROW_BAND,
         NBMC_FIELD_DENSE,
         NBMC_FIELD_SCATTER,
@@ -135,7 +138,10 @@ fn rust_layouts() -> Vec<Layout> {
             bbox_min,
             bbox_max,
             cleanup,
-            smooth_iterations
+            smooth_iterations,
+            iso_threshold,
+            isolated,
+            min_cluster
         }),
         layout!(nbmc_stats {
             struct_size,
@@ -157,7 +163,9 @@ fn rust_layouts() -> Vec<Layout> {
             grid_origin,
             cell_size,
             raw_triangle_count,
-            smoothing_volume_change
+            smoothing_volume_change,
+            dropped_particle_count,
+            dropped_cluster_count
         }),
         layout!(nbmc_mesh_check_result {
             struct_size,

@@ -205,6 +205,20 @@ int_enum!(
         Ssp07 = sys::NBMC_METHOD_SSP07,
         /// Zhu & Bridson 2005.
         Zb05 = sys::NBMC_METHOD_ZB05,
+        /// Normalised SPH density (cubic spline of support `influence_radius`),
+        /// splashsurf's level set, at `iso_threshold`.
+        Sph = sys::NBMC_METHOD_SPH,
+    }
+);
+
+int_enum!(
+    /// What becomes of small clusters of particles.
+    Isolated {
+        /// Every particle makes surface (default).
+        Keep = sys::NBMC_ISOLATED_KEEP,
+        /// Clusters (particles linked when closer than the surface radius)
+        /// of fewer than `min_cluster` particles make none.
+        Drop = sys::NBMC_ISOLATED_DROP,
     }
 );
 
@@ -294,12 +308,19 @@ pub struct Params {
     /// SSP07 eigenvalue thresholds (defaults 0.4 and 3.5).
     pub t_low: f64,
     pub t_high: f64,
+    /// `Method::Sph`: iso level of the normalised density, a fraction of the
+    /// rest density in (0, 1) (default 0.6).
+    pub iso_threshold: f64,
     /// Colour-field gradient threshold of the surface test (default 0.75).
     pub color_threshold: f64,
     /// Fewer neighbours than this means surface (default 25).
     pub neighbour_threshold: i32,
     /// Per-vertex normals (default true).
     pub compute_normals: bool,
+    /// Small clusters of particles: kept (default) or dropped.
+    pub isolated: Isolated,
+    /// `Isolated::Drop`: the smallest cluster kept (default 10).
+    pub min_cluster: i32,
     /// Only reconstruct inside this box (absolute units), if set.
     pub bbox: Option<([f64; 3], [f64; 3])>,
 }
@@ -321,9 +342,12 @@ impl Params {
             field: FieldStrategy::from_raw(p.field).unwrap_or(FieldStrategy::NarrowBand),
             t_low: p.t_low,
             t_high: p.t_high,
+            iso_threshold: p.iso_threshold,
             color_threshold: p.color_threshold,
             neighbour_threshold: p.neighbour_threshold,
             compute_normals: p.compute_normals != 0,
+            isolated: Isolated::from_raw(p.isolated).unwrap_or(Isolated::Keep),
+            min_cluster: p.min_cluster,
             bbox: None,
         }
     }
@@ -343,9 +367,12 @@ impl Params {
         p.field = self.field.raw();
         p.t_low = self.t_low;
         p.t_high = self.t_high;
+        p.iso_threshold = self.iso_threshold;
         p.color_threshold = self.color_threshold;
         p.neighbour_threshold = self.neighbour_threshold;
         p.compute_normals = i32::from(self.compute_normals);
+        p.isolated = self.isolated.raw();
+        p.min_cluster = self.min_cluster;
         if let Some((lo, hi)) = self.bbox {
             p.use_bbox = 1;
             p.bbox_min = lo;

@@ -1,0 +1,114 @@
+// SPDX-License-Identifier: MIT
+// The normalised SPH density, the level set of splashsurf (docs/methods.md
+// compares the two):
+//   rho(x) = sum_j V_j W(|x - x_j|),  V_j = m / rho_j,  rho_j = m sum_k W(|x_j - x_k|)
+// with the cubic spline kernel of compact support h = R (the influence radius),
+//   W(q) = sigma (1 - 6 q^2 + 6 q^3)  for q = |d| / h <= 1/2,
+//          sigma 2 (1 - q)^3           for 1/2 < q < 1, 0 beyond,
+// and the surface rho(x) = iso_threshold (a fraction of the rest density).
+// The mass m and sigma = 8 / (pi h^3) cancel: rho(x) = sum_j W~(x - x_j) / D_j
+// with W~ = W / sigma and D_j = sum_k W~(x_j - x_k) (k = j included, so
+// D_j >= W~(0) = 1). phi(x) = iso_threshold - rho(x): negative inside.
+//
+// The particles' 1 / D_j are their weights (NeighbourView::weight), computed
+// before the field by compute_sph_weights (sph_density.hpp) with the same
+// kernel and the same summation order as a vertex's field value.
+#pragma once
+
+#include "field_common.hpp"
+
+#include <cmath>
+#include <cstdint>
+
+namespace nbmc {
+namespace Details {
+
+// W / sigma as a function of k = 1 - q^2 (what the drivers pass; k = 0 gives
+// exactly 0). One expression for the device, the scalar host code and, lane
+// by lane, the host SIMD vectors.
+KOKKOS_INLINE_FUNCTION float sph_kernel(float k) {
+  const float q2 = 1.f - k;
+  const float q = Kokkos::Experimental::sqrt(q2);
+  const float inner = (1.f - 6.f * q2) + (6.f * q2) * q;
+  const float u = 1.f - q;
+  const float outer = 2.f * (u * u * u);
+  return q <= 0.5f ? inner : outer;
+}
+
+#if !defined(__CUDA_ARCH__)
+inline HostVecF sph_kernel(HostVecF k) {
+  const HostVecF one = host_splat(1.f), six = host_splat(6.f);
+  const HostVecF q2 = one - k;
+  HostVecF q;
+  for (int l = 0; l < kHostLanes; ++l) q[l] = std::sqrt(q2[l]);  // IEEE sqrt, as on the device
+  const HostVecF inner = (one - six * q2) + (six * q2) * q;
+  const HostVecF u = one - q;
+  const HostVecF outer = host_splat(2.f) * (u * u * u);
+  const HostVecI m = q <= host_splat(0.5f);
+  return (HostVecF)(((HostVecI)inner & m) | ((HostVecI)outer & ~m));
+}
+#endif
+
+struct FieldSPH {
+  static constexpr const char* name = "sph";
+  static constexpr bool weighted = true;
+  // a[0] = sum_j W~_j / D_j
+  static constexpr int N = 1;
+  // T is float, or a host SIMD vector of floats (same formula, lane-wise).
+  template <class T>
+  KOKKOS_INLINE_FUNCTION static void add(T* a, T /*dx*/, T /*dy*/, T /*dz*/, T k, T w) {
+    a[0] += sph_kernel(k) * w;
+  }
+  // Adds particles [b, e) (SoA coordinates, weights W) at vertex x, one after
+  // the other (see field_common.hpp); returns how many contribute. Same
+  // operations as add().
+  KOKKOS_INLINE_FUNCTION static std::uint32_t accumulate(float* a, const float* X, const float* Y, const float* Z,
+                                                         const float* W, std::uint32_t b, std::uint32_t e, float x0,
+                                                         float x1, float x2, float inv_R2) {
+    float a0 = a[0];
+    std::uint32_t count = 0;
+    for (std::uint32_t j = b; j < e; ++j) {
+      const float dx = X[j] - x0, dy = Y[j] - x1, dz = Z[j] - x2;
+      const float s2 = (dx * dx + dy * dy + dz * dz) * inv_R2;
+      const float k = s2 < 1.f ? 1.f - s2 : 0.f;
+      count += s2 < 1.f ? 1u : 0u;
+      a0 += sph_kernel(k) * W[j];
+    }
+    a[0] = a0;
+    return count;
+  }
+  KOKKOS_INLINE_FUNCTION static float value(const float* a, const FieldConstants& c) {
+    return c.iso_threshold - a[0];
+  }
+};
+
+// D_j of one particle: the same sum with unit weights (not a field method
+// of its own; compute_sph_weights evaluates it at every particle).
+struct SphDensity {
+  static constexpr const char* name = "sph-density";
+  static constexpr bool weighted = false;
+  static constexpr int N = 1;
+  template <class T>
+  KOKKOS_INLINE_FUNCTION static void add(T* a, T, T, T, T k, T) {
+    a[0] += sph_kernel(k);
+  }
+  KOKKOS_INLINE_FUNCTION static std::uint32_t accumulate(float* a, const float* X, const float* Y, const float* Z,
+                                                         const float*, std::uint32_t b, std::uint32_t e, float x0,
+                                                         float x1, float x2, float inv_R2) {
+    float a0 = a[0];
+    std::uint32_t count = 0;
+    for (std::uint32_t j = b; j < e; ++j) {
+      const float dx = X[j] - x0, dy = Y[j] - x1, dz = Z[j] - x2;
+      const float s2 = (dx * dx + dy * dy + dz * dz) * inv_R2;
+      const float k = s2 < 1.f ? 1.f - s2 : 0.f;
+      count += s2 < 1.f ? 1u : 0u;
+      a0 += sph_kernel(k);
+    }
+    a[0] = a0;
+    return count;
+  }
+  KOKKOS_INLINE_FUNCTION static float value(const float* a, const FieldConstants&) { return a[0]; }
+};
+
+}  // namespace Details
+}  // namespace nbmc
