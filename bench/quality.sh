@@ -12,6 +12,7 @@
 # NBMC_DATA_DIR (default ../shared/data).
 set -euo pipefail
 cd "$(dirname "$0")/.."
+cmdline="bench/quality.sh $*"
 threads=2
 pattern=""
 out="bench/logs/quality-$(date -u +%Y-%m-%d).md"
@@ -55,7 +56,7 @@ end=$(date -u +%s)
 {
   echo "# Surface quality (issue #11), $(date -u '+%Y-%m-%d %H:%M UTC')"
   echo
-  echo "Command: \`bench/quality.sh --threads $threads\` ($prog, NBMC_DATA_DIR=$data)"
+  echo "Command: \`$cmdline\` ($prog, NBMC_DATA_DIR=$data, threads $threads)"
   echo "Commit: $(git rev-parse --short HEAD 2>/dev/null || echo unknown)$(git diff --quiet 2>/dev/null || echo ' (with local changes)')"
   echo "Machine: $(uname -srm), $(nproc) cores, $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //')"
   echo "Wall time of the whole run: $((end - start)) s"
