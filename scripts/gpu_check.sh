@@ -8,8 +8,8 @@
 #   scripts/gpu_check.sh [DATA_DIR] [OUT_DIR]
 #
 # NBMC_GPU_CHECK_STEPS picks steps (default: all of "build equivalence
-# pointers sanitizers ncu bench"; also "zb05" (the two field methods
-# side by side, ncu on the gather), "limits" (106 M tiled at r/4 and r/8:
+# pointers sanitizers ncu bench"; also "zb05" (the field methods
+# side by side, ZB05's band growth traced, ncu on the gather), "limits" (106 M tiled at r/4 and r/8:
 # clear errors), "subdomains" (split frames on the GPU
 # equal the whole frame and the CPU's, device-resident too), "mpi" (the CLI
 # under mpirun, ranks sharing or spreading over the GPUs), "python" (the
@@ -174,18 +174,22 @@ if want scale; then
   done
 fi
 if want zb05; then
-  step "ZB05 vs SSP07 (1.65 M frame, r/2): stage times, growth rounds, the gather kernel under ncu"
-  for m in ssp07 zb05; do
+  step "field methods (1.65 M frame, r/2): SSP07, ZB05, SPH on the GPU and all CPU cores; ZB05's band growth traced; ncu on the gather"
+  for m in ssp07 zb05 sph; do
     for be in cuda openmp; do
-      NBMC_TRACE=1 "$B/bench/nbmc_bench" "$BIG" --spacing 0.00484 --backend $be --method $m --repeat 3 2>&1 | tee -a "$OUT/zb05.txt"
+      "$B/bench/nbmc_bench" "$BIG" --spacing 0.00484 --backend $be --method $m --repeat 3 2>&1 | grep RESULT | tail -1 |
+        sed "s/^/$m /" | tee -a "$OUT/methods.txt"
     done
-    if command -v ncu >/dev/null; then
+  done
+  NBMC_TRACE=1 "$B/bench/nbmc_bench" "$BIG" --spacing 0.00484 --backend cuda --method zb05 >"$OUT/zb05-trace.txt" 2>&1
+  if command -v ncu >/dev/null; then
+    for m in ssp07 zb05; do
       timeout 240 ncu --section SpeedOfLight --section Occupancy --section LaunchStats --section MemoryWorkloadAnalysis \
         --kernel-name-base demangled -k regex:gather --launch-count 2 "$B/bench/nbmc_bench" "$BIG" --spacing 0.00484 \
         --backend cuda --method $m >"$OUT/ncu-$m.txt" 2>&1
-      grep -E "Duration|Registers Per|Achieved Occupancy|Theoretical Occupancy|Compute \(SM\) Throughput|Memory Throughput|Grid Size|Local" "$OUT/ncu-$m.txt" | head -30
-    fi
-  done
+      echo "ncu $m:"; grep -E "Duration|Registers Per|Achieved Occupancy" "$OUT/ncu-$m.txt" | head -6
+    done
+  fi
 fi
 
 if want limits; then
