@@ -198,6 +198,41 @@ TEST(MeshCleanup, SphereIsUntouched) {
   EXPECT_EQ(m.t, before.t);
 }
 
+// An octahedron a millionth of the sphere's size (a speck marching cubes
+// leaves where the field barely dips below zero at one grid vertex): all its
+// triangles are degenerate and no collapse can fix it; the clean-up removes
+// that component whole and leaves the sphere as it was.
+TEST(MeshCleanup, DegenerateSpecksAreRemoved) {
+  TestMesh m = icosphere(2);
+  const TestMesh sphere = m;
+  const std::uint32_t base = std::uint32_t(m.p.size() / 3);
+  const float c[3] = {3.f, 0.f, 0.f}, e = 1e-6f;
+  const float dirs[6][3] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
+  for (const auto& d : dirs)
+    for (int a = 0; a < 3; ++a) {
+      m.p.push_back(c[a] + e * d[a]);
+      m.n.push_back(d[a]);
+    }
+  // +x 0, -x 1, +y 2, -y 3, +z 4, -z 5; counter-clockwise seen from outside
+  const std::uint32_t oct[8][3] = {{0, 2, 4}, {2, 1, 4}, {1, 3, 4}, {3, 0, 4},
+                                   {2, 0, 5}, {1, 2, 5}, {3, 1, 5}, {0, 3, 5}};
+  for (const auto& f : oct) m.t.insert(m.t.end(), {base + f[0], base + f[1], base + f[2]});
+  const CheckResult in = m.check();
+  ASSERT_TRUE(in.closed && in.manifold && in.oriented);
+  ASSERT_EQ(in.components, 2u);
+  ASSERT_EQ(in.degenerate_triangles, 8u);
+  const auto r = nbmc::mesh::cleanup_mesh(m.p, m.n, m.t);
+  EXPECT_EQ(r.bad_before, 8u);
+  EXPECT_EQ(r.bad_after, 0u);
+  EXPECT_EQ(r.removed_triangles, 8u);
+  EXPECT_EQ(r.removed_vertices, 6u);
+  EXPECT_EQ(m.p, sphere.p);
+  EXPECT_EQ(m.t, sphere.t);
+  const CheckResult out = m.check();
+  EXPECT_TRUE(out.closed && out.manifold && out.oriented);
+  EXPECT_EQ(out.components, 1u);
+}
+
 TEST(MeshCleanup, NeedlesAreRepaired) {
   TestMesh m = icosphere(2);
   // Move vertex 0 almost onto its neighbour: its two shared triangles become needles.

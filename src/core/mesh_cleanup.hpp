@@ -30,6 +30,10 @@
 // worse. Orientation is kept by construction (collapses rename a vertex,
 // flips keep the quad's boundary direction).
 //
+// Last, a connected component made of degenerate triangles only (a speck
+// where the field barely dips below zero at one grid vertex) is removed as a
+// whole.
+//
 // Serial and in a fixed order (worst triangle first, then by index), so the
 // result depends only on the input mesh: the same on every backend and
 // thread count. The output keeps the surviving triangles in their order and
@@ -155,6 +159,39 @@ class Cleaner {
     if (!best.valid) return false;
     apply_collapse(best);
     return true;
+  }
+
+  // Removes the connected components all of whose triangles are degenerate
+  // (marching cubes leaves such specks where the field barely dips below
+  // zero at one grid vertex: an octahedron a millionth of a cell wide, which
+  // no collapse can repair without leaving a degenerate triangle). Whole
+  // components go, so the rest of the mesh is untouched. Returns the
+  // triangles removed.
+  std::uint64_t drop_degenerate_components() {
+    std::vector<std::uint32_t> parent(nv_);
+    for (std::size_t v = 0; v < nv_; ++v) parent[v] = std::uint32_t(v);
+    auto root = [&](std::uint32_t v) {
+      while (parent[v] != v) v = parent[v] = parent[parent[v]];
+      return v;
+    };
+    for (std::size_t t = 0; t < nt_; ++t) {
+      if (!alive_[t]) continue;
+      const std::uint32_t* v = T_ + 3 * t;
+      for (int k = 1; k < 3; ++k) {
+        const std::uint32_t a = root(v[0]), b = root(v[k]);
+        if (a != b) parent[std::max(a, b)] = std::min(a, b);
+      }
+    }
+    std::vector<std::uint8_t> solid(nv_, 0);  // by root: has a non-degenerate triangle
+    for (std::size_t t = 0; t < nt_; ++t)
+      if (alive_[t] && tri_class(std::uint32_t(t)) != 2) solid[root(T_[3 * t])] = 1;
+    std::uint64_t removed = 0;
+    for (std::size_t t = 0; t < nt_; ++t)
+      if (alive_[t] && !solid[root(T_[3 * t])]) {
+        alive_[t] = 0;
+        ++removed;
+      }
+    return removed;
   }
 
   // Writes the surviving triangles and vertices back, compacted; returns the
@@ -612,6 +649,9 @@ CleanupResult cleanup_mesh(FloatVec& positions, FloatVec& normals, IndexVec& tri
       remaining = kUnknown;
     }
   }
+  // What no repair could fix and is only noise: specks made of degenerate
+  // triangles alone.
+  if (remaining != 0 && c.drop_degenerate_components() > 0) remaining = kUnknown;
   r.bad_after = remaining != kUnknown ? remaining : c.bad_triangles().size();
   r.collapses = c.collapses;
   r.flips = c.flips;
