@@ -66,11 +66,7 @@ template <class MemSpace>
 KOKKOS_INLINE_FUNCTION bool cell_corners(const BandView<MemSpace>& band, std::int64_t i, std::int64_t j,
                                          std::int64_t k, std::int64_t self, std::int64_t idx[8]) {
   idx[0] = self;
-  for (int c = 1; c < 8; ++c) {
-    idx[c] = band.index(i + (c & 1), j + ((c >> 1) & 1), k + ((c >> 2) & 1));
-    if (idx[c] < 0) return false;
-  }
-  return true;
+  return band.cell_indices(i, j, k, 1, idx);
 }
 
 template <class MemSpace>
@@ -194,10 +190,8 @@ KOKKOS_INLINE_FUNCTION int leaks_at(const BandView<MemSpace>& band, const Kokkos
                        nk = k + (a == 2 ? (side ? 1 : -1) : 0);
     if (ni < 0 || nj < 0 || nk < 0 || ni + 1 >= band.dims[0] || nj + 1 >= band.dims[1] || nk + 1 >= band.dims[2])
       continue;  // the grid's own boundary (padded: only reached with a clipping box)
-    bool full = true;
-    for (int c = 0; c < 8 && full; ++c)
-      full = band.index(ni + (c & 1), nj + ((c >> 1) & 1), nk + (c >> 2)) >= 0;
-    if (full) continue;
+    std::int64_t nidx[8];
+    if (band.cell_indices(ni, nj, nk, 0, nidx)) continue;  // entirely in the band
     out[3 * n] = ni;
     out[3 * n + 1] = nj;
     out[3 * n + 2] = nk;
