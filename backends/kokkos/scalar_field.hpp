@@ -160,6 +160,19 @@ KOKKOS_INLINE_FUNCTION bool eval_tile_host(const NeighbourView<MemSpace>& nb, co
           t.gap2[base[a] + o][l] = d2;
         }
     }
+    // The lanes' x range. A cell's particles are sorted by x: those before
+    // the first and after the last that can reach a lane form two runs, which
+    // are skipped. They would add k = 0 in every lane, leaving every sum as it
+    // is; a skipped particle has ((X - xmin)^2) * inv_R2 >= 1 (or the same
+    // with xmax), computed with the lanes' own float operations, and every
+    // lane's s2 is at least that (rounding is monotone), so s2 >= 1 there.
+    float xmin = vx[0], xmax = vx[0];
+    for (int l = 1; l < L; ++l) {
+      xmin = vx[l] < xmin ? vx[l] : xmin;
+      xmax = vx[l] > xmax ? vx[l] : xmax;
+    }
+    const float inv_R2s = fc.inv_R2;
+    auto beyond = [&](float d) { return (d * d) * inv_R2s >= 1.f; };
     HostVecF acc[Method::N];
     for (int q = 0; q < Method::N; ++q) acc[q] = zero;
     HostVecI count = izero;
@@ -168,7 +181,10 @@ KOKKOS_INLINE_FUNCTION bool eval_tile_host(const NeighbourView<MemSpace>& nb, co
       const HostVecF d2 = (t.gap2[t.off[q][0]] + t.gap2[base[1] + t.off[q][1]]) + t.gap2[base[2] + t.off[q][2]];
       const HostVecI visit = d2 < R2v;
       if (!host_any(visit)) continue;
-      for (std::uint32_t p = t.begin[q]; p < t.end[q]; ++p) {
+      std::uint32_t pb = t.begin[q], pe = t.end[q];
+      while (pb < pe && X[pb] < xmin && beyond(X[pb] - xmin)) ++pb;
+      while (pe > pb && X[pe - 1] > xmax && beyond(X[pe - 1] - xmax)) --pe;
+      for (std::uint32_t p = pb; p < pe; ++p) {
         const HostVecF dx = host_splat(X[p]) - vx;
         const HostVecF dy = host_splat(Y[p]) - vy;
         const HostVecF dz = host_splat(Z[p]) - vz;
