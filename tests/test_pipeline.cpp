@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdlib>
 #include <fstream>
 #include <random>
 #include <set>
@@ -240,4 +241,38 @@ TEST(SurfaceParticles, IndependentOfTheInfluenceRadiusOnARealFrame) {
   const std::vector<std::uint64_t> c = surface_counts(read_xyz(f), 0.0156, 1.0);
   for (std::size_t i = 1; i < c.size(); ++i) EXPECT_EQ(c[i], c[0]) << "influence radius #" << i;
   EXPECT_LT(c[0], 46250u / 2);
+}
+
+// The host field kernel runs 8 lanes (AVX2, chosen at run time) or 4
+// (NBMC_HOST_SIMD=4): every lane does the scalar operations, so the meshes
+// are the same bit for bit.
+TEST(HostSimd, FourAndEightLanesGiveTheSameMesh) {
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+  if (!__builtin_cpu_supports("avx2")) GTEST_SKIP() << "no AVX2 on this CPU: 4 lanes only";
+#else
+  GTEST_SKIP() << "8 lanes are an x86-64 path";
+#endif
+  std::vector<std::pair<Points, nbmc_params>> cases;
+  const double r = 0.05;
+  for (double R : {4.0, 2.0}) {
+    nbmc_params prm = params(r);
+    prm.influence_radius = R;
+    cases.emplace_back(blob(r), prm);
+    prm.method = NBMC_METHOD_ZB05;
+    cases.emplace_back(blob(r), prm);
+  }
+  const std::string f = frame("cbd46k_t050_46250.xyz");
+  if (have(f)) {
+    nbmc_params prm = params(0.0156);
+    prm.cell_size = 0.5;
+    cases.emplace_back(read_xyz(f), prm);
+  }
+  for (const auto& c : cases) {
+    setenv("NBMC_HOST_SIMD", "4", 1);
+    const Result four = reconstruct(c.first, c.second);
+    unsetenv("NBMC_HOST_SIMD");
+    const Result eight = reconstruct(c.first, c.second);
+    expect_identical(four, eight, "4 vs 8 lanes");
+    EXPECT_EQ(four.stats.neighbour_evaluations, eight.stats.neighbour_evaluations);
+  }
 }
