@@ -711,7 +711,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   // R, 2R for the SPH density).
   const bool is_sph = prm.method == NBMC_METHOD_SPH;
   const double cell_abs = prm.cell_size * f, R_abs = prm.influence_radius * f, bw_abs = prm.band_width * f,
-               iso_abs = (is_sph ? prm.influence_radius : prm.iso_radius) * f, reach_abs = is_sph ? 2 * R_abs : R_abs;
+               iso_abs = (is_sph ? prm.influence_radius : prm.iso_radius) * f, reach_abs = is_sph ? 2 * R_abs : R_abs,
+               sr_abs = prm.surface_radius * f;
   if (ex.params_ok) {
     ex.domain_small = !absurd_cell;
     // Particles the reconstruction keeps, and the extent of its grid.
@@ -737,13 +738,13 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
         hi[a] = prm.bbox_max[a];
       }
     // The grid must be indexable: fewer than 2^21 - 2 vertices per axis for
-    // the marching-cubes cells and the neighbour cells (R/2); a generous
+    // the marching-cubes cells and the neighbour cells (max(R/2, surface radius)); a generous
     // margin either side leaves the boundary itself to the library.
     const double pad = std::max(bw_abs, iso_abs + cell_abs) + 2 * cell_abs;
     const double limit = double((1u << 21) - 2);
     for (int a = 0; a < 3 && ex.bbox_has_particles; ++a) {
       const double ext = hi[a] - lo[a] + 2 * pad;
-      const double cells = std::max(ext / cell_abs, ext / (0.5 * R_abs)) + 2;
+      const double cells = std::max(ext / cell_abs, ext / std::max(0.5 * R_abs, sr_abs)) + 2;
       if (cells > 0.999 * limit) ex.grid_ok = false;
       if (cells > 0.999 * limit && cells < 1.001 * limit) ex.grid_ok = ex.domain_small = false;  // either way
     }

@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <array>
 #include <cmath>
+#include <cstdlib>
 #include <fstream>
 #include <random>
 #include <set>
@@ -197,3 +198,81 @@ INSTANTIATE_TEST_SUITE_P(
         if (!isalnum(static_cast<unsigned char>(ch))) ch = '_';
       return s;
     });
+
+// The surface particles are defined by the surface radius and the thresholds,
+// not by the influence radius R: the same count at R = 2r, 2.5r, 3r and 4r
+// (the neighbour cells are then all as wide as the surface radius). At
+// R = 2r nbmc used to judge empty neighbour cells on cells of R/2 = r, one
+// particle wide, and marked most of a fluid's inside as surface.
+namespace {
+std::vector<std::uint64_t> surface_counts(const Points& p, double r, double cell) {
+  std::vector<std::uint64_t> counts;
+  for (double R : {2.0, 2.5, 3.0, 4.0}) {
+    nbmc_params prm = params(r);
+    prm.cell_size = cell;
+    prm.influence_radius = R;
+    const Result run = reconstruct(p, prm);
+    EXPECT_EQ(run.status, NBMC_OK) << run.message;
+    counts.push_back(run.stats.surface_particle_count);
+  }
+  return counts;
+}
+}  // namespace
+
+TEST(SurfaceParticles, IndependentOfTheInfluenceRadiusOnALatticeBlock) {
+  // A jittered 30^3 block: a free surface on all sides, 27,000 particles, of
+  // which about the outer layer (5,048 particles) is surface.
+  const double r = 0.05;
+  const double lo[3] = {-0.7, -0.7, -0.7}, hi[3] = {-0.7 + 29.5 * r, -0.7 + 29.5 * r, -0.7 + 29.5 * r};
+  Points p = box(lo, hi, r);
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-0.15 * r, 0.15 * r);
+  for (double& x : p) x += u(rng);
+  ASSERT_EQ(p.size() / 3, 27000u);
+  const std::vector<std::uint64_t> c = surface_counts(p, r, 1.0);
+  for (std::size_t i = 1; i < c.size(); ++i) EXPECT_EQ(c[i], c[0]) << "influence radius #" << i;
+  EXPECT_GT(c[0], 4000u);       // the outer layer
+  EXPECT_LT(c[0], 27000u / 2);  // not the inside
+}
+
+TEST(SurfaceParticles, IndependentOfTheInfluenceRadiusOnARealFrame) {
+  const std::string f = frame("cbd46k_t050_46250.xyz");
+  if (!have(f)) GTEST_SKIP() << f << " not present";
+  const std::vector<std::uint64_t> c = surface_counts(read_xyz(f), 0.0156, 1.0);
+  for (std::size_t i = 1; i < c.size(); ++i) EXPECT_EQ(c[i], c[0]) << "influence radius #" << i;
+  EXPECT_LT(c[0], 46250u / 2);
+}
+
+// The host field kernel runs 8 lanes (AVX2, chosen at run time) or 4
+// (NBMC_HOST_SIMD=4): every lane does the scalar operations, so the meshes
+// are the same bit for bit.
+TEST(HostSimd, FourAndEightLanesGiveTheSameMesh) {
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+  if (!__builtin_cpu_supports("avx2")) GTEST_SKIP() << "no AVX2 on this CPU: 4 lanes only";
+#else
+  GTEST_SKIP() << "8 lanes are an x86-64 path";
+#endif
+  std::vector<std::pair<Points, nbmc_params>> cases;
+  const double r = 0.05;
+  for (double R : {4.0, 2.0}) {
+    nbmc_params prm = params(r);
+    prm.influence_radius = R;
+    cases.emplace_back(blob(r), prm);
+    prm.method = NBMC_METHOD_ZB05;
+    cases.emplace_back(blob(r), prm);
+  }
+  const std::string f = frame("cbd46k_t050_46250.xyz");
+  if (have(f)) {
+    nbmc_params prm = params(0.0156);
+    prm.cell_size = 0.5;
+    cases.emplace_back(read_xyz(f), prm);
+  }
+  for (const auto& c : cases) {
+    setenv("NBMC_HOST_SIMD", "4", 1);
+    const Result four = reconstruct(c.first, c.second);
+    unsetenv("NBMC_HOST_SIMD");
+    const Result eight = reconstruct(c.first, c.second);
+    expect_identical(four, eight, "4 vs 8 lanes");
+    EXPECT_EQ(four.stats.neighbour_evaluations, eight.stats.neighbour_evaluations);
+  }
+}

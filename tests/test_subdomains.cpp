@@ -113,6 +113,22 @@ TEST(Subdomains, ShapesAreIdenticalForEverySplit) {
   }
 }
 
+// Influence radii below twice the surface radius: neighbour cells as wide as
+// the surface radius, not R/2 (src/core/grid.hpp), and the ghosts they imply.
+TEST(Subdomains, SmallInfluenceRadii) {
+  const double r = 0.05;
+  const Points p = jittered_blob(3, r);
+  for (double R : {2.0, 3.0}) {
+    nbmc_params prm = nbmc_test::params(r);
+    prm.influence_radius = R;
+    for (const auto& s : std::vector<std::array<int, 3>>{{2, 1, 1}, {2, 2, 2}, {3, 3, 3}}) {
+      SCOPED_TRACE("R " + std::to_string(R) + ", " + std::to_string(s[0]) + "x" + std::to_string(s[1]) + "x" +
+                   std::to_string(s[2]));
+      expect_identical(p, prm, s[0], s[1], s[2]);
+    }
+  }
+}
+
 // The stitching merges key ranges in parallel on large meshes; force many
 // ranges on these small ones (ranges end inside pieces and at shared keys).
 TEST(Subdomains, ParallelStitchingRanges) {

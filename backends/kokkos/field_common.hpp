@@ -51,6 +51,46 @@ inline bool host_any(HostVecI m) {
   std::memcpy(u, &m, sizeof m);
   return (u[0] | u[1]) != 0;
 }
+
+// The same for L lanes (4 or 8), for kernels templated on the lane count.
+// 8 lanes are only used inside functions compiled for AVX2 and chosen at run
+// time (host_simd_lanes in scalar_field.hpp); each lane still does the
+// scalar code's IEEE operations (AVX2 has no FMA; nbmc compiles without
+// contraction anyway), so the lane count never changes a result. (GCC's
+// -Wpsabi note on 32-byte vectors does not apply: they never cross a call
+// that is not inlined.)
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wpsabi"
+#endif
+template <int L>
+struct HostSimd;
+template <>
+struct HostSimd<4> {
+  typedef HostVecF F;
+  typedef HostVecI I;
+};
+template <>
+struct HostSimd<8> {
+  typedef float F __attribute__((vector_size(32)));
+  typedef std::int32_t I __attribute__((vector_size(32)));
+};
+// v in every lane (v - (+0) is v, -0 included).
+template <class V>
+inline V host_splat_of(float v) {
+  return v - V{};
+}
+template <class M>
+inline bool host_any_of(M m) {
+  std::uint64_t u[sizeof(M) / 8];
+  std::memcpy(u, &m, sizeof m);
+  std::uint64_t o = 0;
+  for (std::size_t q = 0; q < sizeof(M) / 8; ++q) o |= u[q];
+  return o != 0;
+}
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic pop
+#endif
 #endif
 
 struct FieldConstants {

@@ -36,17 +36,22 @@ KOKKOS_INLINE_FUNCTION float sph_kernel(float k) {
 }
 
 #if !defined(__CUDA_ARCH__)
-inline HostVecF sph_kernel(HostVecF k) {
-  const HostVecF one = host_splat(1.f), six = host_splat(6.f);
-  const HostVecF q2 = one - k;
-  HostVecF q;
-  for (int l = 0; l < kHostLanes; ++l) q[l] = std::sqrt(q2[l]);  // IEEE sqrt, as on the device
-  const HostVecF inner = (one - six * q2) + (six * q2) * q;
-  const HostVecF u = one - q;
-  const HostVecF outer = host_splat(2.f) * (u * u * u);
-  const HostVecI m = q <= host_splat(0.5f);
-  return (HostVecF)(((HostVecI)inner & m) | ((HostVecI)outer & ~m));
+// Host SIMD vectors of any lane count (4, or 8 in the AVX2 tile kernel).
+template <class V>
+inline V sph_kernel_lanes(V k) {
+  const V one = host_splat_of<V>(1.f), six = host_splat_of<V>(6.f);
+  const V q2 = one - k;
+  V q;
+  for (int l = 0; l < int(sizeof(V) / sizeof(float)); ++l) q[l] = std::sqrt(q2[l]);  // IEEE sqrt, as on the device
+  const V inner = (one - six * q2) + (six * q2) * q;
+  const V u = one - q;
+  const V outer = host_splat_of<V>(2.f) * (u * u * u);
+  const auto m = q <= host_splat_of<V>(0.5f);
+  using I = decltype(m);
+  return (V)(((I)inner & m) | ((I)outer & ~m));
 }
+inline HostVecF sph_kernel(HostVecF k) { return sph_kernel_lanes(k); }
+inline HostSimd<8>::F sph_kernel(HostSimd<8>::F k) { return sph_kernel_lanes(k); }
 #endif
 
 struct FieldSPH {

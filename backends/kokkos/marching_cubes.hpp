@@ -60,17 +60,15 @@ KOKKOS_INLINE_FUNCTION int edge_start(int e) {
   return axis == 0 ? (m << 1) : (axis == 1 ? ((m & 1) | ((m >> 1) << 2)) : m);
 }
 
-// Band indices of the 8 corners of the cell whose minimum corner is (i,j,k);
-// false if one is not a band vertex.
+// Band indices of the 8 corners of the cell whose minimum corner is (i,j,k)
+// (band index self, in block `block` if the caller knows it: w >> 3 of its
+// word w); false if one is not a band vertex.
 template <class MemSpace>
 KOKKOS_INLINE_FUNCTION bool cell_corners(const BandView<MemSpace>& band, std::int64_t i, std::int64_t j,
-                                         std::int64_t k, std::int64_t self, std::int64_t idx[8]) {
+                                         std::int64_t k, std::int64_t self, std::int64_t idx[8],
+                                         std::uint32_t block = ~0u) {
   idx[0] = self;
-  for (int c = 1; c < 8; ++c) {
-    idx[c] = band.index(i + (c & 1), j + ((c >> 1) & 1), k + ((c >> 2) & 1));
-    if (idx[c] < 0) return false;
-  }
-  return true;
+  return band.cell_indices(i, j, k, 1, idx, block);
 }
 
 template <class MemSpace>
@@ -140,7 +138,7 @@ McResult classify_cells(const ExecSpace& space, const BandView<typename ExecSpac
       KOKKOS_LAMBDA(const std::size_t w, const int bit, const std::int64_t self) {
         std::int64_t i, j, k, idx[8];
         band.vertex(w, bit, i, j, k);
-        if (!band.owns_cell(i, j, k) || !cell_corners(band, i, j, k, self, idx)) return;
+        if (!band.owns_cell(i, j, k) || !cell_corners(band, i, j, k, self, idx, std::uint32_t(w >> 3))) return;
         int cs = 0;
         for (int c = 0; c < 8; ++c) cs |= (phi(idx[c]) < 0.f ? 1 : 0) << c;
         if (cs == 0 || cs == 255) return;
@@ -177,9 +175,9 @@ McResult classify_cells(const ExecSpace& space, const BandView<typename ExecSpac
 template <class MemSpace>
 KOKKOS_INLINE_FUNCTION int leaks_at(const BandView<MemSpace>& band, const Kokkos::View<const float*, MemSpace>& phi,
                                     std::int64_t i, std::int64_t j, std::int64_t k, std::int64_t self,
-                                    std::int64_t out[18]) {
+                                    std::int64_t out[18], std::uint32_t block = ~0u) {
   std::int64_t idx[8];
-  if (!band.owns_cell(i, j, k) || !cell_corners(band, i, j, k, self, idx)) return 0;
+  if (!band.owns_cell(i, j, k) || !cell_corners(band, i, j, k, self, idx, block)) return 0;
   int cs = 0;
   for (int c = 0; c < 8; ++c) cs |= (phi(idx[c]) < 0.f ? 1 : 0) << c;
   if (cs == 0 || cs == 255) return 0;
@@ -194,10 +192,8 @@ KOKKOS_INLINE_FUNCTION int leaks_at(const BandView<MemSpace>& band, const Kokkos
                        nk = k + (a == 2 ? (side ? 1 : -1) : 0);
     if (ni < 0 || nj < 0 || nk < 0 || ni + 1 >= band.dims[0] || nj + 1 >= band.dims[1] || nk + 1 >= band.dims[2])
       continue;  // the grid's own boundary (padded: only reached with a clipping box)
-    bool full = true;
-    for (int c = 0; c < 8 && full; ++c)
-      full = band.index(ni + (c & 1), nj + ((c >> 1) & 1), nk + (c >> 2)) >= 0;
-    if (full) continue;
+    std::int64_t nidx[8];
+    if (band.cell_indices(ni, nj, nk, 0, nidx)) continue;  // entirely in the band
     out[3 * n] = ni;
     out[3 * n + 1] = nj;
     out[3 * n + 2] = nk;
@@ -276,7 +272,7 @@ std::vector<std::int64_t> find_band_leaks(const ExecSpace& space, const BandView
         KOKKOS_LAMBDA(const std::size_t w, const int bit, const std::int64_t self) {
           std::int64_t i, j, k, out[18];
           band.vertex(w, bit, i, j, k);
-          const int n = leaks_at(band, phi, i, j, k, self, out);
+          const int n = leaks_at(band, phi, i, j, k, self, out, std::uint32_t(w >> 3));
           if (!n) return;
           const std::size_t at = Kokkos::atomic_fetch_add(&cursor(), unsigned(n));
           for (int q = 0; q < n; ++q)
@@ -459,7 +455,7 @@ void compute_triangles(const ExecSpace& space, const BandView<typename ExecSpace
         if (!cs) return;
         std::int64_t i, j, k, idx[8];
         band.vertex(w, bit, i, j, k);
-        cell_corners(band, i, j, k, self, idx);
+        cell_corners(band, i, j, k, self, idx, std::uint32_t(w >> 3));
         const std::uint64_t out = tri_offset(self);
         const int nt = tables.count(cs);
         for (int t = 0; t < 3 * nt; ++t) {

@@ -83,11 +83,41 @@ struct BandView {
     const std::uint32_t b =
         blocks.find(morton3(std::uint32_t(i >> 3), std::uint32_t(j >> 3), std::uint32_t(k >> 3)));
     if (b == ~0u) return -1;
+    return index_in_block(b, i, j, k);
+  }
+  // The same for a vertex of block b (its index, already looked up).
+  KOKKOS_FORCEINLINE_FUNCTION std::int64_t index_in_block(std::uint32_t b, std::int64_t i, std::int64_t j,
+                                                     std::int64_t k) const {
     const std::size_t w = std::size_t(b) * 8 + word_of(i & 7, j & 7, k & 7);
     const int bit = bit_of(i & 7, j & 7, k & 7);
     const std::uint64_t word = words(w);
     if (!((word >> bit) & 1)) return -1;
     return std::int64_t(word_offset(w)) + popcount64(word & ((std::uint64_t(1) << bit) - 1));
+  }
+  // Band indices of the corners c = first..7 of the cell with minimum corner
+  // (i, j, k) (corner c at i + (c & 1), j + (c >> 1 & 1), k + (c >> 2)); false
+  // if one is not a band vertex. A cell inside one 8^3 block (7 of 8 per
+  // axis) looks its block up once instead of once per corner, or not at all
+  // when the caller knows it (`block`: the index of the block of (i, j, k)).
+  KOKKOS_FORCEINLINE_FUNCTION bool cell_indices(std::int64_t i, std::int64_t j, std::int64_t k, int first,
+                                                std::int64_t idx[8], std::uint32_t block = ~0u) const {
+    if (i >= 0 && j >= 0 && k >= 0 && (i & 7) != 7 && (j & 7) != 7 && (k & 7) != 7 && i + 1 < dims[0] &&
+        j + 1 < dims[1] && k + 1 < dims[2]) {
+      const std::uint32_t b =
+          block != ~0u ? block
+                       : blocks.find(morton3(std::uint32_t(i >> 3), std::uint32_t(j >> 3), std::uint32_t(k >> 3)));
+      if (b == ~0u) return false;
+      for (int c = first; c < 8; ++c) {
+        idx[c] = index_in_block(b, i + (c & 1), j + ((c >> 1) & 1), k + ((c >> 2) & 1));
+        if (idx[c] < 0) return false;
+      }
+      return true;
+    }
+    for (int c = first; c < 8; ++c) {
+      idx[c] = index(i + (c & 1), j + ((c >> 1) & 1), k + ((c >> 2) & 1));
+      if (idx[c] < 0) return false;
+    }
+    return true;
   }
 };
 

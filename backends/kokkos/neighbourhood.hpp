@@ -1,6 +1,6 @@
 // SPDX-License-Identifier: MIT
 // Neighbourhood: particle handlers sorted by the z-order (Morton) key of their
-// neighbour-grid cell (cell size S = R/2), then by position, so that the order
+// neighbour-grid cell (cell size S = max(R/2, surface radius), grid.hpp), then by position, so that the order
 // (and every sum over it) is independent of the input order. Occupied cells are
 // kept as a sorted list with start indices and a hash map key -> cell, so memory
 // follows the particles, never the bounding box (the paper's startIndices array

@@ -75,6 +75,7 @@ KOKKOS_INLINE_FUNCTION float box_distance2(const float lo[3], float S, const flo
 // never -0: it starts at +0 and a sum is -0 only when both terms are).
 // Returns false if the span has more than kMaxTileCells cells.
 #if !defined(__CUDA_ARCH__)
+template <int L>
 struct TileScratch {
   std::uint32_t begin[kMaxTileCells], end[kMaxTileCells];
   std::uint16_t off[kMaxTileCells][3];  // cell coordinates minus the span's lower corner
@@ -82,7 +83,7 @@ struct TileScratch {
   // term d * d of box_distance2 for each lane's vertex, +inf where the cell
   // is outside the vertex's own cell_span (the span's sides add up to at
   // most kMaxTileCells + 2 when their product is at most kMaxTileCells).
-  HostVecF gap2[kMaxTileCells + 2];
+  typename HostSimd<L>::F gap2[kMaxTileCells + 2];
 };
 #endif
 
@@ -94,22 +95,27 @@ KOKKOS_INLINE_FUNCTION int tile_order(int o) {
   return (2 * xq + x) + 4 * (2 * yq + y) + 16 * z;
 }
 
-template <class Method, class MemSpace>
-KOKKOS_INLINE_FUNCTION bool eval_tile_host(const NeighbourView<MemSpace>& nb, const std::int64_t lo[3],
-                                           const std::int64_t hi[3], float S, const FieldConstants& fc,
-                                           std::uint64_t word, std::uint64_t full, std::size_t w,
-                                           const BandView<MemSpace>& band, float c,
-                                           const Kokkos::View<float*, MemSpace>& phi, std::uint64_t& evals) {
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wpsabi"  // 32-byte vectors never cross a call that is not inlined
+#endif
+template <class Method, int L, class MemSpace>
+KOKKOS_INLINE_FUNCTION bool eval_tile_host_lanes(const NeighbourView<MemSpace>& nb, const std::int64_t lo[3],
+                                                 const std::int64_t hi[3], float S, const FieldConstants& fc,
+                                                 std::uint64_t word, std::uint64_t full, std::size_t w,
+                                                 const BandView<MemSpace>& band, float c,
+                                                 const Kokkos::View<float*, MemSpace>& phi, std::uint64_t& evals) {
 #if defined(__CUDA_ARCH__)
   (void)nb; (void)lo; (void)hi; (void)S; (void)fc; (void)word; (void)full; (void)w; (void)band; (void)c; (void)phi;
   (void)evals;
   return false;  // device code uses gather_words_direct / gather_words_team
 #else
-  constexpr int L = kHostLanes;
+  using HostVecF = typename HostSimd<L>::F;
+  using HostVecI = typename HostSimd<L>::I;
   const std::int64_t span[3] = {hi[0] - lo[0] + 1, hi[1] - lo[1] + 1, hi[2] - lo[2] + 1};
   if (span[0] * span[1] * span[2] > kMaxTileCells) return false;
-  static thread_local TileScratch scratch;
-  TileScratch& t = scratch;  // one TLS lookup per tile, not per access
+  static thread_local TileScratch<L> scratch;
+  TileScratch<L>& t = scratch;  // one TLS lookup per tile, not per access
   int n_cells = 0;
   for (std::int64_t z = lo[2]; z <= hi[2]; ++z)
     for (std::int64_t y = lo[1]; y <= hi[1]; ++y)
@@ -126,8 +132,8 @@ KOKKOS_INLINE_FUNCTION bool eval_tile_host(const NeighbourView<MemSpace>& nb, co
   const int base[3] = {0, int(span[0]), int(span[0] + span[1])};
   const float R2 = fc.R * fc.R;
   const float inf = std::numeric_limits<float>::infinity();
-  const HostVecF one = host_splat(1.f), inv_R2 = host_splat(fc.inv_R2), R2v = host_splat(R2);
-  const HostVecF zero = host_splat(0.f);
+  const HostVecF one = host_splat_of<HostVecF>(1.f), inv_R2 = host_splat_of<HostVecF>(fc.inv_R2), R2v = host_splat_of<HostVecF>(R2);
+  const HostVecF zero = host_splat_of<HostVecF>(0.f);
   const HostVecI izero = (HostVecI)zero;
   const float* X = nb.pos.data();
   const float* Y = X + nb.n;
@@ -161,6 +167,19 @@ KOKKOS_INLINE_FUNCTION bool eval_tile_host(const NeighbourView<MemSpace>& nb, co
           t.gap2[base[a] + o][l] = d2;
         }
     }
+    // The lanes' x range. A cell's particles are sorted by x: those before
+    // the first and after the last that can reach a lane form two runs, which
+    // are skipped. They would add k = 0 in every lane, leaving every sum as it
+    // is; a skipped particle has ((X - xmin)^2) * inv_R2 >= 1 (or the same
+    // with xmax), computed with the lanes' own float operations, and every
+    // lane's s2 is at least that (rounding is monotone), so s2 >= 1 there.
+    float xmin = vx[0], xmax = vx[0];
+    for (int l = 1; l < L; ++l) {
+      xmin = vx[l] < xmin ? vx[l] : xmin;
+      xmax = vx[l] > xmax ? vx[l] : xmax;
+    }
+    const float inv_R2s = fc.inv_R2;
+    auto beyond = [&](float d) { return (d * d) * inv_R2s >= 1.f; };
     HostVecF acc[Method::N];
     for (int q = 0; q < Method::N; ++q) acc[q] = zero;
     HostVecI count = izero;
@@ -168,16 +187,19 @@ KOKKOS_INLINE_FUNCTION bool eval_tile_host(const NeighbourView<MemSpace>& nb, co
       // box_distance2: ((0 + d0^2) + d1^2) + d2^2, and 0 + d0^2 == d0^2
       const HostVecF d2 = (t.gap2[t.off[q][0]] + t.gap2[base[1] + t.off[q][1]]) + t.gap2[base[2] + t.off[q][2]];
       const HostVecI visit = d2 < R2v;
-      if (!host_any(visit)) continue;
-      for (std::uint32_t p = t.begin[q]; p < t.end[q]; ++p) {
-        const HostVecF dx = host_splat(X[p]) - vx;
-        const HostVecF dy = host_splat(Y[p]) - vy;
-        const HostVecF dz = host_splat(Z[p]) - vz;
+      if (!host_any_of<HostVecI>(visit)) continue;
+      std::uint32_t pb = t.begin[q], pe = t.end[q];
+      while (pb < pe && X[pb] < xmin && beyond(X[pb] - xmin)) ++pb;
+      while (pe > pb && X[pe - 1] > xmax && beyond(X[pe - 1] - xmax)) --pe;
+      for (std::uint32_t p = pb; p < pe; ++p) {
+        const HostVecF dx = host_splat_of<HostVecF>(X[p]) - vx;
+        const HostVecF dy = host_splat_of<HostVecF>(Y[p]) - vy;
+        const HostVecF dz = host_splat_of<HostVecF>(Z[p]) - vz;
         const HostVecF s2 = (dx * dx + dy * dy + dz * dz) * inv_R2;
         const HostVecI inside = (s2 < one) & visit;  // -1 where the particle contributes
         const HostVecF k = (HostVecF)((HostVecI)(one - s2) & inside);
         count -= inside;
-        Method::add(acc, dx, dy, dz, k, Method::weighted ? host_splat(Wt[p]) : one);
+        Method::add(acc, dx, dy, dz, k, Method::weighted ? host_splat_of<HostVecF>(Wt[p]) : one);
       }
     }
     for (int l = 0; l < m; ++l) {
@@ -191,6 +213,50 @@ KOKKOS_INLINE_FUNCTION bool eval_tile_host(const NeighbourView<MemSpace>& nb, co
   return true;
 #endif
 }
+
+// 8 lanes on CPUs with AVX2, chosen at run time: the tile code above compiled
+// for AVX2 (flatten: everything it calls is inlined into this one function,
+// so no other code is compiled for AVX2). Not under nvcc.
+#if !defined(__CUDACC__) && !defined(__CUDA_ARCH__) && defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#define NBMC_HOST_AVX2 1
+template <class Method, class MemSpace>
+__attribute__((target("avx2"), flatten)) bool eval_tile_host_avx2(
+    const NeighbourView<MemSpace>& nb, const std::int64_t lo[3], const std::int64_t hi[3], float S,
+    const FieldConstants& fc, std::uint64_t word, std::uint64_t full, std::size_t w, const BandView<MemSpace>& band,
+    float c, const Kokkos::View<float*, MemSpace>& phi, std::uint64_t& evals) {
+  return eval_tile_host_lanes<Method, 8>(nb, lo, hi, S, fc, word, full, w, band, c, phi, evals);
+}
+#endif
+
+// Lanes of the host field kernel: 8 where the CPU has AVX2, else 4;
+// NBMC_HOST_SIMD=4 forces 4 (the results are the same either way).
+inline int host_simd_lanes() {
+#if defined(NBMC_HOST_AVX2)
+  const char* e = std::getenv("NBMC_HOST_SIMD");
+  if (e && std::string(e) == "4") return 4;
+  return __builtin_cpu_supports("avx2") ? 8 : 4;
+#else
+  return 4;
+#endif
+}
+
+template <class Method, class MemSpace>
+KOKKOS_INLINE_FUNCTION bool eval_tile_host(const NeighbourView<MemSpace>& nb, const std::int64_t lo[3],
+                                           const std::int64_t hi[3], float S, const FieldConstants& fc,
+                                           std::uint64_t word, std::uint64_t full, std::size_t w,
+                                           const BandView<MemSpace>& band, float c,
+                                           const Kokkos::View<float*, MemSpace>& phi, std::uint64_t& evals,
+                                           int lanes) {
+#if defined(NBMC_HOST_AVX2)
+  if (lanes == 8) return eval_tile_host_avx2<Method>(nb, lo, hi, S, fc, word, full, w, band, c, phi, evals);
+#endif
+  (void)lanes;
+  return eval_tile_host_lanes<Method, 4>(nb, lo, hi, S, fc, word, full, w, band, c, phi, evals);
+}
+
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic pop
+#endif
 
 // Field value at x visiting the neighbour cells directly (no cell list):
 // the fallback for cells so coarse that a tile's cell list would not fit.
@@ -270,6 +336,7 @@ std::uint64_t gather_words_host(const ExecSpace& space, const NeighbourView<type
                                 const Kokkos::View<float*, typename ExecSpace::memory_space>& phi,
                                 const WordList<typename ExecSpace::memory_space>& list) {
   const float c = float(g.cell), S = float(g.nb_cell);
+  const int lanes = host_simd_lanes();
   std::uint64_t evals = 0;
   Kokkos::parallel_reduce(
       "nbmc::scalar_field::gather", Kokkos::RangePolicy<ExecSpace, Kokkos::Schedule<Kokkos::Dynamic>>(space, w0, w1),
@@ -286,7 +353,7 @@ std::uint64_t gather_words_host(const ExecSpace& space, const NeighbourView<type
         const float tmax[3] = {float(i0 + 3) * c, float(j0 + 3) * c, float(k0 + 3) * c};
         std::int64_t lo[3], hi[3];
         cell_span(nb, tmin, tmax, fc.R, lo, hi);
-        if (eval_tile_host<Method>(nb, lo, hi, S, fc, word, full, w, band, c, phi, acc_evals)) return;
+        if (eval_tile_host<Method>(nb, lo, hi, S, fc, word, full, w, band, c, phi, acc_evals, lanes)) return;
         while (word) {  // very coarse cells: per vertex
           const int bit = ctz64(word);
           word &= word - 1;

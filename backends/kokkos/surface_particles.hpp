@@ -6,6 +6,14 @@
 // within h (this catches splashes, which the colour field misses). A third,
 // nbmc's own: every particle of a neighbour cell that borders an empty cell
 // but holds no surface particle (see surface_particles_of_cell).
+//
+// The neighbour cells are never smaller than h (src/core/grid.hpp,
+// neighbour_cell_size: S = max(R/2, h)), so the test reads exactly the 27
+// cells around a particle's own. For every R <= 2h the cells are h wide and
+// lie on the same grid whatever R is: the sums, their order and the
+// empty-cell rule, hence the surface particles, do not depend on R. (Cells of
+// R/2 < h, as nbmc had before, were one particle wide at R = 2r: the
+// empty-cell rule then marked most of the fluid as surface.)
 #pragma once
 
 #include "common.hpp"
@@ -18,12 +26,12 @@
 namespace nbmc {
 namespace Details {
 
-// Particles in one neighbour cell (edge R/2 = 2r) beyond which it is "crowded":
-// the rest density puts about 8 there.
+// Particles in one neighbour cell (edge 2r by default) beyond which it is
+// "crowded": the rest density puts about 8 there.
 constexpr std::uint32_t kCrowdedCell = 2048;
 
-// Marks the particles of occupied neighbour cell `cell`: the neighbour cells
-// within `range` are looked up once for all particles of the cell. Each
+// Marks the particles of occupied neighbour cell `cell`: the 27 neighbour
+// cells around it (range 1) are looked up once for all particles of the cell. Each
 // particle's colour gradient is summed in one order on every backend: the
 // cells in z, y, x order, their particles in sorted order (the host computes
 // kHostLanes particles i at a time, one lane each, with the same operations).
@@ -33,7 +41,7 @@ KOKKOS_INLINE_FUNCTION std::size_t surface_particles_of_cell(const NeighbourView
                                                              std::size_t cell, int range, float h, float scale,
                                                              float threshold, int min_neighbours,
                                                              const Kokkos::View<std::uint8_t*, MemSpace>& flags) {
-  constexpr int kMaxCells = 729;  // range <= 4
+  constexpr int kMaxCells = 27;  // range 1: cells at least h wide
   // A cell crowded far beyond any fluid density (256x the rest density: a
   // solver blow-up, or many particles at one point) is all surface, without
   // the pairwise test that would cost its count squared.
@@ -128,6 +136,8 @@ KOKKOS_INLINE_FUNCTION std::size_t surface_particles_of_cell(const NeighbourView
   // particles: many neighbours, no colour gradient): a cell next to an empty
   // cell that holds no surface particle is all surface. Cells on a normal
   // free surface already hold surface particles, so the band is unchanged there.
+  // The cells are at least h wide (about 8 particles at rest density for the
+  // default h = 2r), so inside the fluid they are not empty.
   if (surface == 0 && face_empty) {
     for (std::uint32_t i = first; i < last; ++i) flags(i) = 1;
     surface = last - first;
@@ -144,8 +154,7 @@ std::size_t mark_surface_particles(const ExecSpace& space, const NeighbourView<t
   ScopedRegion region("nbmc::surface_particles");
   const float h = float(p.surface_radius);
   const int range = int(std::ceil(p.surface_radius / g.nb_cell));
-  if (range > 4)
-    throw Error(4, "surface_radius may be at most twice the influence radius");
+  if (range != 1) throw Error(9, "the neighbour cells are smaller than the surface radius");
   // |grad c| * h with c = sum_j V W_poly6(x - x_j, h), V = r^3.
   const double h9 = std::pow(p.surface_radius, 9);
   const float scale = float(p.spacing * p.spacing * p.spacing * 945.0 / (32.0 * 3.14159265358979 * h9) * p.surface_radius);

@@ -15,7 +15,7 @@
 //     width (their boxes), and whether a particle is a surface particle
 //     depends on the particles in the neighbour cells within the surface
 //     radius of its own cell (whole cells, as the surface test reads them).
-// Particles are selected by whole neighbour cells (cells of R/2 of the frame's
+// Particles are selected by whole neighbour cells (cells of S of the frame's
 // neighbour grid), so a subdomain holds the same particles in the same cells,
 // in the same sorted order, as the whole frame there.
 #pragma once

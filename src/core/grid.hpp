@@ -31,18 +31,29 @@ struct Grid {
   double origin[3] = {0, 0, 0};  // position of vertex (0,0,0), absolute
   double cell = 0;               // marching-cubes cell size c
   std::int64_t dims[3] = {0, 0, 0};  // vertices per axis
-  double nb_cell = 0;            // neighbour-grid cell size S (= R/2)
+  double nb_cell = 0;            // neighbour-grid cell size S = max(R/2, surface radius)
   std::int64_t nb_dims[3] = {0, 0, 0};
   std::uint64_t vertex_count() const { return std::uint64_t(dims[0]) * dims[1] * dims[2]; }
   std::int64_t block_dims(int a) const { return (dims[a] + 7) / 8; }
 };
+
+// The neighbour-grid cell size S: R/2 (a vertex's particles lie in the 5^3
+// cells around its own), but never below the surface radius h. The surface
+// test (backends/kokkos/surface_particles.hpp) sums over the 27 cells around
+// a particle's own and judges emptiness on these cells, so with S = h for
+// every R <= 2h the surface particles are the same for all such R (the grid's
+// origin does not depend on R either); with S = R/2 < h, cells of one
+// particle would make the surface test slow and its empty-cell rule wrong.
+inline double neighbour_cell_size(const Params& p) {
+  return std::max(0.5 * p.influence_radius, p.surface_radius);
+}
 
 // Chooses a grid that contains [lo, hi] padded on every side by what the band
 // and the field reach beyond the particles.
 inline Grid make_grid(const double lo[3], const double hi[3], const Params& p) {
   Grid g;
   g.cell = p.cell_size;
-  g.nb_cell = 0.5 * p.influence_radius;
+  g.nb_cell = neighbour_cell_size(p);
   const double pad = std::max(p.band_width, surface_reach(p) + p.cell_size) + 2 * p.cell_size;
   for (int a = 0; a < 3; ++a) {
     g.origin[a] = lo[a] - pad;
