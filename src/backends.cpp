@@ -447,15 +447,18 @@ void run_backend(nbmc_context& ctx, const Params& p, HostMesh& mesh, RunStats& s
   ctx.subdomain_report = SubdomainReport();
   ClusterFilter clusters;
   ParticleVector kept;  // the particles the isolated-particle filter keeps
+  // The input's positions on the host: particles in device memory are
+  // copied into `host` first.
+  auto host_positions = [&](ParticleVector& host) -> const double* {
+    if (!in.on_device) return in.xyz;
+    host.resize(3 * in.count);
+    download_particles(in.xyz, in.count, host.data());
+    return host.data();
+  };
   auto job = [&]() {
     if (p.drop_isolated) {
       ParticleVector host;
-      const double* xyz = in.xyz;
-      if (in.on_device) {
-        host.resize(3 * in.count);
-        download_particles(in.xyz, in.count, host.data());
-        xyz = host.data();
-      }
+      const double* xyz = host_positions(host);
       clusters = drop_small_clusters(xyz, in.count, p.surface_radius, p.min_cluster);
       if (clusters.kept.empty())
         throw Error(NBMC_ERROR_NO_PARTICLES, "every particle lies in a cluster of fewer than min_cluster (" +
@@ -471,21 +474,20 @@ void run_backend(nbmc_context& ctx, const Params& p, HostMesh& mesh, RunStats& s
       // Subdomains work on host positions: particles in device memory are
       // copied to the host first (the GPU then holds one subdomain at a time).
       ParticleVector host;
-      const double* xyz = in.xyz;
-      if (in.on_device) {
-        host.resize(3 * in.count);
-        download_particles(in.xyz, in.count, host.data());
-        xyz = host.data();
-      }
+      const double* xyz = host_positions(host);
       std::uint64_t budget = ctx.memory.budget;
       if (!budget && ctx.backend == NBMC_BACKEND_CUDA) budget = cuda_free_memory() / 10 * 8;
       const RunRegion run = [&](const ParticleInput& part, const Params& q, HostMesh& m, RunStats& s) {
         run_one(part, q, false, m, s);
       };
-      if (reconstruct_subdomains(ctx.subdomains, budget, xyz, in.count, p, run, mesh, st, ctx.subdomain_report)) {
+      auto split = [&](std::uint64_t at_least) {
+        if (!reconstruct_subdomains(ctx.subdomains, budget, xyz, in.count, p, run, mesh, st, ctx.subdomain_report,
+                                    at_least))
+          return false;
         if (mesh_on_device) move_mesh_to_device(mesh);
-        return;
-      }
+        return true;
+      };
+      if (split(1)) return;
       if (ctx.subdomains.automatic) {
         // `auto` estimated that the frame fits; if the whole run still hits
         // a limit that splitting avoids, split after all.
@@ -497,11 +499,7 @@ void run_backend(nbmc_context& ctx, const Params& p, HostMesh& mesh, RunStats& s
         }
         mesh = HostMesh();
         st = RunStats();
-        if (reconstruct_subdomains(ctx.subdomains, budget, xyz, in.count, p, run, mesh, st, ctx.subdomain_report,
-                                   2)) {
-          if (mesh_on_device) move_mesh_to_device(mesh);
-          return;
-        }
+        if (split(2)) return;
       }
     }
     run_one(in, p, mesh_on_device, mesh, st);
