@@ -144,6 +144,10 @@ build_kokkos() { # $1 = variant (openmp|cuda)
     args+=(-DKokkos_ENABLE_CUDA=ON -DKokkos_ENABLE_CUDA_LAMBDA=ON
            -DKokkos_ENABLE_CUDA_CONSTEXPR=ON -DKokkos_ARCH_${CUDA_ARCH}=ON
            -DCMAKE_CXX_COMPILER="$KOKKOS_SRC/bin/nvcc_wrapper")
+  else
+    # GCC 13 (Ubuntu 24.04, the GPU machines) no longer includes <cstdint>
+    # through <string>, which Kokkos 3.4's Kokkos_MemoryPool.cpp relied on.
+    args+=(-DCMAKE_CXX_FLAGS="-include cstdint")
   fi
   say "building Kokkos $KOKKOS_VERSION ($variant) into $prefix"
   cmake "${args[@]}" >"$CACHE/kokkos-$variant-configure.log" 2>&1 ||
