@@ -75,24 +75,6 @@ Points blob(double r) {
   return p;
 }
 
-// Triangles as vertex-position triples (rotated so the smallest vertex comes
-// first, which keeps the orientation), to compare meshes numbered differently.
-using Tri = std::array<float, 9>;
-std::set<Tri> triangle_set(const Mesh& m) {
-  std::set<Tri> s;
-  for (std::size_t t = 0; t < m.triangle_count(); ++t) {
-    std::array<std::array<float, 3>, 3> v;
-    for (int c = 0; c < 3; ++c)
-      for (int a = 0; a < 3; ++a) v[c][a] = m.positions[3 * m.triangles[3 * t + c] + a];
-    const int first = int(std::min_element(v.begin(), v.end()) - v.begin());
-    Tri key;
-    for (int c = 0; c < 3; ++c)
-      for (int a = 0; a < 3; ++a) key[3 * c + a] = v[(first + c) % 3][a];
-    s.insert(key);
-  }
-  return s;
-}
-
 void expect_identical(const Result& a, const Result& b, const std::string& what) {
   ASSERT_EQ(a.status, NBMC_OK) << a.message;
   ASSERT_EQ(b.status, NBMC_OK) << b.message;

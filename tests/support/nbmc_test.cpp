@@ -210,4 +210,19 @@ std::string MeshReport::summary() const {
   return s.str();
 }
 
+std::set<Tri> triangle_set(const Mesh& m) {
+  std::set<Tri> s;
+  for (std::size_t t = 0; t < m.triangle_count(); ++t) {
+    std::array<std::array<float, 3>, 3> v;
+    for (int c = 0; c < 3; ++c)
+      for (int a = 0; a < 3; ++a) v[c][a] = m.positions[3 * m.triangles[3 * t + c] + a];
+    const int first = int(std::min_element(v.begin(), v.end()) - v.begin());
+    Tri key;
+    for (int c = 0; c < 3; ++c)
+      for (int a = 0; a < 3; ++a) key[3 * c + a] = v[(first + c) % 3][a];
+    s.insert(key);
+  }
+  return s;
+}
+
 }  // namespace nbmc_test

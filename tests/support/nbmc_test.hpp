@@ -6,8 +6,10 @@
 
 #include "nbmc.h"
 
+#include <array>
 #include <cstdint>
 #include <functional>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -56,5 +58,11 @@ struct MeshReport {
   std::string summary() const;
 };
 MeshReport check_mesh(const Mesh& m);
+
+// A mesh's triangles as vertex-position triples, each rotated so that its
+// smallest vertex comes first (which keeps the orientation): compares meshes
+// whose vertices are numbered differently.
+using Tri = std::array<float, 9>;
+std::set<Tri> triangle_set(const Mesh& m);
 
 }  // namespace nbmc_test
