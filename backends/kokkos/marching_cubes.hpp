@@ -209,6 +209,22 @@ KOKKOS_INLINE_FUNCTION int leaks_at(const BandView<MemSpace>& band, const Kokkos
 // of those neighbour cells (x, y, z triples, host memory, sorted).
 // Sorts cell triples (minimum corners, x y z) by z, then y, then x, so that
 // lists filled in parallel come out in one order; with `unique`, drops repeats.
+// Cell triples as packed keys z << 42 | y << 21 | x (coordinates in
+// [0, 2^21), as kMaxAxisCells guarantees): ordered by z, then y, then x.
+inline std::uint64_t pack_cell(std::int64_t i, std::int64_t j, std::int64_t k) {
+  return std::uint64_t(k) << 42 | std::uint64_t(j) << 21 | std::uint64_t(i);
+}
+// Writes packed keys back as triples (cells resized to 3 per key).
+inline void unpack_cells(const std::vector<std::uint64_t>& keys, std::vector<std::int64_t>& cells) {
+  constexpr std::uint64_t kMask = (std::uint64_t(1) << 21) - 1;
+  cells.resize(3 * keys.size());
+  for (std::size_t q = 0; q < keys.size(); ++q) {
+    cells[3 * q] = std::int64_t(keys[q] & kMask);
+    cells[3 * q + 1] = std::int64_t((keys[q] >> 21) & kMask);
+    cells[3 * q + 2] = std::int64_t(keys[q] >> 42);
+  }
+}
+
 inline void sort_cells(std::vector<std::int64_t>& cells, bool unique) {
   // Grid coordinates fit 21 bits (kMaxAxisCells): sorted as packed keys
   // z << 42 | y << 21 | x, the same order, a few times faster.
@@ -216,16 +232,10 @@ inline void sort_cells(std::vector<std::int64_t>& cells, bool unique) {
   if (std::all_of(cells.begin(), cells.end(), [](std::int64_t v) { return v >= 0 && v < kLimit; })) {
     std::vector<std::uint64_t> keys(cells.size() / 3);
     for (std::size_t q = 0; q < keys.size(); ++q)
-      keys[q] = std::uint64_t(cells[3 * q + 2]) << 42 | std::uint64_t(cells[3 * q + 1]) << 21 | std::uint64_t(cells[3 * q]);
+      keys[q] = pack_cell(cells[3 * q], cells[3 * q + 1], cells[3 * q + 2]);
     std::sort(keys.begin(), keys.end());
     if (unique) keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
-    cells.resize(3 * keys.size());
-    constexpr std::uint64_t kMask = (std::uint64_t(1) << 21) - 1;
-    for (std::size_t q = 0; q < keys.size(); ++q) {
-      cells[3 * q] = std::int64_t(keys[q] & kMask);
-      cells[3 * q + 1] = std::int64_t((keys[q] >> 21) & kMask);
-      cells[3 * q + 2] = std::int64_t(keys[q] >> 42);
-    }
+    unpack_cells(keys, cells);
     return;
   }
   std::vector<std::array<std::int64_t, 3>> t(cells.size() / 3);
@@ -315,7 +325,7 @@ std::vector<std::int64_t> find_band_leaks_near(const ExecSpace& space,
           for (std::size_t c = 0; c < n_added; ++c) {
             const std::int64_t i = added[3 * c] + dx, j = added[3 * c + 1] + dy, k = added[3 * c + 2] + dz;
             if (i < 0 || j < 0 || k < 0) continue;
-            keys.push_back(std::uint64_t(k) << 42 | std::uint64_t(j) << 21 | std::uint64_t(i));
+            keys.push_back(pack_cell(i, j, k));
           }
           run_end.push_back(keys.size());
         }
@@ -337,13 +347,7 @@ std::vector<std::int64_t> find_band_leaks_near(const ExecSpace& space,
     }
     if (!std::is_sorted(keys.begin(), keys.end())) std::sort(keys.begin(), keys.end());  // `added` unsorted
     keys.erase(std::unique(keys.begin(), keys.end()), keys.end());
-    constexpr std::uint64_t kMask = (std::uint64_t(1) << 21) - 1;
-    cand.resize(3 * keys.size());
-    for (std::size_t q = 0; q < keys.size(); ++q) {
-      cand[3 * q] = std::int64_t(keys[q] & kMask);
-      cand[3 * q + 1] = std::int64_t((keys[q] >> 21) & kMask);
-      cand[3 * q + 2] = std::int64_t(keys[q] >> 42);
-    }
+    unpack_cells(keys, cand);
   }
   trace("leaks near: candidates (host)", cand.size() / 3);
   const std::size_t n = cand.size() / 3;
