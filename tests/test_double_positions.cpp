@@ -22,6 +22,7 @@
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <thread>
 #include <unistd.h>
 #include <vector>
 
@@ -335,6 +336,30 @@ TEST(DoublePositions, DefaultsAndMisuse) {
   EXPECT_TRUE(same_bits(pos, f64.mesh.positions_f32));
   EXPECT_EQ(nbmc_mesh_memory(m), NBMC_MEMORY_HOST);
   nbmc_mesh_destroy(m);
+}
+
+// The float positions of a double mesh are rounded on the first request:
+// threads asking at once all get the same, complete array.
+TEST(DoublePositions, ConcurrentFloatRequestsGetOneArray) {
+  nbmc_mesh* m = nullptr;
+  nbmc_context_desc d;
+  nbmc_context_desc_init(&d);
+  nbmc_context* ctx = nullptr;
+  ASSERT_EQ(nbmc_context_create(&d, &ctx), NBMC_OK);
+  const Points p = offset_sphere(kOffset);
+  ASSERT_EQ(nbmc_context_set_particles_f64(ctx, p.data(), p.size() / 3, 0), NBMC_OK);
+  const nbmc_params prm = params(true);
+  ASSERT_EQ(nbmc_context_reconstruct(ctx, &prm, &m), NBMC_OK);
+  std::vector<const float*> got(8, nullptr);
+  std::vector<std::thread> threads;
+  for (std::size_t t = 0; t < got.size(); ++t) threads.emplace_back([&, t] { got[t] = nbmc_mesh_positions(m); });
+  for (std::thread& t : threads) t.join();
+  const double* d64 = nbmc_mesh_positions_f64(m);
+  ASSERT_NE(got[0], nullptr);
+  for (const float* g : got) EXPECT_EQ(g, got[0]);
+  for (std::size_t i = 0; i < 3 * nbmc_mesh_vertex_count(m); ++i) ASSERT_EQ(got[0][i], float(d64[i])) << i;
+  nbmc_mesh_destroy(m);
+  nbmc_context_destroy(ctx);
 }
 
 // ----------------------------------------------------------------- writers
