@@ -334,7 +334,9 @@ NBMC_API uint64_t nbmc_mesh_triangle_count(const nbmc_mesh* mesh);
 /* Pointers into the mesh (valid until nbmc_mesh_destroy): positions and normals
  * are 3 * vertex_count floats (x,y,z per vertex), triangles 3 * triangle_count
  * vertex indices, counter-clockwise seen from outside the fluid. Normals point
- * out of the fluid and are NULL when compute_normals was 0. Empty mesh: NULL. */
+ * out of the fluid and are NULL when compute_normals was 0. Empty mesh: NULL.
+ * A mesh made with nbmc_params.double_positions: positions are its doubles
+ * rounded to float (see nbmc_mesh_positions_f64). */
 NBMC_API const float* nbmc_mesh_positions(const nbmc_mesh* mesh);
 NBMC_API const float* nbmc_mesh_normals(const nbmc_mesh* mesh);
 NBMC_API const uint32_t* nbmc_mesh_triangles(const nbmc_mesh* mesh);

@@ -972,7 +972,9 @@ impl Mesh {
     }
 
     /// Vertex positions. Empty for a mesh in device memory (see
-    /// [`Mesh::memory`]; use [`Mesh::copy_to_host`] there).
+    /// [`Mesh::memory`]; use [`Mesh::copy_to_host`] there). For a mesh made
+    /// with [`Params::double_positions`], its doubles rounded to f32 (see
+    /// [`Mesh::positions_f64`]).
     pub fn positions(&self) -> &[[f32; 3]] {
         if !self.on_host() {
             return &[];
