@@ -829,10 +829,10 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     expect_same(a, c, "shuffled particle order", false);
   }
 
-  // double_positions (a quarter of the successful free runs): the raw mesh in
-  // double, rounded, is the raw float mesh bit for bit (marching cubes
-  // computes in double either way; only the store rounds).
-  if (a.status == NBMC_OK && free_run && ex.struct_ok && (perm_seed & 3u) == 0 && us == NBMC_OK &&
+  // double_positions (every successful free run; 12 of the 21 corpus inputs):
+  // the raw mesh in double, rounded, is the raw float mesh bit for bit
+  // (marching cubes computes in double either way; only the store rounds).
+  if (a.status == NBMC_OK && free_run && ex.struct_ok && us == NBMC_OK &&
       prm.struct_size >= offsetof(nbmc_params, double_positions) + sizeof(int32_t)) {
     nbmc_params raw = prm;
     raw.cleanup = 0;
