@@ -286,6 +286,7 @@ struct Run {
   nbmc_test::Mesh mesh;
   nbmc_stats stats{};
   bool has_normals = false;
+  std::vector<double> positions64;  // nbmc_mesh_positions_f64 (double_positions)
 };
 
 Run reconstruct(nbmc_context* ctx, const nbmc_params& prm, int cancel_at) {
@@ -321,6 +322,9 @@ Run reconstruct(nbmc_context* ctx, const nbmc_params& prm, int cancel_at) {
   if (pos) r.mesh.positions.assign(pos, pos + 3 * nv);
   if (nrm) r.mesh.normals.assign(nrm, nrm + 3 * nv);
   if (tri) r.mesh.triangles.assign(tri, tri + 3 * nt);
+  const double* pos64 = nbmc_mesh_positions_f64(m);
+  if (bool(pos64) != (prm.double_positions && nv > 0)) die("double positions present/absent against double_positions");
+  if (pos64) r.positions64.assign(pos64, pos64 + 3 * nv);
   nbmc_mesh_destroy(m);
   nbmc_stats_init(&r.stats);
   if (nbmc_context_stats(ctx, &r.stats) != NBMC_OK) die("nbmc_context_stats failed after a success");
@@ -823,6 +827,24 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     if (s2 != NBMC_OK) die("upload of the shuffled particles gave " + status_text(s2));
     const Run c = reconstruct(ctx, prm, cancel_at);
     expect_same(a, c, "shuffled particle order", false);
+  }
+
+  // double_positions (every successful free run; 12 of the 21 corpus inputs):
+  // the raw mesh in double, rounded, is the raw float mesh bit for bit
+  // (marching cubes computes in double either way; only the store rounds).
+  if (a.status == NBMC_OK && free_run && ex.struct_ok && us == NBMC_OK &&
+      prm.struct_size >= offsetof(nbmc_params, double_positions) + sizeof(int32_t)) {
+    nbmc_params raw = prm;
+    raw.cleanup = 0;
+    raw.smooth_iterations = 0;
+    nbmc_params raw64 = raw;
+    raw64.double_positions = 1;
+    const Run f = reconstruct(ctx, raw, -1), d = reconstruct(ctx, raw64, -1);
+    if (f.status != NBMC_OK || d.status != NBMC_OK)
+      die("double_positions: raw runs gave " + status_text(f.status) + " / " + status_text(d.status));
+    expect_same(f, d, "double_positions (rounded to float)", false);
+    for (std::size_t i = 0; i < d.positions64.size(); ++i)
+      if (float(d.positions64[i]) != d.mesh.positions[i]) die("double_positions: float positions are not the doubles rounded");
   }
 
   // The context stays usable after whatever happened: leave it clean.

@@ -272,6 +272,16 @@ typedef struct nbmc_params {
                                left out before the reconstruction (nbmc_stats counts them). Host
                                work, O(particles); not available over MPI */
   int32_t min_cluster;      /* NBMC_ISOLATED_DROP: smallest cluster kept, >= 1; default 10 */
+  /* Appended with double-precision positions (older callers: the default). */
+  int32_t double_positions; /* non-zero: the mesh keeps its vertex positions in double precision
+                               (nbmc_mesh_positions_f64) through the clean-up, smoothing, the
+                               subdomain stitch and the MPI gather, and the writers that can
+                               (PLY, OBJ, VTK, VTU, VTP, HDF5) store doubles. The field is still
+                               float, relative to the grid origin: the gain is for coordinates
+                               far from the origin (at 5e6 m a float resolves 0.5 m; a double
+                               keeps the field's relative precision there). Host meshes only:
+                               with NBMC_MEMORY_DEVICE, NBMC_ERROR_INVALID_PARAMETER.
+                               0 (default): float positions, as before */
 } nbmc_params;
 
 /* Fills *params with the defaults (spacing is 0 and must be set). */
@@ -324,11 +334,21 @@ NBMC_API uint64_t nbmc_mesh_triangle_count(const nbmc_mesh* mesh);
 /* Pointers into the mesh (valid until nbmc_mesh_destroy): positions and normals
  * are 3 * vertex_count floats (x,y,z per vertex), triangles 3 * triangle_count
  * vertex indices, counter-clockwise seen from outside the fluid. Normals point
- * out of the fluid and are NULL when compute_normals was 0. Empty mesh: NULL. */
+ * out of the fluid and are NULL when compute_normals was 0. Empty mesh: NULL.
+ * A mesh made with nbmc_params.double_positions: positions are its doubles
+ * rounded to float (see nbmc_mesh_positions_f64). */
 NBMC_API const float* nbmc_mesh_positions(const nbmc_mesh* mesh);
 NBMC_API const float* nbmc_mesh_normals(const nbmc_mesh* mesh);
 NBMC_API const uint32_t* nbmc_mesh_triangles(const nbmc_mesh* mesh);
 NBMC_API void nbmc_mesh_destroy(nbmc_mesh* mesh);
+/* Double-precision positions (3 * vertex_count doubles, x,y,z per vertex) of
+ * a mesh reconstructed with nbmc_params.double_positions, owned by the mesh
+ * and valid until nbmc_mesh_destroy; NULL for NULL, an empty mesh, or a mesh
+ * made without double_positions (its float positions are all it has: a
+ * widened copy would only pretend to the precision). On such a mesh,
+ * nbmc_mesh_positions returns the positions rounded to float (computed on the
+ * first call, once, and kept by the mesh; safe to call concurrently). */
+NBMC_API const double* nbmc_mesh_positions_f64(const nbmc_mesh* mesh);
 /* Where the mesh's arrays live: NBMC_MEMORY_HOST, or NBMC_MEMORY_DEVICE (see
  * nbmc_context_set_mesh_memory), in which case nbmc_mesh_positions, _normals
  * and _triangles return CUDA device pointers (same layout), valid until

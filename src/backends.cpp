@@ -327,6 +327,7 @@ Params resolve_params(const nbmc_params& in) {
   p.color_threshold = in.color_threshold;
   p.neighbour_threshold = in.neighbour_threshold;
   p.normals = in.compute_normals != 0;
+  p.double_positions = in.double_positions != 0;
   p.use_bbox = in.use_bbox != 0;
   if (p.use_bbox)
     for (int a = 0; a < 3; ++a) {

@@ -355,6 +355,31 @@ int32_t nbmc_context_set_memory_budget(nbmc_context* ctx, uint64_t bytes) {
   return NBMC_OK;
 }
 
+}  // extern "C"
+
+namespace {
+// double_positions: host meshes only (a device mesh has float arrays).
+void check_double_positions(const nbmc_context& ctx, const nbmc_params& p, const char* fn) {
+  if (p.double_positions && ctx.mesh_memory == NBMC_MEMORY_DEVICE)
+    throw Error(NBMC_ERROR_INVALID_PARAMETER, std::string(fn) +
+                                                  ": double_positions needs host meshes (nbmc_context_set_mesh_memory "
+                                                  "is NBMC_MEMORY_DEVICE; device meshes are float only)");
+}
+}  // namespace
+
+const float* nbmc_mesh::float_positions() const {
+  if (!mesh.f64) return mesh.positions.empty() ? nullptr : mesh.positions.data();
+  std::call_once(rounded, [this] {
+    auto& m = const_cast<nbmc::HostMesh&>(mesh);
+    std::vector<float, nbmc::NoInitAllocator<float>> f(m.positions64.size());
+    for (std::size_t i = 0; i < f.size(); ++i) f[i] = float(m.positions64[i]);
+    m.positions.swap(f);
+  });
+  return mesh.positions.empty() ? nullptr : mesh.positions.data();
+}
+
+extern "C" {
+
 void nbmc_params_init(nbmc_params* p) {
   if (!p) return;
   std::memset(p, 0, sizeof(*p));
@@ -396,6 +421,7 @@ int32_t nbmc_context_reconstruct(nbmc_context* ctx, const nbmc_params* params, n
   std::memcpy(&full, params, std::min<std::size_t>(params->struct_size, sizeof full));
   full.struct_size = sizeof full;
   params = &full;
+  check_double_positions(*ctx, full, "nbmc_context_reconstruct");
   nbmc::check_postprocess_params(full);
   if (ctx->particles.empty() && ctx->device_particles.count == 0)
     throw Error(NBMC_ERROR_NO_PARTICLES, "nbmc_context_reconstruct: no particles uploaded");
@@ -468,7 +494,14 @@ uint64_t nbmc_mesh_vertex_count(const nbmc_mesh* m) { return m ? m->mesh.vertex_
 uint64_t nbmc_mesh_triangle_count(const nbmc_mesh* m) { return m ? m->mesh.triangle_count() : 0; }
 const float* nbmc_mesh_positions(const nbmc_mesh* m) {
   if (m && m->mesh.on_device) return m->mesh.d_positions;
-  return m && !m->mesh.positions.empty() ? m->mesh.positions.data() : nullptr;
+  try {
+    return m ? m->float_positions() : nullptr;
+  } catch (...) {  // out of memory for the rounded copy
+    return nullptr;
+  }
+}
+const double* nbmc_mesh_positions_f64(const nbmc_mesh* m) {
+  return m && m->mesh.f64 && !m->mesh.positions64.empty() ? m->mesh.positions64.data() : nullptr;
 }
 const float* nbmc_mesh_normals(const nbmc_mesh* m) {
   if (m && m->mesh.on_device) return m->mesh.d_normals;
@@ -486,7 +519,10 @@ int32_t nbmc_mesh_copy_to_host(const nbmc_mesh* m, float* positions, float* norm
     if (h.on_device) {
       nbmc::download_mesh(h, positions, normals, triangles);
     } else {
-      if (positions && !h.positions.empty()) std::memcpy(positions, h.positions.data(), h.positions.size() * sizeof(float));
+      if (positions && h.f64)
+        for (std::size_t i = 0; i < h.positions64.size(); ++i) positions[i] = float(h.positions64[i]);
+      else if (positions && !h.positions.empty())
+        std::memcpy(positions, h.positions.data(), h.positions.size() * sizeof(float));
       if (normals && !h.normals.empty()) std::memcpy(normals, h.normals.data(), h.normals.size() * sizeof(float));
       if (triangles && !h.triangles.empty())
         std::memcpy(triangles, h.triangles.data(), h.triangles.size() * sizeof(uint32_t));
@@ -646,6 +682,7 @@ int32_t nbmc__reconstruct_collective(nbmc_context* ctx, const nbmc_params* param
   nbmc_params_init(&full);
   std::memcpy(&full, params, std::min<std::size_t>(params->struct_size, sizeof full));
   full.struct_size = sizeof full;
+  check_double_positions(*ctx, full, "nbmc_mpi_reconstruct");
   auto m = std::make_unique<nbmc_mesh>();
   ctx->has_stats = false;
   nbmc::reconstruct_collective(*ctx, full, *c, output, root, m->mesh);

@@ -145,7 +145,9 @@ void interpolate_mesh_attributes(nbmc_context& ctx, const Params& p, nbmc_mesh& 
   const int threads = ctx.backend == NBMC_BACKEND_SERIAL ? 1 : std::max(0, int(ctx.num_threads));
   std::vector<io::Attribute> values;
   try {
-    values = io::interpolate_attributes(xyz, n, ctx.attributes, {}, vertices, nv, p.influence_radius, threads);
+    values = m.f64 ? io::interpolate_attributes(xyz, n, ctx.attributes, {}, m.positions64.data(), nv,
+                                                p.influence_radius, threads)
+                   : io::interpolate_attributes(xyz, n, ctx.attributes, {}, vertices, nv, p.influence_radius, threads);
   } catch (const io::Error& e) {
     throw Error(NBMC_ERROR_INVALID_PARAMETER, std::string("attribute interpolation: ") + e.what());
   }

@@ -108,10 +108,11 @@ int32_t nbmc_mesh_write(const nbmc_mesh* mesh, const char* path, const char* for
                           copy.triangles.data());
     }
     const nbmc::HostMesh& m = mesh->mesh.on_device ? copy : mesh->mesh;
-    v.vertex_count = m.positions.size() / 3;
+    v.vertex_count = m.vertex_count();
     v.triangle_count = m.triangles.size() / 3;
-    v.positions = m.positions.empty() ? nullptr : m.positions.data();
-    v.normals = m.normals.size() == m.positions.size() && !m.normals.empty() ? m.normals.data() : nullptr;
+    if (m.f64) v.positions64 = m.positions64.empty() ? nullptr : m.positions64.data();  // doubles where the format can
+    else v.positions = m.positions.empty() ? nullptr : m.positions.data();
+    v.normals = m.normals.size() == 3 * v.vertex_count && !m.normals.empty() ? m.normals.data() : nullptr;
     v.triangles = m.triangles.empty() ? nullptr : m.triangles.data();
     const std::vector<nbmc::io::Attribute> attributes = nbmc::mesh_attributes_for_writer(*mesh);
     v.attributes = attributes.empty() ? nullptr : attributes.data();

@@ -30,29 +30,36 @@ void check_postprocess_params(const nbmc_params& params) {
 
 namespace {
 
-// The post-processing of a mesh in host memory.
-void postprocess_host(const nbmc_params& params, HostMesh& m, mesh::PostprocessStats& ps) {
+// The post-processing of a mesh in host memory, on its float or double
+// positions (PosVec).
+template <class PosVec>
+void postprocess_positions(const nbmc_params& params, PosVec& positions, HostMesh& m, mesh::PostprocessStats& ps) {
   if (params.cleanup) {
-    const mesh::CleanupResult c = mesh::cleanup_mesh(m.positions, m.normals, m.triangles);
+    const mesh::CleanupResult c = mesh::cleanup_mesh(positions, m.normals, m.triangles);
     ps.collapses = c.collapses;
     ps.flips = c.flips;
     ps.bad_before = c.bad_before;
     ps.bad_after = c.bad_after;
   }
   if (params.smooth_iterations > 0) {
-    const mesh::SmoothResult s = mesh::smooth_mesh(m.positions, m.normals, m.triangles, params.smooth_iterations);
+    const mesh::SmoothResult s = mesh::smooth_mesh(positions, m.normals, m.triangles, params.smooth_iterations);
     ps.volume_before_smoothing = s.volume_before;
     ps.volume_after_smoothing = s.volume_after;
     ps.volume_change = s.volume_before != 0 ? s.volume_after / s.volume_before - 1 : 0;
     // Smoothing can pull nearly coincident vertices together again (the
     // clusters the clean-up widened): clean what it made.
     if (params.cleanup) {
-      const mesh::CleanupResult c = mesh::cleanup_mesh(m.positions, m.normals, m.triangles);
+      const mesh::CleanupResult c = mesh::cleanup_mesh(positions, m.normals, m.triangles);
       ps.collapses += c.collapses;
       ps.flips += c.flips;
       ps.bad_after = c.bad_after;
     }
   }
+}
+
+void postprocess_host(const nbmc_params& params, HostMesh& m, mesh::PostprocessStats& ps) {
+  if (m.f64) postprocess_positions(params, m.positions64, m, ps);
+  else postprocess_positions(params, m.positions, m, ps);
 }
 
 // A mesh left in GPU memory: copied to the host, post-processed there, and
@@ -120,8 +127,11 @@ int32_t nbmc_mesh_check(const nbmc_mesh* m, nbmc_mesh_check_result* out) {
       nbmc::download_mesh(h, copy.positions.data(), nullptr, copy.triangles.data());
     }
     const nbmc::HostMesh& src = h.on_device ? copy : h;
-    const nbmc::mesh::CheckResult c = nbmc::mesh::check_mesh(src.positions.data(), src.positions.size() / 3,
-                                                             src.triangles.data(), src.triangles.size() / 3);
+    const nbmc::mesh::CheckResult c =
+        src.f64 ? nbmc::mesh::check_mesh(src.positions64.data(), src.positions64.size() / 3, src.triangles.data(),
+                                         src.triangles.size() / 3)
+                : nbmc::mesh::check_mesh(src.positions.data(), src.positions.size() / 3, src.triangles.data(),
+                                         src.triangles.size() / 3);
     nbmc_mesh_check_result_init(out);
     out->closed = c.closed;
     out->manifold = c.manifold;

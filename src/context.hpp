@@ -11,6 +11,7 @@
 #include "io/attributes.hpp"
 
 #include <memory>
+#include <mutex>
 #include <new>
 #include <utility>
 #include <string>
@@ -70,4 +71,10 @@ struct MeshAttribute {
 struct nbmc_mesh {
   nbmc::HostMesh mesh;
   std::vector<nbmc::MeshAttribute> attributes;
+  // A mesh with double positions (mesh.f64): its float positions, rounded
+  // once on first request (nbmc_mesh_positions may be called concurrently).
+  mutable std::once_flag rounded;
+  // The float positions of a host mesh (rounded from the doubles of an f64
+  // mesh); null when it has none. Throws std::bad_alloc.
+  const float* float_positions() const;
 };

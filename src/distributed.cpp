@@ -177,6 +177,7 @@ struct Reader {
 
 void pack_piece(std::vector<char>& b, const Piece& p) {
   put_array(b, p.positions);
+  put_array(b, p.positions64);
   put_array(b, p.normals);
   put_array(b, p.triangles);
   put_array(b, p.vertex_keys);
@@ -186,6 +187,7 @@ void pack_piece(std::vector<char>& b, const Piece& p) {
 Piece unpack_piece(Reader& r) {
   Piece p;
   r.get_array(p.positions);
+  r.get_array(p.positions64);
   r.get_array(p.normals);
   r.get_array(p.triangles);
   r.get_array(p.vertex_keys);
@@ -471,15 +473,22 @@ void reconstruct_collective(nbmc_context& ctx, const nbmc_params& full, const nb
     std::vector<const Piece*> ptrs;
     for (const Piece& pc : pieces) ptrs.push_back(&pc);
     stitch(ptrs, [&](std::uint64_t nv, std::uint64_t nt) {
-      merged.positions.resize(3 * nv);
+      merged.positions.resize(p.double_positions ? 0 : 3 * nv);
+      merged.positions64.resize(p.double_positions ? 3 * nv : 0);
       merged.normals.resize(p.normals ? 3 * nv : 0);
       merged.triangles.resize(3 * nt);
       merged.vertex_keys.resize(nv);
       merged.vertex_axes.resize(nv);
       merged.triangle_cells.resize(nt);
-      return StitchTarget{merged.positions.data(), p.normals ? merged.normals.data() : nullptr,
-                          merged.triangles.data(), merged.vertex_keys.data(), merged.vertex_axes.data(),
-                          merged.triangle_cells.data()};
+      StitchTarget t;
+      t.positions = p.double_positions ? nullptr : merged.positions.data();
+      t.positions64 = p.double_positions ? merged.positions64.data() : nullptr;
+      t.normals = p.normals ? merged.normals.data() : nullptr;
+      t.triangles = merged.triangles.data();
+      t.vertex_keys = merged.vertex_keys.data();
+      t.vertex_axes = merged.vertex_axes.data();
+      t.triangle_cells = merged.triangle_cells.data();
+      return t;
     });
     pieces.clear();
   });
@@ -544,7 +553,7 @@ void reconstruct_collective(nbmc_context& ctx, const nbmc_params& full, const nb
         Reader rd{part};
         ps.push_back(unpack_piece(rd));
       }
-      const StitchResult r = stitch_into(ps, p.normals, mesh, rep.stitch_seconds);
+      const StitchResult r = stitch_into(ps, p.normals, p.double_positions, mesh, rep.stitch_seconds);
       rep.shared_vertices = r.shared_vertices;
       frame.stage[6] += rep.stitch_seconds;
       frame.vertices = r.vertices;
@@ -564,7 +573,9 @@ void reconstruct_collective(nbmc_context& ctx, const nbmc_params& full, const nb
       agree(c, e);
     }
     step(c, [&] {
+      mesh.f64 = p.double_positions;
       mesh.positions.swap(merged.positions);
+      mesh.positions64.swap(merged.positions64);
       mesh.normals.swap(merged.normals);
       mesh.triangles.swap(merged.triangles);
       mesh.global_ids = std::move(ids);

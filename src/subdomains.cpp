@@ -43,15 +43,22 @@ double seconds_now() {
   return std::chrono::duration<double>(std::chrono::steady_clock::now().time_since_epoch()).count();
 }
 
-StitchResult stitch_into(const std::vector<Piece>& pieces, bool normals, HostMesh& mesh, double& seconds) {
+StitchResult stitch_into(const std::vector<Piece>& pieces, bool normals, bool f64, HostMesh& mesh, double& seconds) {
   const double t0 = seconds_now();
   std::vector<const Piece*> ptrs;
   for (const Piece& pc : pieces) ptrs.push_back(&pc);
+  mesh.f64 = f64;
   const StitchResult r = stitch(ptrs, [&](std::uint64_t nv, std::uint64_t nt) {
-    mesh.positions.resize(3 * nv);
+    mesh.positions.resize(f64 ? 0 : 3 * nv);
+    mesh.positions64.resize(f64 ? 3 * nv : 0);
     mesh.normals.resize(normals ? 3 * nv : 0);
     mesh.triangles.resize(3 * nt);
-    return StitchTarget{mesh.positions.data(), normals ? mesh.normals.data() : nullptr, mesh.triangles.data()};
+    StitchTarget t;
+    t.positions = f64 ? nullptr : mesh.positions.data();
+    t.positions64 = f64 ? mesh.positions64.data() : nullptr;
+    t.normals = normals ? mesh.normals.data() : nullptr;
+    t.triangles = mesh.triangles.data();
+    return t;
   });
   seconds = seconds_now() - t0;
   return r;
@@ -143,6 +150,7 @@ std::vector<Piece> run_subdomain_job(const Decomposition& d, const Params& p, co
       for (double& x : one.stage) x = 0;
       last[i] = one;
       piece.positions.swap(mesh.positions);
+      piece.positions64.swap(mesh.positions64);
       piece.normals.swap(mesh.normals);
       piece.triangles.swap(mesh.triangles);
       e.vertices = piece.vertex_count();
@@ -222,7 +230,7 @@ void run_split(const int parts[3], const Grid& g, const double* xyz, std::size_t
   for (const SubdomainEntry& e : rep.entries) particles += e.particles;
   if (particles == 0 && p.use_bbox)
     throw Error(NBMC_ERROR_NO_PARTICLES, "no particle lies within the bounding box (extended by the influence radius)");
-  const StitchResult r = stitch_into(pieces, p.normals, mesh, rep.stitch_seconds);
+  const StitchResult r = stitch_into(pieces, p.normals, p.double_positions, mesh, rep.stitch_seconds);
   rep.shared_vertices = r.shared_vertices;
   acc.stage[6] += rep.stitch_seconds;
   acc.particles = particles;

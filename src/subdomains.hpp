@@ -67,7 +67,7 @@ inline bool split_would_help(const Error& e) {
 }
 
 // Stitches pieces into a host mesh (normals when asked); the time in seconds.
-StitchResult stitch_into(const std::vector<Piece>& pieces, bool normals, HostMesh& mesh, double& seconds);
+StitchResult stitch_into(const std::vector<Piece>& pieces, bool normals, bool f64, HostMesh& mesh, double& seconds);
 
 // Monotonic clock in seconds (the report's per-subdomain and stitch times).
 double seconds_now();

@@ -181,6 +181,47 @@ TEST_F(MeshOut, Hdf5FileWithXdmf) {
   for (const auto& e : fs::directory_iterator(dir_)) EXPECT_FALSE(contains(e.path().string(), "nbmc-tmp"));
 }
 
+// Double positions (nbmc_params.double_positions): a float64 dataset that
+// reads back bit for bit, and the XDMF descriptor says Precision="8"; also
+// into a group of an existing file.
+TEST_F(MeshOut, Hdf5DoublePositions) {
+  const Strip s(4);
+  std::vector<double> p64;
+  for (std::size_t i = 0; i < s.positions.size(); ++i) p64.push_back(5e6 + 1e-3 / 3 * double(i));  // UTM-like
+  nbmc::io::MeshView v = s.view();
+  v.positions = nullptr;
+  v.positions64 = p64.data();
+  for (const std::string group : {"", "/frame_1"}) {
+    SCOPED_TRACE(group);
+    const std::string f = path("d.h5");
+    nbmc::io::write_mesh(group.empty() ? f : f + ":" + group, v);
+    std::vector<hsize_t> dims;
+    const std::vector<double> back = h5read<double>(f, group + "/positions", H5T_NATIVE_DOUBLE, dims);
+    ASSERT_EQ(back.size(), p64.size());
+    EXPECT_EQ(std::memcmp(back.data(), p64.data(), p64.size() * sizeof(double)), 0);
+    EXPECT_EQ(dims, (std::vector<hsize_t>{10, 3}));
+    // Stored as float64, not widened floats: the file's type says so.
+    const hid_t fh = H5Fopen(f.c_str(), H5F_ACC_RDONLY, H5P_DEFAULT);
+    const hid_t d = H5Dopen2(fh, (group + "/positions").c_str(), H5P_DEFAULT);
+    const hid_t t = H5Dget_type(d);
+    EXPECT_EQ(H5Tget_size(t), 8u);
+    EXPECT_EQ(H5Tget_class(t), H5T_FLOAT);
+    H5Tclose(t);
+    H5Dclose(d);
+    H5Fclose(fh);
+    EXPECT_EQ(h5read<float>(f, group + "/normals", H5T_NATIVE_FLOAT, dims), s.normals);
+    const std::string x = slurp(path("d.xdmf"));
+    EXPECT_TRUE(contains(x, "<DataItem Dimensions=\"10 3\" NumberType=\"Float\" Precision=\"8\" Format=\"HDF\">d.h5:" +
+                                group + "/positions</DataItem>"))
+        << x;
+    fs::remove(f);
+    fs::remove(path("d.xdmf"));
+    if (!group.empty()) continue;
+    // The group case writes into an existing file (of float meshes).
+    nbmc::io::write_mesh(f + ":/frame_0", s.view());
+  }
+}
+
 TEST_F(MeshOut, Hdf5GroupsMakeATemporalCollection) {
   const std::string f = path("seq.h5");
   const Strip a(2), b(3, 0.5f), c(4, 1.0f);

@@ -87,4 +87,26 @@ TEST_F(MeshCliTest, CheckCleanupSmooth) {
   EXPECT_EQ(r.exit_code, 2) << r.out << r.err;
 }
 
+// --double-positions: PLY with double x y z and VTU with Float64 points,
+// "double_positions" in the JSON, the text report says so; without it, float.
+TEST_F(MeshCliTest, DoublePositions) {
+  const std::string frame = std::string(NBMC_SOURCE_DIR) + "/examples/data/double_dam_break_4732.xyz";
+  const std::string base = "reconstruct " + quote(frame) + " --particle-radius 0.025 --progress never";
+  nbmc_test::CliResult r = run(base + " -o " + quote(path("d.ply")) + " --double-positions --json " +
+                               quote(path("d.json")));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(contains(r.out, "double-precision positions")) << r.out;
+  EXPECT_EQ(json_value(slurp(path("d.json")), "double_positions"), "true");
+  r = run(base + " -o " + quote(path("f.ply")) + " --json " + quote(path("f.json")) + " -q");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(json_value(slurp(path("f.json")), "double_positions"), "false");
+  const std::string d = slurp(path("d.ply")), f = slurp(path("f.ply"));
+  EXPECT_TRUE(contains(d, "property double x\nproperty double y\nproperty double z\n"));
+  EXPECT_TRUE(contains(f, "property float x\nproperty float y\nproperty float z\n"));
+  EXPECT_FALSE(contains(f, "double"));
+  r = run(base + " -o " + quote(path("d.vtu")) + " --double-positions -q");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(contains(slurp(path("d.vtu")), "<DataArray type=\"Float64\" Name=\"Points\""));
+}
+
 }  // namespace

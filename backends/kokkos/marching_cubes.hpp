@@ -376,14 +376,16 @@ std::vector<std::int64_t> find_band_leaks_near(const ExecSpace& space,
   return count ? cells_to_host(list, count) : std::vector<std::int64_t>();
 }
 
-// Pass C: intersection points (absolute, float) and normals.
-template <class ExecSpace>
+// Pass C: intersection points (absolute; Real: float, or double for
+// nbmc_params.double_positions) and normals. The point is computed in double
+// either way; only the store rounds it.
+template <class ExecSpace, class Real>
 void compute_vertices(const ExecSpace& space, const BandView<typename ExecSpace::memory_space>& band,
                       std::size_t n_words, const Grid& g,
                       const Kokkos::View<const float*, typename ExecSpace::memory_space>& phi,
                       const Kokkos::View<const std::uint32_t*, typename ExecSpace::memory_space>& info,
                       const Kokkos::View<const std::uint32_t*, typename ExecSpace::memory_space>& vert_offset,
-                      const Kokkos::View<float*, typename ExecSpace::memory_space>& positions,
+                      const Kokkos::View<Real*, typename ExecSpace::memory_space>& positions,
                       const Kokkos::View<float*, typename ExecSpace::memory_space>& normals, bool with_normals,
                       const Kokkos::View<std::uint64_t*, typename ExecSpace::memory_space>& keys = {},
                       const Kokkos::View<std::uint8_t*, typename ExecSpace::memory_space>& axes = {}) {
@@ -407,9 +409,9 @@ void compute_vertices(const ExecSpace& space, const BandView<typename ExecSpace:
               const float f0 = phi(self), f1 = phi(other);
               float t = f0 / (f0 - f1);
               t = t < 0.f ? 0.f : (t > 1.f ? 1.f : t);
-              positions(3 * out) = float(o0 + (double(i) + double(t) * double(di)) * c);
-              positions(3 * out + 1) = float(o1 + (double(j) + double(t) * double(dj)) * c);
-              positions(3 * out + 2) = float(o2 + (double(k) + double(t) * double(dk)) * c);
+              positions(3 * out) = Real(o0 + (double(i) + double(t) * double(di)) * c);
+              positions(3 * out + 1) = Real(o1 + (double(j) + double(t) * double(dj)) * c);
+              positions(3 * out + 2) = Real(o2 + (double(k) + double(t) * double(dk)) * c);
               if (with_keys) {
                 keys(out) = band_order_key(i, j, k);
                 axes(out) = std::uint8_t(a);

@@ -19,6 +19,7 @@
 #include <limits>
 #include <memory>
 #include <sstream>
+#include <type_traits>
 #include <vector>
 
 namespace nbmc {
@@ -26,7 +27,11 @@ namespace nbmc {
 // The mesh as the C API hands it out: in host vectors, or (CUDA backend,
 // NBMC_MEMORY_DEVICE) in one device allocation owned by `device`.
 struct HostMesh {
+  // positions: 3 floats per vertex, or, in a mesh made with double positions
+  // (f64), empty until the C API rounds positions64 into it on demand.
   std::vector<float, NoInitAllocator<float>> positions, normals;
+  std::vector<double, NoInitAllocator<double>> positions64;
+  bool f64 = false;
   std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>> triangles;
   bool on_device = false;
   std::shared_ptr<void> device;
@@ -38,7 +43,9 @@ struct HostMesh {
   // id in the whole mesh (the same on every process that has the vertex).
   std::vector<std::uint64_t> global_ids;
   std::uint64_t global_vertex_count = 0;
-  std::uint64_t vertex_count() const { return on_device ? d_vertices : positions.size() / 3; }
+  std::uint64_t vertex_count() const {
+    return on_device ? d_vertices : (f64 ? positions64.size() : positions.size()) / 3;
+  }
   std::uint64_t triangle_count() const { return on_device ? d_triangles_count : triangles.size() / 3; }
 };
 
@@ -415,11 +422,17 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
   st.vertices = r.vertices;
   st.triangles = r.triangles;
 
-  const std::uint64_t out_bytes =
-      r.vertices * 3 * sizeof(float) * (p.normals ? 2 : 1) + r.triangles * 3 * sizeof(std::uint32_t);
+  // Positions in float, or in double with p.double_positions (host meshes).
+  if (p.double_positions && mesh_on_device)
+    throw Error(4, "double_positions: the mesh must be in host memory (not NBMC_MEMORY_DEVICE)");
+  const std::uint64_t pos_size = p.double_positions ? sizeof(double) : sizeof(float);
+  const std::uint64_t out_bytes = r.vertices * 3 * (pos_size + (p.normals ? sizeof(float) : 0)) +
+                                  r.triangles * 3 * sizeof(std::uint32_t);
   tracker.require(out_bytes, "the mesh");
   if (!mesh_on_device) {
-    mesh.positions.resize(3 * r.vertices);
+    mesh.f64 = p.double_positions;
+    if (p.double_positions) mesh.positions64.resize(3 * r.vertices);
+    else mesh.positions.resize(3 * r.vertices);
     mesh.normals.resize(p.normals ? 3 * r.vertices : 0);
     mesh.triangles.resize(3 * r.triangles);
   }
@@ -445,72 +458,78 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
     haxes = decltype(haxes)(pc.vertex_axes.data(), pc.vertex_axes.size());
     htkeys = decltype(htkeys)(pc.triangle_cells.data(), pc.triangle_cells.size());
   }
-  Kokkos::View<float*, Kokkos::HostSpace, Unmanaged> hpos(mesh.positions.data(), mesh.positions.size());
   Kokkos::View<float*, Kokkos::HostSpace, Unmanaged> hnrm(mesh.normals.data(), mesh.normals.size());
   Kokkos::View<std::uint32_t*, Kokkos::HostSpace, Unmanaged> htri(mesh.triangles.data(), mesh.triangles.size());
   const Kokkos::View<const std::uint32_t*, MemSpace> cinfo = info.view(), cvoff = vert_offset.view();
-  if constexpr (std::is_same<MemSpace, Kokkos::HostSpace>::value) {
-    compute_vertices(space, bv, n_words, g, cphi, cinfo, cvoff, Kokkos::View<float*, MemSpace>(hpos),
-                     Kokkos::View<float*, MemSpace>(hnrm), p.normals, Kokkos::View<std::uint64_t*, MemSpace>(hvkeys),
-                     Kokkos::View<std::uint8_t*, MemSpace>(haxes));
-    compute_triangles(space, bv, n_words, tables, cinfo, cvoff,
-                      Kokkos::View<const std::uint32_t*, MemSpace>(tri_offset.view()),
-                      Kokkos::View<std::uint32_t*, MemSpace>(htri), Kokkos::View<std::uint64_t*, MemSpace>(htkeys));
-    lap(5);
-  } else if (mesh_on_device) {
+  // The vertices and triangles, with Real (float or double) positions.
+  auto triangulate = [&](auto* host_positions, std::size_t n_positions) {
+    using Real = std::remove_pointer_t<decltype(host_positions)>;
+    Kokkos::View<Real*, Kokkos::HostSpace, Unmanaged> hpos(host_positions, n_positions);
+    if constexpr (std::is_same<MemSpace, Kokkos::HostSpace>::value) {
+      compute_vertices(space, bv, n_words, g, cphi, cinfo, cvoff, Kokkos::View<Real*, MemSpace>(hpos),
+                       Kokkos::View<float*, MemSpace>(hnrm), p.normals, Kokkos::View<std::uint64_t*, MemSpace>(hvkeys),
+                       Kokkos::View<std::uint8_t*, MemSpace>(haxes));
+      compute_triangles(space, bv, n_words, tables, cinfo, cvoff,
+                        Kokkos::View<const std::uint32_t*, MemSpace>(tri_offset.view()),
+                        Kokkos::View<std::uint32_t*, MemSpace>(htri), Kokkos::View<std::uint64_t*, MemSpace>(htkeys));
+      lap(5);
+    } else if (mesh_on_device) {
 #if defined(KOKKOS_ENABLE_CUDA)
-    allocate_device_mesh(mesh, r.vertices, r.triangles, p.normals);
-    const std::size_t np = 3 * std::size_t(r.vertices), nn = p.normals ? np : 0, nt = 3 * std::size_t(r.triangles);
-    Kokkos::View<float*, MemSpace, Unmanaged> dpos(mesh.d_positions, np), dnrm(mesh.d_normals, nn);
-    Kokkos::View<std::uint32_t*, MemSpace, Unmanaged> dtri(mesh.d_triangles, nt);
-    compute_vertices(space, bv, n_words, g, cphi, cinfo, cvoff, Kokkos::View<float*, MemSpace>(dpos),
-                     Kokkos::View<float*, MemSpace>(dnrm), p.normals);
-    compute_triangles(space, bv, n_words, tables, cinfo, cvoff,
-                      Kokkos::View<const std::uint32_t*, MemSpace>(tri_offset.view()),
-                      Kokkos::View<std::uint32_t*, MemSpace>(dtri));
-    lap(5);
+      allocate_device_mesh(mesh, r.vertices, r.triangles, p.normals);
+      const std::size_t np = 3 * std::size_t(r.vertices), nn = p.normals ? np : 0, nt = 3 * std::size_t(r.triangles);
+      Kokkos::View<float*, MemSpace, Unmanaged> dpos(mesh.d_positions, np), dnrm(mesh.d_normals, nn);
+      Kokkos::View<std::uint32_t*, MemSpace, Unmanaged> dtri(mesh.d_triangles, nt);
+      compute_vertices(space, bv, n_words, g, cphi, cinfo, cvoff, Kokkos::View<float*, MemSpace>(dpos),
+                       Kokkos::View<float*, MemSpace>(dnrm), p.normals);
+      compute_triangles(space, bv, n_words, tables, cinfo, cvoff,
+                        Kokkos::View<const std::uint32_t*, MemSpace>(tri_offset.view()),
+                        Kokkos::View<std::uint32_t*, MemSpace>(dtri));
+      lap(5);
 #else
-    throw Error(7, "device memory needs the CUDA backend");
+      throw Error(7, "device memory needs the CUDA backend");
 #endif
-  } else {
-    Buffer<float, MemSpace> dpos(tracker, "mesh::positions", hpos.extent(0));
-    Buffer<float, MemSpace> dnrm(tracker, "mesh::normals", hnrm.extent(0));
-    Buffer<std::uint32_t, MemSpace> dtri(tracker, "mesh::triangles", htri.extent(0));
-    Buffer<std::uint64_t, MemSpace> dvkeys(tracker, "mesh::vertex_keys", hvkeys.extent(0));
-    Buffer<std::uint8_t, MemSpace> daxes(tracker, "mesh::vertex_axes", haxes.extent(0));
-    Buffer<std::uint64_t, MemSpace> dtkeys(tracker, "mesh::triangle_cells", htkeys.extent(0));
-    compute_vertices(space, bv, n_words, g, cphi, cinfo, cvoff, dpos.view(), dnrm.view(), p.normals, dvkeys.view(),
-                     daxes.view());
-    compute_triangles(space, bv, n_words, tables, cinfo, cvoff,
-                      Kokkos::View<const std::uint32_t*, MemSpace>(tri_offset.view()), dtri.view(), dtkeys.view());
-    lap(5);
-    if (hvkeys.extent(0)) {
-      Kokkos::deep_copy(space, hvkeys, dvkeys.view());
-      Kokkos::deep_copy(space, haxes, daxes.view());
+    } else {
+      Buffer<Real, MemSpace> dpos(tracker, "mesh::positions", hpos.extent(0));
+      Buffer<float, MemSpace> dnrm(tracker, "mesh::normals", hnrm.extent(0));
+      Buffer<std::uint32_t, MemSpace> dtri(tracker, "mesh::triangles", htri.extent(0));
+      Buffer<std::uint64_t, MemSpace> dvkeys(tracker, "mesh::vertex_keys", hvkeys.extent(0));
+      Buffer<std::uint8_t, MemSpace> daxes(tracker, "mesh::vertex_axes", haxes.extent(0));
+      Buffer<std::uint64_t, MemSpace> dtkeys(tracker, "mesh::triangle_cells", htkeys.extent(0));
+      compute_vertices(space, bv, n_words, g, cphi, cinfo, cvoff, dpos.view(), dnrm.view(), p.normals, dvkeys.view(),
+                       daxes.view());
+      compute_triangles(space, bv, n_words, tables, cinfo, cvoff,
+                        Kokkos::View<const std::uint32_t*, MemSpace>(tri_offset.view()), dtri.view(), dtkeys.view());
+      lap(5);
+      if (hvkeys.extent(0)) {
+        Kokkos::deep_copy(space, hvkeys, dvkeys.view());
+        Kokkos::deep_copy(space, haxes, daxes.view());
+      }
+      if (htkeys.extent(0)) Kokkos::deep_copy(space, htkeys, dtkeys.view());
+      // The host vectors are fresh, uninitialised memory: touch their pages
+      // with all host threads first (single-threaded page faults inside the
+      // copy cost 20 ms for the 40 MB mesh of the 1.65 M frame at r/2).
+      {
+        using HostExec = Kokkos::DefaultHostExecutionSpace;
+        auto touch = [](void* data, std::size_t bytes) {
+          if (!bytes) return;
+          char* base = static_cast<char*>(data);
+          const std::size_t pages = (bytes + 4095) / 4096;
+          Kokkos::parallel_for(
+              "nbmc::mesh::first_touch", Kokkos::RangePolicy<HostExec>(0, pages),
+              [=](const std::size_t q) { base[q * 4096] = 0; });
+        };
+        touch(hpos.data(), hpos.extent(0) * sizeof(Real));
+        touch(hnrm.data(), hnrm.extent(0) * sizeof(float));
+        touch(htri.data(), htri.extent(0) * sizeof(std::uint32_t));
+        HostExec().fence();
+      }
+      Kokkos::deep_copy(space, hpos, dpos.view());
+      Kokkos::deep_copy(space, hnrm, dnrm.view());
+      Kokkos::deep_copy(space, htri, dtri.view());
     }
-    if (htkeys.extent(0)) Kokkos::deep_copy(space, htkeys, dtkeys.view());
-    // The host vectors are fresh, uninitialised memory: touch their pages
-    // with all host threads first (single-threaded page faults inside the
-    // copy cost 20 ms for the 40 MB mesh of the 1.65 M frame at r/2).
-    {
-      using HostExec = Kokkos::DefaultHostExecutionSpace;
-      auto touch = [](void* data, std::size_t bytes) {
-        if (!bytes) return;
-        char* base = static_cast<char*>(data);
-        const std::size_t pages = (bytes + 4095) / 4096;
-        Kokkos::parallel_for(
-            "nbmc::mesh::first_touch", Kokkos::RangePolicy<HostExec>(0, pages),
-            [=](const std::size_t q) { base[q * 4096] = 0; });
-      };
-      touch(hpos.data(), hpos.extent(0) * sizeof(float));
-      touch(hnrm.data(), hnrm.extent(0) * sizeof(float));
-      touch(htri.data(), htri.extent(0) * sizeof(std::uint32_t));
-      HostExec().fence();
-    }
-    Kokkos::deep_copy(space, hpos, dpos.view());
-    Kokkos::deep_copy(space, hnrm, dnrm.view());
-    Kokkos::deep_copy(space, htri, dtri.view());
-  }
+  };
+  if (p.double_positions) triangulate(mesh.positions64.data(), mesh.positions64.size());
+  else triangulate(mesh.positions.data(), mesh.positions.size());
   lap(6);
   st.total = total.seconds();
 }

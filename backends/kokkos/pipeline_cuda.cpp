@@ -243,6 +243,7 @@ void download_device_items(const void* src, std::uint64_t count, std::uint64_t b
 }
 
 void move_mesh_to_device(HostMesh& m) {
+  if (m.f64) throw Error(4, "double_positions: the mesh must be in host memory (not NBMC_MEMORY_DEVICE)");
 #if defined(KOKKOS_ENABLE_CUDA)
   const std::size_t np = m.positions.size(), nn = m.normals.size(), nt = m.triangles.size();
   HostMesh d;

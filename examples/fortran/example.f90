@@ -161,6 +161,16 @@ program example
   call check(status, 'nbmc_mesh_copy_to_host')
   if (maxval(abs(vcopy - nbmc_mesh_positions(mesh))) > 0 .or. any(tcopy /= nbmc_mesh_triangles(mesh))) &
        error stop 'nbmc_mesh_copy_to_host differs from the mesh'
+  ! Double-precision positions (params%double_positions): the same surface,
+  ! its positions in real(c_double); a float mesh has none.
+  if (associated(nbmc_mesh_positions_f64(mesh))) error stop 'a float mesh has double positions'
+  params%double_positions = 1
+  status = nbmc_context_reconstruct(ctx, params, mesh)
+  call check(status, 'nbmc_context_reconstruct (double_positions)')
+  if (.not. associated(nbmc_mesh_positions_f64(mesh))) error stop 'double positions missing'
+  if (maxval(abs(real(nbmc_mesh_positions_f64(mesh), c_float) - nbmc_mesh_positions(mesh))) > 0) &
+       error stop 'the float positions are not the doubles rounded'
+  params%double_positions = 0
   ! Device memory needs the CUDA backend; elsewhere the call fails cleanly.
   if (backend /= NBMC_BACKEND_CUDA) then
     status = nbmc_context_set_mesh_memory(ctx, NBMC_MEMORY_DEVICE)

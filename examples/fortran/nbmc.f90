@@ -174,6 +174,7 @@ module nbmc
     real(c_double)     :: iso_threshold = 0       ! appended (NBMC_METHOD_SPH)
     integer(c_int32_t) :: isolated = 0            ! appended (isolated-particle filter)
     integer(c_int32_t) :: min_cluster = 0
+    integer(c_int32_t) :: double_positions = 0    ! appended (double-precision positions)
   end type nbmc_params
 
   type, bind(c), public :: nbmc_stats
@@ -228,6 +229,7 @@ module nbmc
   public :: nbmc_stats_init, nbmc_context_stats
   public :: nbmc_mesh_vertex_count, nbmc_mesh_triangle_count
   public :: nbmc_mesh_positions, nbmc_mesh_normals, nbmc_mesh_triangles, nbmc_mesh_close
+  public :: nbmc_mesh_positions_f64
   public :: nbmc_mesh_memory, nbmc_mesh_copy_to_host, nbmc_mesh_c_arrays
   public :: nbmc_context_load_particles, nbmc_mesh_write, nbmc_last_error
   public :: nbmc_kokkos_finalize
@@ -434,6 +436,12 @@ module nbmc
       type(c_ptr), value :: mesh
       type(c_ptr) :: p
     end function c_mesh_positions
+
+    function c_mesh_positions_f64(mesh) bind(c, name="nbmc_mesh_positions_f64") result(p)
+      import :: c_ptr
+      type(c_ptr), value :: mesh
+      type(c_ptr) :: p
+    end function c_mesh_positions_f64
 
     function c_mesh_normals(mesh) bind(c, name="nbmc_mesh_normals") result(p)
       import :: c_ptr
@@ -828,6 +836,18 @@ contains
     p = c_mesh_positions(mesh%ptr)
     if (c_associated(p)) call c_f_pointer(p, pos, [3_c_int64_t, c_mesh_vertex_count(mesh%ptr)])
   end function nbmc_mesh_positions
+
+  !> Double-precision vertex positions pos(3, nv) of a mesh reconstructed with
+  !> params%double_positions = 1, pointing into the mesh (no copy); not
+  !> associated for a float mesh and for an empty one.
+  function nbmc_mesh_positions_f64(mesh) result(pos)
+    type(nbmc_mesh), intent(in) :: mesh
+    real(c_double), pointer :: pos(:, :)
+    type(c_ptr) :: p
+    nullify(pos)
+    p = c_mesh_positions_f64(mesh%ptr)
+    if (c_associated(p)) call c_f_pointer(p, pos, [3_c_int64_t, c_mesh_vertex_count(mesh%ptr)])
+  end function nbmc_mesh_positions_f64
 
   !> Unit normals nrm(3, nv) pointing out of the fluid; not associated when
   !> the reconstruction had compute_normals = 0, and for a device mesh.

@@ -111,6 +111,8 @@ class Params(Structure):
         # appended with the isolated-particle filter
         ("isolated", c_int32),
         ("min_cluster", c_int32),
+        # appended with double-precision positions
+        ("double_positions", c_int32),
     ]
 
 
@@ -231,6 +233,7 @@ _SIGNATURES = {
     "nbmc_mesh_vertex_count": (c_uint64, [_mesh_p]),
     "nbmc_mesh_triangle_count": (c_uint64, [_mesh_p]),
     "nbmc_mesh_positions": (c_void_p, [_mesh_p]),
+    "nbmc_mesh_positions_f64": (c_void_p, [_mesh_p]),
     "nbmc_mesh_normals": (c_void_p, [_mesh_p]),
     "nbmc_mesh_triangles": (c_void_p, [_mesh_p]),
     "nbmc_mesh_destroy": (None, [_mesh_p]),

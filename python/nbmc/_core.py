@@ -64,7 +64,8 @@ def stage_name(stage: int) -> str:
 # CLI's options (--cell-size -> cell_size); 'normals' is the inverse of --no-normals.
 _LENGTHS = ("cell_size", "influence_radius", "band_width", "surface_radius", "iso_radius")
 _PARAM_KEYS = _LENGTHS + ("method", "field", "t_low", "t_high", "iso_threshold", "color_threshold",
-                          "neighbour_threshold", "normals", "length_unit", "isolated", "min_cluster")
+                          "neighbour_threshold", "normals", "length_unit", "isolated", "min_cluster",
+                          "double_positions")
 
 
 def defaults() -> Dict[str, Any]:
@@ -79,7 +80,8 @@ def defaults() -> Dict[str, Any]:
              t_high=p.t_high, iso_threshold=p.iso_threshold, color_threshold=p.color_threshold,
              neighbour_threshold=p.neighbour_threshold, normals=bool(p.compute_normals),
              length_unit=_name_of(UNITS, p.length_unit),
-             isolated=_name_of(ISOLATED, p.isolated), min_cluster=p.min_cluster)
+             isolated=_name_of(ISOLATED, p.isolated), min_cluster=p.min_cluster,
+             double_positions=bool(p.double_positions))
     return d
 
 
@@ -122,6 +124,8 @@ def make_params(spacing: Optional[float] = None, particle_radius: Optional[float
         p.length_unit = _enum(UNITS, kw["length_unit"], "length_unit")
     if kw.get("normals") is not None:
         p.compute_normals = 1 if kw["normals"] else 0
+    if kw.get("double_positions") is not None:
+        p.double_positions = 1 if kw["double_positions"] else 0
     if bbox is not None:
         lo, hi = _bbox(bbox)
         p.use_bbox = 1
@@ -264,8 +268,17 @@ class Mesh:
         return self._cache[which]
 
     @property
+    def double_positions(self) -> bool:
+        """True when the mesh was made with ``double_positions=True``: its
+        ``vertices`` are float64."""
+        return bool(lib.nbmc_mesh_positions_f64(self._h.ptr))
+
+    @property
     def vertices(self) -> Union[np.ndarray, A.DeviceArray]:
-        """(V, 3) float32 vertex positions (a view, no copy)."""
+        """(V, 3) vertex positions (a view, no copy): float32, or float64 for a
+        mesh made with ``double_positions=True`` (``nbmc_mesh_positions_f64``)."""
+        if self.double_positions:
+            return self._array("vertices", lib.nbmc_mesh_positions_f64, self.vertex_count, np.float64)
         return self._array("vertices", lib.nbmc_mesh_positions, self.vertex_count, np.float32)
 
     @property
@@ -825,6 +838,7 @@ def reconstruct(points: Any, spacing: Optional[float] = None, *,
                 neighbour_threshold: Optional[int] = None, normals: Optional[bool] = None,
                 length_unit: Optional[str] = None, bbox: Any = None,
                 isolated: Optional[str] = None, min_cluster: Optional[int] = None,
+                double_positions: Optional[bool] = None,
                 backend: Union[str, int] = "auto", threads: Optional[int] = None,
                 device_id: int = 0, memory_budget: Union[int, str, None] = None,
                 mesh_memory: str = "host", progress: Optional[ProgressFn] = None,
@@ -864,6 +878,11 @@ def reconstruct(points: Any, spacing: Optional[float] = None, *,
         ``surface_radius``) of fewer than ``min_cluster`` particles make no
         surface; defaults {isolated!r}, {min_cluster}. ``Context.stats``
         counts what was dropped.
+    double_positions
+        Keep the vertex positions in double precision: ``Mesh.vertices`` is
+        float64 (for coordinates far from the origin, e.g. UTM metres, where
+        float32 resolves only 0.5 m); host meshes only. Default
+        {double_positions}.
     bbox
         Only reconstruct near this box (absolute): (xmin, ymin, zmin, xmax,
         ymax, zmax) or ((xmin, ymin, zmin), (xmax, ymax, zmax)).
@@ -892,7 +911,7 @@ def reconstruct(points: Any, spacing: Optional[float] = None, *,
                                iso_threshold=iso_threshold, color_threshold=color_threshold,
                                neighbour_threshold=neighbour_threshold, normals=normals,
                                length_unit=length_unit, isolated=isolated,
-                               min_cluster=min_cluster)
+                               min_cluster=min_cluster, double_positions=double_positions)
 
 
 def _show_library_defaults(fn: Callable[..., Any]) -> None:

@@ -263,3 +263,30 @@ def test_subdomains_give_the_same_mesh(points):
             ctx.subdomains = "sometimes"
         ctx.subdomains = "auto"
         assert ctx.subdomains == "auto"
+
+
+def _sphere(offset, r=0.01, radius=0.1):
+    g = np.arange(-radius - r, radius + 1.5 * r, r)
+    x, y, z = np.meshgrid(g, g, g, indexing="ij")
+    p = np.stack([x.ravel(), y.ravel(), z.ravel()], axis=1)
+    return p[(p * p).sum(axis=1) <= radius * radius * (1 + 1e-9)] + offset
+
+
+def test_double_positions_far_from_the_origin():
+    # 1e7 in each coordinate: a float32 resolves 1.0 there, the sphere's
+    # radius is 0.1. The float64 vertices keep its shape.
+    assert nbmc.defaults()["double_positions"] is False
+    near = nbmc.reconstruct(_sphere(0.0), 0.01, backend="serial")
+    far = nbmc.reconstruct(_sphere(1e7), 0.01, double_positions=True, backend="serial")
+    assert not near.double_positions and near.vertices.dtype == np.float32
+    assert far.double_positions and far.vertices.dtype == np.float64
+    assert far.vertices.shape == (far.vertex_count, 3) and not far.vertices.flags.writeable
+    rn = np.linalg.norm(near.vertices.astype(np.float64), axis=1)
+    rf = np.linalg.norm(far.vertices - 1e7, axis=1)
+    assert abs(rf.mean() - rn.mean()) < 1e-4 and np.ptp(rf) < 0.01
+    # In float32 the vertices collapse onto a few points (the clean-up then
+    # removes what is left of the surface).
+    flt = nbmc.reconstruct(_sphere(1e7), 0.01, backend="serial")
+    assert flt.vertices.dtype == np.float32
+    radii = np.linalg.norm(flt.vertices.astype(np.float64) - 1e7, axis=1)
+    assert flt.vertex_count < far.vertex_count / 2 or np.ptp(radii) > 0.05

@@ -92,6 +92,7 @@ struct Options {
   std::string method, field, backend, isolated;
   std::vector<double> bbox;
   bool no_normals = false;
+  bool double_positions = false;
   bool no_cleanup = false;  // --no-cleanup
   bool check = false;       // --check
   bool quiet = false;
@@ -222,7 +223,9 @@ bool emit_report(const Options& o, bool json_to_stdout, Text text, Json json) {
 // The writers' view of a (host) mesh from the C API.
 nbmc::io::MeshView mesh_view(const nbmc_mesh* mesh) {
   nbmc::io::MeshView view;
-  view.positions = nbmc_mesh_positions(mesh);
+  // --double-positions: the doubles (the writers round them where they must).
+  view.positions64 = nbmc_mesh_positions_f64(mesh);
+  if (!view.positions64) view.positions = nbmc_mesh_positions(mesh);
   view.normals = nbmc_mesh_normals(mesh);
   view.triangles = nbmc_mesh_triangles(mesh);
   view.vertex_count = nbmc_mesh_vertex_count(mesh);
@@ -739,7 +742,8 @@ int reconstruct_mpi(Options& o, int rank, int size, bool pieces) {
       if (o.params.compute_normals)
         x += "    <PPointData Normals=\"Normals\">\n      <PDataArray type=\"Float32\" Name=\"Normals\" "
              "NumberOfComponents=\"3\"/>\n    </PPointData>\n";
-      x += "    <PPoints>\n      <PDataArray type=\"Float32\" NumberOfComponents=\"3\"/>\n    </PPoints>\n";
+      x += std::string("    <PPoints>\n      <PDataArray type=\"") +
+           (o.params.double_positions ? "Float64" : "Float32") + "\" NumberOfComponents=\"3\"/>\n    </PPoints>\n";
       if (!vtp)
         x += "    <PCells>\n      <PDataArray type=\"Int64\" Name=\"connectivity\"/>\n      <PDataArray "
              "type=\"Int64\" Name=\"offsets\"/>\n      <PDataArray type=\"UInt8\" Name=\"types\"/>\n    </PCells>\n";
@@ -993,6 +997,9 @@ int main(int argc, char** argv) {
                   "Fewer neighbours than this within the surface radius: surface particle")
       ->capture_default_str();
   rec->add_flag("--no-normals", o.no_normals, "Do not compute vertex normals");
+  rec->add_flag("--double-positions", o.double_positions,
+                "Keep the mesh's vertex positions in double precision (for coordinates far from the origin); "
+                "PLY, OBJ, VTK, VTU, VTP and HDF5 store doubles, glTF rounds to float");
   rec->add_flag("--no-cleanup", o.no_cleanup,
                 "Keep the raw marching-cubes mesh (no removal of degenerate and sliver triangles)");
   rec->add_option("--smooth", p.smooth_iterations,
@@ -1073,6 +1080,7 @@ int main(int argc, char** argv) {
   p.isolated = value_of(kIsolated, o.isolated);
   o.desc.backend = value_of(kBackends, o.backend);
   if (o.no_normals) p.compute_normals = 0;
+  if (o.double_positions) p.double_positions = 1;
   if (o.no_cleanup) p.cleanup = 0;
   if (!o.bbox.empty()) {
     p.use_bbox = 1;

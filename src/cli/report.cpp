@@ -196,7 +196,8 @@ std::string format_report(const Report& r) {
                    (r.params.smooth_iterations > 0
                         ? ", " + std::to_string(r.params.smooth_iterations) + " smoothing iterations (volume " +
                               printf_string("%+.3f%%", 100.0 * s.smoothing_volume_change) + ")"
-                        : std::string()));
+                        : std::string()) +
+                   (r.params.double_positions ? ", double-precision positions" : ""));
   if (r.params.isolated == NBMC_ISOLATED_DROP)
     line("isolated", "dropped " + grouped(s.dropped_particle_count) + " particles in " +
                          grouped(s.dropped_cluster_count) + " clusters of fewer than " +
@@ -312,6 +313,7 @@ std::string format_json(const Report& r) {
   o += ", \"isolated\": " + json_string(p.isolated == NBMC_ISOLATED_DROP ? "drop" : "keep");
   o += ", \"min_cluster\": " + std::to_string(p.min_cluster);
   o += std::string(", \"compute_normals\": ") + (p.compute_normals ? "true" : "false");
+  o += std::string(", \"double_positions\": ") + (p.double_positions ? "true" : "false");
   o += std::string(", \"cleanup\": ") + (p.cleanup ? "true" : "false");
   o += ", \"smooth_iterations\": " + std::to_string(p.smooth_iterations);
   if (p.use_bbox) {

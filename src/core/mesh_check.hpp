@@ -47,7 +47,9 @@ inline Vec3 cross(const Vec3& a, const Vec3& b) {
   return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
 }
 inline double norm(const Vec3& a) { return std::sqrt(dot(a, a)); }
+// Vertex v of positions in float, or in double (nbmc_params.double_positions).
 inline Vec3 load(const float* p, std::uint32_t v) { return {p[3 * std::size_t(v)], p[3 * std::size_t(v) + 1], p[3 * std::size_t(v) + 2]}; }
+inline Vec3 load(const double* p, std::uint32_t v) { return {p[3 * std::size_t(v)], p[3 * std::size_t(v) + 1], p[3 * std::size_t(v) + 2]}; }
 
 // Shape of one triangle: twice its area and the sine of its smallest angle
 // (0 when two vertices coincide).
@@ -70,7 +72,8 @@ inline TriangleShape triangle_shape(const Vec3& a, const Vec3& b, const Vec3& c)
 }
 
 // Largest side of the bounding box of the vertices (0 for none).
-inline double bounding_extent(const float* positions, std::size_t vertex_count, Vec3* centre = nullptr) {
+template <class Real>
+inline double bounding_extent(const Real* positions, std::size_t vertex_count, Vec3* centre = nullptr) {
   if (vertex_count == 0) {
     if (centre) *centre = Vec3{};
     return 0;
@@ -146,7 +149,8 @@ inline std::uint64_t edge_key(std::uint32_t a, std::uint32_t b) {
 // touches a boundary, non-manifold or misoriented edge, a triangle that
 // repeats a vertex, or has more than one fan (mesh clean-up leaves these
 // alone).
-inline CheckResult check_mesh(const float* positions, std::size_t vertex_count, const std::uint32_t* triangles,
+template <class Real>  // float or double positions
+inline CheckResult check_mesh(const Real* positions, std::size_t vertex_count, const std::uint32_t* triangles,
                               std::size_t triangle_count, std::vector<std::uint8_t>* irregular = nullptr) {
   using detail::HalfEdge;
   CheckResult r;

@@ -70,9 +70,12 @@ struct CleanupResult {
 
 namespace detail {
 
+// Real: the positions' scalar (float, or double with
+// nbmc_params.double_positions); normals are float either way.
+template <class Real>
 class Cleaner {
  public:
-  Cleaner(float* positions, float* normals, std::size_t nv, std::uint32_t* tri, std::size_t nt)
+  Cleaner(Real* positions, float* normals, std::size_t nv, std::uint32_t* tri, std::size_t nt)
       : P_(positions), N_(normals), nv_(nv), T_(tri), nt_(nt), alive_(nt, 1), next_(nv, kNone), tail_(nv) {
     for (std::size_t v = 0; v < nv; ++v) tail_[v] = std::uint32_t(v);
     const double extent = bounding_extent(positions, nv);
@@ -362,7 +365,7 @@ class Cleaner {
           q[k] = v[k] == a || v[k] == b ? p : o[k];
         }
         // Rounded as the output will be.
-        for (int k = 0; k < 3; ++k) q[k] = Vec3{double(float(q[k].x)), double(float(q[k].y)), double(float(q[k].z))};
+        for (int k = 0; k < 3; ++k) q[k] = Vec3{double(Real(q[k].x)), double(Real(q[k].y)), double(Real(q[k].z))};
         const TriangleShape s_old = triangle_shape(o[0], o[1], o[2]);
         const TriangleShape s_new = triangle_shape(q[0], q[1], q[2]);
         const int c_old = triangle_class(s_old, degenerate_double_area_);
@@ -416,7 +419,7 @@ class Cleaner {
     around_.clear();
     for (auto& m : moved) {
       if (irregular_[m.first]) return;
-      m.second = Vec3{double(float(m.second.x)), double(float(m.second.y)), double(float(m.second.z))};
+      m.second = Vec3{double(Real(m.second.x)), double(Real(m.second.y)), double(Real(m.second.z))};
       fan(m.first, fa_);
       around_.insert(around_.end(), fa_.begin(), fa_.end());
     }
@@ -456,9 +459,9 @@ class Cleaner {
 
   void apply_move(const Candidate& c) {
     for (const auto& m : c.moved) {
-      P_[3 * std::size_t(m.first)] = float(m.second.x);
-      P_[3 * std::size_t(m.first) + 1] = float(m.second.y);
-      P_[3 * std::size_t(m.first) + 2] = float(m.second.z);
+      P_[3 * std::size_t(m.first)] = Real(m.second.x);
+      P_[3 * std::size_t(m.first) + 1] = Real(m.second.y);
+      P_[3 * std::size_t(m.first) + 2] = Real(m.second.z);
     }
     ++moves;
   }
@@ -578,9 +581,9 @@ class Cleaner {
       const double l = std::sqrt(double(n[0]) * n[0] + double(n[1]) * n[1] + double(n[2]) * n[2]);
       for (int x = 0; x < 3; ++x) N_[3 * std::size_t(a) + x] = l > 0 ? float(n[x] / l) : N_[3 * std::size_t(a) + x];
     }
-    P_[3 * std::size_t(a)] = float(c.p.x);
-    P_[3 * std::size_t(a) + 1] = float(c.p.y);
-    P_[3 * std::size_t(a) + 2] = float(c.p.z);
+    P_[3 * std::size_t(a)] = Real(c.p.x);
+    P_[3 * std::size_t(a) + 1] = Real(c.p.y);
+    P_[3 * std::size_t(a) + 2] = Real(c.p.z);
     // b's triangles now belong to a.
     next_[tail_[a]] = b;
     tail_[a] = tail_[b];
@@ -605,7 +608,7 @@ class Cleaner {
     extra_head_[v] = std::uint32_t(extra_.size() - 1);
   }
 
-  float* P_;
+  Real* P_;
   float* N_;
   std::size_t nv_;
   std::uint32_t* T_;
@@ -620,16 +623,16 @@ class Cleaner {
 
 }  // namespace detail
 
-// Cleans the mesh in place: positions and normals (3 floats per vertex;
-// normals may be empty), triangles (3 indices each). Vectors of any
-// allocator; they are shrunk to the new counts.
-template <class FloatVec, class IndexVec>
-CleanupResult cleanup_mesh(FloatVec& positions, FloatVec& normals, IndexVec& triangles) {
+// Cleans the mesh in place: positions (3 floats or doubles per vertex) and
+// normals (3 floats per vertex; may be empty), triangles (3 indices each).
+// Vectors of any allocator; they are shrunk to the new counts.
+template <class PosVec, class NormalVec, class IndexVec>
+CleanupResult cleanup_mesh(PosVec& positions, NormalVec& normals, IndexVec& triangles) {
   CleanupResult r;
   const std::size_t nv = positions.size() / 3, nt = triangles.size() / 3;
   if (nt == 0) return r;
   const bool has_normals = !normals.empty() && normals.size() == positions.size();
-  detail::Cleaner c(positions.data(), has_normals ? normals.data() : nullptr, nv, triangles.data(), nt);
+  detail::Cleaner<typename PosVec::value_type> c(positions.data(), has_normals ? normals.data() : nullptr, nv, triangles.data(), nt);
   // Passes until nothing more can be repaired; then again with a looser
   // limit on the normals' turn for what is left (folds stay excluded).
   // (A scan costs about 40 ns per triangle: none is repeated needlessly.)

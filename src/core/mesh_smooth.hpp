@@ -62,7 +62,8 @@ inline void vertex_neighbours(const std::uint32_t* tri, std::size_t nt, std::siz
 
 // Area-weighted vertex normals from the faces (counter-clockwise triangles
 // give outward normals); a vertex without area keeps (0, 0, 0).
-inline void face_normals_to_vertices(const float* positions, std::size_t nv, const std::uint32_t* tri,
+template <class Real>  // float or double positions
+inline void face_normals_to_vertices(const Real* positions, std::size_t nv, const std::uint32_t* tri,
                                      std::size_t nt, float* normals) {
   std::vector<double> acc(3 * nv, 0.0);
   for (std::size_t t = 0; t < nt; ++t) {
@@ -90,7 +91,8 @@ inline void face_normals_to_vertices(const float* positions, std::size_t nv, con
 constexpr double kSmoothRestoreVolume = 0.01;
 
 // x: smoothed positions (double), before: the positions before smoothing.
-inline void restore_small_components(const float* before, std::vector<double>& x, const std::uint32_t* tri,
+template <class Real>
+inline void restore_small_components(const Real* before, std::vector<double>& x, const std::uint32_t* tri,
                                      std::size_t nt, std::size_t nv) {
   detail::UnionFind uf(nv);
   for (std::size_t t = 0; t < nt; ++t) {
@@ -138,10 +140,11 @@ struct SmoothResult {
   double volume_before = 0, volume_after = 0;  // enclosed volumes (see check_mesh)
 };
 
-// Smooths positions in place (iterations of lambda|mu); recomputes normals
-// from the faces when normals is not empty.
-template <class FloatVec, class IndexVec>
-SmoothResult smooth_mesh(FloatVec& positions, FloatVec& normals, const IndexVec& triangles, int iterations,
+// Smooths positions in place (iterations of lambda|mu, in double, rounded to
+// the positions' scalar: float, or double with nbmc_params.double_positions);
+// recomputes normals (float) from the faces when normals is not empty.
+template <class PosVec, class NormalVec, class IndexVec>
+SmoothResult smooth_mesh(PosVec& positions, NormalVec& normals, const IndexVec& triangles, int iterations,
                          double lambda = kTaubinLambda, double mu = kTaubinMu) {
   SmoothResult r;
   const std::size_t nv = positions.size() / 3, nt = triangles.size() / 3;
@@ -176,7 +179,8 @@ SmoothResult smooth_mesh(FloatVec& positions, FloatVec& normals, const IndexVec&
       step(mu);
     }
     restore_small_components(positions.data(), x, triangles.data(), nt, nv);
-    for (std::size_t i = 0; i < x.size(); ++i) positions[i] = float(x[i]);
+    using Real = typename PosVec::value_type;
+    for (std::size_t i = 0; i < x.size(); ++i) positions[i] = Real(x[i]);
   }
   r.volume_after = volume();
   if (!normals.empty() && normals.size() == positions.size())

@@ -75,6 +75,7 @@ struct Params {
   double color_threshold = 0.75;
   int neighbour_threshold = 25;
   bool normals = true;
+  bool double_positions = false;  // mesh positions in double (HostMesh::positions64)
   bool use_bbox = false;
   double bbox_min[3] = {0, 0, 0}, bbox_max[3] = {0, 0, 0};
 };

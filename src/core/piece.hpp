@@ -13,6 +13,8 @@ namespace nbmc {
 
 struct Piece {
   std::vector<float, NoInitAllocator<float>> positions, normals;  // 3 per vertex (normals may be empty)
+  // Instead of positions, with nbmc_params.double_positions (positions empty).
+  std::vector<double, NoInitAllocator<double>> positions64;
   std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>> triangles;  // 3 per triangle, indices into this piece
   // Per vertex: band_order_key() of the grid vertex owning its edge, and the
   // edge's axis (0, 1, 2). Ascending in (key, axis): the order in which the

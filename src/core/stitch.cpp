@@ -53,10 +53,11 @@ std::vector<std::uint64_t> splitters(std::size_t pieces, int n, const GetKeys& k
 StitchResult stitch(const std::vector<const Piece*>& pieces,
                     const std::function<StitchTarget(std::uint64_t, std::uint64_t)>& out) {
   const std::size_t k = pieces.size();
-  bool normals = false;
+  bool normals = false, f64 = false;
   std::uint64_t vtotal = 0, ttotal = 0;
   for (const Piece* p : pieces) {
     normals = normals || !p->normals.empty();
+    f64 = f64 || !p->positions64.empty();
     vtotal += p->vertex_count();
     ttotal += p->triangle_count();
   }
@@ -107,7 +108,8 @@ StitchResult stitch(const std::vector<const Piece*>& pieces,
         const auto [sp, sv] = src.back();
         const Piece& s = *pieces[sp];
         const bool same =
-            std::memcmp(&s.positions[3 * std::size_t(sv)], &p.positions[3 * v], 3 * sizeof(float)) == 0 &&
+            (f64 ? std::memcmp(&s.positions64[3 * std::size_t(sv)], &p.positions64[3 * v], 3 * sizeof(double)) == 0
+                 : std::memcmp(&s.positions[3 * std::size_t(sv)], &p.positions[3 * v], 3 * sizeof(float)) == 0) &&
             (!normals || std::memcmp(&s.normals[3 * std::size_t(sv)], &p.normals[3 * v], 3 * sizeof(float)) == 0);
         if (!same) {
           std::ostringstream m;
@@ -139,6 +141,8 @@ StitchResult stitch(const std::vector<const Piece*>& pieces,
   if (r.vertices > std::numeric_limits<std::uint32_t>::max())
     throw Error(NBMC_ERROR_DOMAIN_TOO_LARGE, "the stitched mesh has more vertices than 32-bit indices can address");
   const StitchTarget tg = out(r.vertices, r.triangles);
+  if (r.vertices && (f64 ? !tg.positions64 : !tg.positions))
+    throw Error(NBMC_ERROR_INTERNAL, "stitching: no target for the pieces' positions");
   // Final indices and the vertex arrays, range by range.
   on_threads(std::size_t(nv_ranges), [&](std::size_t ti) {
     const int t = int(ti);
@@ -150,7 +154,8 @@ StitchResult stitch(const std::vector<const Piece*>& pieces,
     for (std::size_t i = 0; i < src.size(); ++i) {
       const Piece& p = *pieces[src[i].first];
       const std::size_t s = src[i].second, v = std::size_t(base) + i;
-      std::memcpy(tg.positions + 3 * v, &p.positions[3 * s], 3 * sizeof(float));
+      if (f64) std::memcpy(tg.positions64 + 3 * v, &p.positions64[3 * s], 3 * sizeof(double));
+      else std::memcpy(tg.positions + 3 * v, &p.positions[3 * s], 3 * sizeof(float));
       if (normals && tg.normals) std::memcpy(tg.normals + 3 * v, &p.normals[3 * s], 3 * sizeof(float));
       if (tg.vertex_keys) tg.vertex_keys[v] = p.vertex_keys[s];
       if (tg.vertex_axes) tg.vertex_axes[v] = p.vertex_axes[s];

@@ -21,9 +21,11 @@ struct StitchResult {
 
 // Writes the merged mesh through `out`, which is called once with the final
 // counts and returns the arrays to fill (normals may be null when the pieces
-// have none). Throws Error(NBMC_ERROR_INTERNAL) if a shared vertex differs.
+// have none; pieces carry either float or double positions, all the same
+// kind). Throws Error(NBMC_ERROR_INTERNAL) if a shared vertex differs.
 struct StitchTarget {
-  float* positions = nullptr;
+  float* positions = nullptr;     // the pieces' float positions go here,
+  double* positions64 = nullptr;  // their double positions (Piece::positions64) here
   float* normals = nullptr;
   std::uint32_t* triangles = nullptr;
   // Optional: the keys of the merged mesh, which is then a piece itself

@@ -122,9 +122,14 @@ std::vector<Attribute> interpolate_attributes(const std::vector<double>& xyz, co
   return interpolate_attributes(xyz.data(), xyz.size() / 3, attributes, names, vertices, vertex_count, radius);
 }
 
-std::vector<Attribute> interpolate_attributes(const double* xyz, std::size_t n, const std::vector<Attribute>& attributes,
-                                              const std::vector<std::string>& names, const float* vertices,
-                                              std::uint64_t vertex_count, double radius, int threads) {
+namespace {
+
+// Real: the vertex positions' scalar (float, or double for meshes made with
+// double_positions).
+template <class Real>
+std::vector<Attribute> interpolate_at(const double* xyz, std::size_t n, const std::vector<Attribute>& attributes,
+                                      const std::vector<std::string>& names, const Real* vertices,
+                                      std::uint64_t vertex_count, double radius, int threads) {
   const std::string who = "attribute interpolation";
   if (!(radius > 0) || !std::isfinite(radius)) detail::fail_arg(who, "the radius must be positive and finite");
   if (n > 0 && !xyz) detail::fail_arg(who, "no particle positions");
@@ -259,6 +264,20 @@ std::vector<Attribute> interpolate_attributes(const double* xyz, std::size_t n, 
     }
   }
   return out;
+}
+
+}  // namespace
+
+std::vector<Attribute> interpolate_attributes(const double* xyz, std::size_t n, const std::vector<Attribute>& attributes,
+                                              const std::vector<std::string>& names, const float* vertices,
+                                              std::uint64_t vertex_count, double radius, int threads) {
+  return interpolate_at(xyz, n, attributes, names, vertices, vertex_count, radius, threads);
+}
+
+std::vector<Attribute> interpolate_attributes(const double* xyz, std::size_t n, const std::vector<Attribute>& attributes,
+                                              const std::vector<std::string>& names, const double* vertices,
+                                              std::uint64_t vertex_count, double radius, int threads) {
+  return interpolate_at(xyz, n, attributes, names, vertices, vertex_count, radius, threads);
 }
 
 } // namespace nbmc::io

@@ -56,6 +56,11 @@ std::vector<Attribute> interpolate_attributes(const double* xyz, std::size_t par
                                               const std::vector<Attribute>& attributes,
                                               const std::vector<std::string>& names, const float* vertices,
                                               std::uint64_t vertex_count, double radius, int threads = 0);
+// The same at double-precision vertices (meshes made with double_positions).
+std::vector<Attribute> interpolate_attributes(const double* xyz, std::size_t particle_count,
+                                              const std::vector<Attribute>& attributes,
+                                              const std::vector<std::string>& names, const double* vertices,
+                                              std::uint64_t vertex_count, double radius, int threads = 0);
 
 } // namespace nbmc::io
 

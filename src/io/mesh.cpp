@@ -151,7 +151,7 @@ private:
 };
 
 void check(const std::string& path, const MeshView& m) {
-  if (m.vertex_count > 0 && !m.positions) fail(path, "mesh has vertices but no positions");
+  if (m.vertex_count > 0 && !m.positions && !m.positions64) fail(path, "mesh has vertices but no positions");
   if (m.attribute_count > 0 && !m.attributes) fail(path, "mesh has attributes but no attribute array");
   for (std::size_t a = 0; a < m.attribute_count; ++a) {
     const Attribute& at = m.attributes[a];
@@ -180,18 +180,22 @@ std::string safe_name(const std::string& s) {
   return out.empty() ? std::string("attribute") : out;
 }
 
-void put_floats(char* dst, const float* src, std::size_t n, bool swap) {
-  std::memcpy(dst, src, 4 * n);
+// n floats or doubles (T) to dst, byte-swapped if swap.
+template <class T>
+void put_floats(char* dst, const T* src, std::size_t n, bool swap) {
+  constexpr std::size_t s = sizeof(T);
+  std::memcpy(dst, src, s * n);
   if (swap)
-    for (std::size_t i = 0; i < n; ++i) std::reverse(dst + 4 * i, dst + 4 * i + 4);
+    for (std::size_t i = 0; i < n; ++i) std::reverse(dst + s * i, dst + s * i + s);
 }
 
-// Appends n floats to out, byte-swapped if swap, in bounded chunks.
-void put_float_array(Output& out, const float* src, std::size_t n, bool swap) {
+// Appends n floats or doubles to out, byte-swapped if swap, in bounded chunks.
+template <class T>
+void put_float_array(Output& out, const T* src, std::size_t n, bool swap) {
   for (std::size_t off = 0; off < n; off += 64) {
     const std::size_t k = std::min<std::size_t>(64, n - off);
-    put_floats(out.room(4 * k), src + off, k, swap);
-    out.advance(4 * k);
+    put_floats(out.room(sizeof(T) * k), src + off, k, swap);
+    out.advance(sizeof(T) * k);
   }
 }
 
@@ -199,7 +203,9 @@ void write_ply(Output& out, const MeshView& m) {
   const bool normals = m.normals != nullptr;
   std::string h = "ply\nformat binary_little_endian 1.0\ncomment written by nbmc\n";
   h += "element vertex " + std::to_string(m.vertex_count) + "\n";
-  h += "property float x\nproperty float y\nproperty float z\n";
+  const bool f64 = m.positions64 != nullptr;  // double positions (nbmc_params.double_positions)
+  h += f64 ? "property double x\nproperty double y\nproperty double z\n"
+           : "property float x\nproperty float y\nproperty float z\n";
   if (normals) h += "property float nx\nproperty float ny\nproperty float nz\n";
   std::size_t extra = 0;
   std::vector<std::string> taken = {"x", "y", "z", "nx", "ny", "nz"};
@@ -230,10 +236,12 @@ void write_ply(Output& out, const MeshView& m) {
   const bool swap = !host_is_little_endian();
   std::vector<float> values(extra);
   for (std::uint64_t i = 0; i < m.vertex_count; ++i) {
-    char* p = out.room(24);
-    put_floats(p, m.positions + 3 * i, 3, swap);
-    if (normals) put_floats(p + 12, m.normals + 3 * i, 3, swap);
-    out.advance(normals ? 24 : 12);
+    const std::size_t ps = f64 ? 24 : 12;  // bytes of a position
+    char* p = out.room(36);
+    if (f64) put_floats(p, m.positions64 + 3 * i, 3, swap);
+    else put_floats(p, m.positions + 3 * i, 3, swap);
+    if (normals) put_floats(p + ps, m.normals + 3 * i, 3, swap);
+    out.advance(normals ? ps + 12 : ps);
     if (extra) {
       std::size_t k = 0;
       for (std::size_t a = 0; a < m.attribute_count; ++a) {
@@ -254,8 +262,10 @@ void write_ply(Output& out, const MeshView& m) {
   }
 }
 
-// Appends " v" for a float in the shortest form that reads back exactly.
-inline char* put_float(char* p, char* end, float v) {
+// Appends " v" for a float or double in the shortest form that reads back
+// exactly.
+template <class T>
+inline char* put_float(char* p, char* end, T v) {
   *p++ = ' ';
   return std::to_chars(p, end, v).ptr;
 }
@@ -266,7 +276,7 @@ void write_obj(Output& out, const MeshView& m) {
   const bool normals = m.normals != nullptr;
   out.put("# written by nbmc: " + std::to_string(m.vertex_count) + " vertices, " +
           std::to_string(m.triangle_count) + " triangles\n");
-  const auto put_vectors = [&](const char* tag, const float* v) {
+  const auto put_vectors = [&](const char* tag, const auto* v) {
     for (std::uint64_t i = 0; i < m.vertex_count; ++i) {
       char* const start = out.room(Output::kReserve);
       char* const end = start + Output::kReserve;
@@ -278,7 +288,8 @@ void write_obj(Output& out, const MeshView& m) {
       out.advance(static_cast<std::size_t>(p - start));
     }
   };
-  put_vectors("v", m.positions);
+  if (m.positions64) put_vectors("v", m.positions64);
+  else put_vectors("v", m.positions);
   if (normals) put_vectors("vn", m.normals);
   for (std::uint64_t i = 0; i < m.triangle_count; ++i) {
     char* const start = out.room(Output::kReserve);
@@ -350,16 +361,22 @@ Mesh parse_ply(ByteReader& in) {
         const std::uint64_t bound = min_bytes ? (in.remaining() + 1) / min_bytes : el.count;
         const std::size_t reserve = static_cast<std::size_t>(std::min(el.count, bound));
         mesh.positions.reserve(3 * reserve);
+        mesh.positions64.reserve(3 * reserve);
         if (have_normals) mesh.normals.reserve(3 * reserve);
         for (; i < el.count; ++i) {
+          double x[3] = {0, 0, 0};
           float v[6] = {0, 0, 0, 0, 0, 0};
           for (std::size_t k = 0; k < el.properties.size(); ++k) {
-            if (role[k] >= 0)
-              v[role[k]] = static_cast<float>(body.read_real(el.properties[k].type));
-            else
+            if (role[k] >= 0) {
+              const double r = body.read_real(el.properties[k].type);
+              v[role[k]] = static_cast<float>(r);
+              if (role[k] < 3) x[role[k]] = r;
+            } else {
               body.skip(el.properties[k]);
+            }
           }
           mesh.positions.insert(mesh.positions.end(), v, v + 3);
+          mesh.positions64.insert(mesh.positions64.end(), x, x + 3);
           if (have_normals) mesh.normals.insert(mesh.normals.end(), v + 3, v + 6);
         }
         done_v = true;
@@ -405,8 +422,9 @@ Mesh parse_ply(ByteReader& in) {
 }
 
 // ------------------------------------------------------------ legacy VTK
-// Appends n floats in big-endian order (legacy VTK binary data).
-void put_floats_be(Output& out, const float* src, std::size_t n) {
+// Appends n floats or doubles in big-endian order (legacy VTK binary data).
+template <class T>
+void put_floats_be(Output& out, const T* src, std::size_t n) {
   put_float_array(out, src, n, host_is_little_endian());
 }
 
@@ -422,9 +440,10 @@ void write_vtk(Output& out, const std::string& path, const MeshView& m) {
   if (m.triangle_count > (std::uint64_t(INT32_MAX) / 4) || m.vertex_count > std::uint64_t(INT32_MAX))
     fail(path, "mesh too large for legacy VTK (32-bit cell lists); write .vtu instead");
   std::string h = "# vtk DataFile Version 4.2\nwritten by nbmc\nBINARY\nDATASET POLYDATA\n";
-  h += "POINTS " + std::to_string(m.vertex_count) + " float\n";
+  h += "POINTS " + std::to_string(m.vertex_count) + (m.positions64 ? " double\n" : " float\n");
   out.put(h);
-  put_floats_be(out, m.positions, static_cast<std::size_t>(3 * m.vertex_count));
+  if (m.positions64) put_floats_be(out, m.positions64, static_cast<std::size_t>(3 * m.vertex_count));
+  else put_floats_be(out, m.positions, static_cast<std::size_t>(3 * m.vertex_count));
   out.put("\nPOLYGONS " + std::to_string(m.triangle_count) + " " + std::to_string(4 * m.triangle_count) + "\n");
   for (std::uint64_t i = 0; i < m.triangle_count; ++i) {
     char* p = out.room(16);
@@ -481,7 +500,8 @@ void write_vtk_xml(Output& out, const MeshView& m, bool polydata) {
   // Points come after the point data in the XML, but their block is first
   // in the appended section: the offsets follow the block order.
   std::string points = "      <Points>\n";
-  points += array("Points", "Float32", 3, 12 * nv);
+  const std::uint64_t point_bytes = (m.positions64 ? 24 : 12) * nv;
+  points += array("Points", m.positions64 ? "Float64" : "Float32", 3, point_bytes);
   points += "      </Points>\n";
   std::string pdata;
   if (m.normals || m.attribute_count) {
@@ -514,8 +534,9 @@ void write_vtk_xml(Output& out, const MeshView& m, bool polydata) {
 
   const bool swap = !host_is_little_endian();
   const auto floats = [&](const float* src, std::size_t n) { put_float_array(out, src, n, swap); };
-  put_u64_le(out, 12 * nv);
-  floats(m.positions, static_cast<std::size_t>(3 * nv));
+  put_u64_le(out, point_bytes);
+  if (m.positions64) put_float_array(out, m.positions64, static_cast<std::size_t>(3 * nv), swap);
+  else floats(m.positions, static_cast<std::size_t>(3 * nv));
   if (m.normals) {
     put_u64_le(out, 12 * nv);
     floats(m.normals, static_cast<std::size_t>(3 * nv));
@@ -746,6 +767,13 @@ void write_mesh(const std::string& path, const MeshView& m, const std::string& f
   const std::string f = mesh_format(path, format);
   check(path, m);
   if (f == "h5") return write_h5(path, m, cancelled);
+  // glTF has float positions only: double positions are rounded.
+  MeshView rounded_view = m;
+  std::vector<float> rounded;
+  if (f == "glb" && !m.positions && m.positions64) {
+    rounded.assign(m.positions64, m.positions64 + 3 * m.vertex_count);
+    rounded_view.positions = rounded.data();
+  }
   AtomicFile file(path);
   Output out(file, path, cancelled);
   if (f == "ply")
@@ -757,7 +785,7 @@ void write_mesh(const std::string& path, const MeshView& m, const std::string& f
   else if (f == "vtu" || f == "vtp")
     write_vtk_xml(out, m, f == "vtp");
   else
-    write_glb(out, path, m);
+    write_glb(out, path, rounded_view);
   out.flush();
   file.commit();
 }
@@ -766,6 +794,7 @@ namespace {
 Mesh mesh_from(Particles&& p, std::vector<std::uint32_t>&& tris) {
   Mesh m;
   m.positions.assign(p.xyz.begin(), p.xyz.end());
+  m.positions64 = p.xyz;
   m.triangles = std::move(tris);
   for (Attribute& a : p.attributes) {
     if (a.name == "Normals" && a.components == 3 && m.normals.empty())

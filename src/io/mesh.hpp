@@ -25,6 +25,11 @@ namespace nbmc::io {
 // the matching count is 0; normals may be null (then none are written).
 struct MeshView {
   const float* positions = nullptr;      // 3 * vertex_count
+  // Double-precision positions (nbmc_params.double_positions), 3 *
+  // vertex_count: when set, PLY (double x y z), OBJ (shortest exact
+  // decimals), VTK (POINTS double), VTU/VTP (Float64) and HDF5 (float64) write
+  // these instead of positions; glTF (float only) rounds them.
+  const double* positions64 = nullptr;
   const float* normals = nullptr;        // 3 * vertex_count, or null
   const std::uint32_t* triangles = nullptr; // 3 * triangle_count, 0-based
   std::uint64_t vertex_count = 0;
@@ -40,6 +45,9 @@ struct MeshView {
 // An owning mesh (what read_mesh_ply returns).
 struct Mesh {
   std::vector<float> positions;
+  // The positions as the file holds them, in double (exact for float and
+  // double files): PLY, VTK, VTU and VTP readers.
+  std::vector<double> positions64;
   std::vector<float> normals; // empty when the file has none
   std::vector<std::uint32_t> triangles;
   std::vector<Attribute> attributes; // per vertex (VTK and VTU readers)
@@ -50,7 +58,8 @@ struct Mesh {
 
 // Writes m to path. format, case-insensitive, or "" to take it from the
 // extension of path:
-//  - "ply": binary little-endian, vertex x y z [nx ny nz] [attributes] float,
+//  - "ply": binary little-endian, vertex x y z [nx ny nz] [attributes] float
+//    (x y z double with positions64),
 //    face "list uchar uint vertex_indices";
 //  - "obj": v, vn, f a//a b//b c//c (1-based); no attributes;
 //  - "vtk": legacy VTK 4.2 BINARY POLYDATA (big-endian): POINTS float,

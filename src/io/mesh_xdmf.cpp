@@ -111,7 +111,10 @@ void write_group(hid_t g, const std::string& name, const MeshView& m, const std:
   const auto poll = [&] {
     if (cancelled && cancelled()) throw Cancelled(name + ": cancelled while writing (nothing written)");
   };
-  put_dataset(g, "positions", name, H5T_NATIVE_FLOAT, m.positions, m.vertex_count, 3);
+  // Double positions (nbmc_params.double_positions) as float64: the XDMF
+  // descriptor takes the precision from the dataset (Precision="8").
+  if (m.positions64) put_dataset(g, "positions", name, H5T_NATIVE_DOUBLE, m.positions64, m.vertex_count, 3);
+  else put_dataset(g, "positions", name, H5T_NATIVE_FLOAT, m.positions, m.vertex_count, 3);
   poll();
   put_dataset(g, "triangles", name, H5T_NATIVE_UINT32, m.triangles, m.triangle_count, 3);
   poll();

@@ -5,7 +5,7 @@
 //
 // Layout of one mesh in a group G ("/" for a single mesh, "/frame_<n>" for
 // the frames of a sequence):
-//   G/positions           float32 [V][3]
+//   G/positions           float32 [V][3]      (float64 with MeshView::positions64)
 //   G/triangles           uint32  [T][3], 0-based
 //   G/normals             float32 [V][3]      (when the mesh has normals)
 //   G/attributes/<name>   float64 [V] or [V][3]

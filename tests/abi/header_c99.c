@@ -104,6 +104,7 @@ int main(void) {
   nbmc_mesh_destroy(NULL);
   CHECK(nbmc_mesh_vertex_count(NULL) == 0 && nbmc_mesh_triangle_count(NULL) == 0);
   CHECK(nbmc_mesh_positions(NULL) == NULL && nbmc_mesh_normals(NULL) == NULL && nbmc_mesh_triangles(NULL) == NULL);
+  CHECK(nbmc_mesh_positions_f64(NULL) == NULL);
   CHECK(nbmc_context_backend(NULL, &backend) == NBMC_ERROR_INVALID_ARGUMENT);
   CHECK(nbmc_context_set_particles_f32(NULL, one, 1, 0) == NBMC_ERROR_INVALID_ARGUMENT);
   CHECK(nbmc_context_set_particles_f64(NULL, NULL, 1, 0) == NBMC_ERROR_INVALID_ARGUMENT);

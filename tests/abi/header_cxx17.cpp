@@ -31,6 +31,8 @@ static_assert(std::is_same_v<decltype(&nbmc_mesh_memory), int32_t (*)(const nbmc
 static_assert(std::is_same_v<decltype(&nbmc_mesh_copy_to_host),
                              int32_t (*)(const nbmc_mesh*, float*, float*, uint32_t*)>);
 static_assert(NBMC_MEMORY_HOST == 0 && NBMC_MEMORY_DEVICE == 1);
+static_assert(std::is_same_v<decltype(&nbmc_mesh_positions_f64), const double* (*)(const nbmc_mesh*)>);
+static_assert(std::is_same_v<decltype(nbmc_params::double_positions), int32_t>);
 static_assert(std::is_same_v<decltype(&nbmc_context_set_attribute_f32),
                              int32_t (*)(nbmc_context*, const char*, const float*, uint32_t, uint64_t)>);
 static_assert(std::is_same_v<decltype(&nbmc_context_set_attribute_f64),

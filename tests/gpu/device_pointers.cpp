@@ -13,6 +13,7 @@
 #include <cuda_runtime.h>
 
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
 #include <cstring>
 #include <fstream>
@@ -162,6 +163,70 @@ void errors() {
   check(s == NBMC_ERROR_BACKEND_UNAVAILABLE, "device mesh on OpenMP: " + said(cpu));
   cudaFree(d);
 }
+// nbmc_params.double_positions on CUDA: marching cubes writes doubles on the
+// device (copied to a host mesh); far from the origin (1e7) the CUDA mesh's
+// doubles equal OpenMP's bit for bit, from host and from device particles;
+// a device mesh with double positions is refused (float arrays only).
+struct F64Mesh {
+  std::vector<double> positions;
+  std::vector<float> normals;
+  std::vector<std::uint32_t> triangles;
+  bool operator==(const F64Mesh& o) const {
+    return positions.size() == o.positions.size() &&
+           std::memcmp(positions.data(), o.positions.data(), positions.size() * sizeof(double)) == 0 &&
+           normals == o.normals && triangles == o.triangles;
+  }
+};
+void double_positions() {
+  Points pts = sphere(0, 0, 0, 0.1, 0.01);
+  for (double& x : pts) x += 1e7;
+  const std::size_t n = pts.size() / 3;
+  nbmc_params prm = params(0.01);
+  prm.double_positions = 1;
+  auto take = [](nbmc_mesh* m) {
+    F64Mesh h;
+    const std::size_t nv = nbmc_mesh_vertex_count(m), nt = nbmc_mesh_triangle_count(m);
+    if (const double* p = nbmc_mesh_positions_f64(m)) h.positions.assign(p, p + 3 * nv);
+    if (const float* q = nbmc_mesh_normals(m)) h.normals.assign(q, q + 3 * nv);
+    if (const std::uint32_t* t = nbmc_mesh_triangles(m)) h.triangles.assign(t, t + 3 * nt);
+    nbmc_mesh_destroy(m);
+    return h;
+  };
+  Ctx cpu(NBMC_BACKEND_OPENMP), gpu(NBMC_BACKEND_CUDA);
+  nbmc_mesh* a = nullptr;
+  nbmc_mesh* b = nullptr;
+  int32_t s = nbmc_context_set_particles_f64(cpu.c, pts.data(), n, 0);
+  if (s == NBMC_OK) s = nbmc_context_reconstruct(cpu.c, &prm, &a);
+  int32_t t = nbmc_context_set_particles_f64(gpu.c, pts.data(), n, 0);
+  if (t == NBMC_OK) t = nbmc_context_reconstruct(gpu.c, &prm, &b);
+  check(s == NBMC_OK && t == NBMC_OK, std::string("double_positions on OpenMP and CUDA: ") +
+                                          nbmc_context_last_error(cpu.c) + nbmc_context_last_error(gpu.c));
+  if (s != NBMC_OK || t != NBMC_OK) return;
+  const F64Mesh ref = take(a), cuda = take(b);
+  check(!ref.positions.empty() && cuda == ref,
+        "double_positions at 1e7: the CUDA mesh's doubles equal OpenMP's bit for bit (" +
+            std::to_string(ref.positions.size() / 3) + " vertices)");
+  double* d = nullptr;
+  cudaMalloc(&d, pts.size() * sizeof(double));
+  cudaMemcpy(d, pts.data(), pts.size() * sizeof(double), cudaMemcpyHostToDevice);
+  nbmc_mesh* c = nullptr;
+  t = nbmc_context_set_particles_device_f64(gpu.c, d, n, 0);
+  if (t == NBMC_OK) t = nbmc_context_reconstruct(gpu.c, &prm, &c);
+  check(t == NBMC_OK && take(c) == ref, "double_positions from device particles: the same doubles");
+  // Subdomains on CUDA stitch the doubles too.
+  nbmc_context_set_subdomains(gpu.c, 2, 1, 1);
+  nbmc_mesh* e = nullptr;
+  t = nbmc_context_reconstruct(gpu.c, &prm, &e);
+  check(t == NBMC_OK && take(e) == ref, "double_positions with 2x1x1 subdomains on CUDA: the same doubles");
+  nbmc_context_set_subdomains(gpu.c, 1, 1, 1);
+  nbmc_mesh* f = nullptr;
+  t = nbmc_context_set_mesh_memory(gpu.c, NBMC_MEMORY_DEVICE);
+  if (t == NBMC_OK) t = nbmc_context_reconstruct(gpu.c, &prm, &f);
+  check(t == NBMC_ERROR_INVALID_PARAMETER && !f,
+        std::string("double_positions with NBMC_MEMORY_DEVICE is refused: ") + nbmc_context_last_error(gpu.c));
+  cudaFree(d);
+}
+
 // Host uploads on a CUDA context reuse one page-locked buffer while the size
 // stays within a factor 2: a sequence of uploads on one context gives the
 // meshes fresh contexts give.
@@ -195,6 +260,7 @@ int main(int argc, char** argv) {
   }
   errors();
   reuse();
+  double_positions();
   run("sphere", sphere(0, 0, 0, 1.0, 0.1), 0.1, 0.5);
   const double lo[3] = {-0.8, -0.5, -0.4}, hi[3] = {0.8, 0.5, 0.4};
   run("box", box(lo, hi, 0.1), 0.1, 1.0);

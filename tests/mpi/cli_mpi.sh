@@ -2,7 +2,7 @@
 # SPDX-License-Identifier: MIT
 # The nbmc command under mpirun: one frame split over 3 ranks gives the same
 # file as one process; --pieces writes one piece per rank and a ParaView
-# index; a sequence is shared by 2 ranks, a failed frame is reported and the
+# index (also with --double-positions); a sequence is shared by 2 ranks, a failed frame is reported and the
 # rest written, --resume skips them; a bad input fails on every rank with no
 # output left. Usage: cli_mpi.sh NBMC MPIEXEC [MPIEXEC FLAGS...]
 set -u
@@ -22,6 +22,14 @@ check "gathered mesh equals one process's, byte for byte" "cmp -s whole.ply mpi.
 check "report lists 3 ranks" "grep -q '\"mpi\": {\"ranks\": 3' mpi.json"
 "${MPIRUN[@]}" -n 3 "$NBMC" reconstruct "$FRAME" --particle-radius 0.025 -o split.ply --subdomains 3x2x2 -q
 check "--subdomains under MPI: the same file" "cmp -s whole.ply split.ply"
+
+"$NBMC" reconstruct "$FRAME" --particle-radius 0.025 -o whole64.ply --double-positions -q
+"${MPIRUN[@]}" -n 3 "$NBMC" reconstruct "$FRAME" --particle-radius 0.025 -o mpi64.ply --double-positions -q
+check "--double-positions: gathered mesh equals one process's, byte for byte (doubles)" \
+  "cmp -s whole64.ply mpi64.ply && grep -aq 'property double x' mpi64.ply"
+"${MPIRUN[@]}" -n 2 "$NBMC" reconstruct "$FRAME" --particle-radius 0.025 -o surf64.pvtp --pieces --double-positions -q
+check "--double-positions --pieces: Float64 points in the pieces and the index" \
+  "grep -aq 'type=\"Float64\" Name=\"Points\"' surf64_0.vtp && grep -q 'PDataArray type=\"Float64\" NumberOfComponents=\"3\"' surf64.pvtp"
 
 H5=$SRC/tests/data/h5part_steps.h5part
 "$NBMC" reconstruct "$H5" --spacing 0.1 -o h5-whole.ply -q

@@ -37,6 +37,7 @@ int g_rank = 0, g_size = 1, g_failures = 0;
 
 struct Mesh {
   std::vector<float> pos, nrm;
+  std::vector<double> pos64;  // double_positions
   std::vector<std::uint32_t> tri;
   std::vector<std::uint64_t> gid;
   std::uint64_t global_count = 0;
@@ -46,6 +47,7 @@ Mesh take(nbmc_mesh* m) {
   Mesh out;
   const std::size_t nv = nbmc_mesh_vertex_count(m), nt = nbmc_mesh_triangle_count(m);
   if (nv) out.pos.assign(nbmc_mesh_positions(m), nbmc_mesh_positions(m) + 3 * nv);
+  if (nv && nbmc_mesh_positions_f64(m)) out.pos64.assign(nbmc_mesh_positions_f64(m), nbmc_mesh_positions_f64(m) + 3 * nv);
   if (nv && nbmc_mesh_normals(m)) out.nrm.assign(nbmc_mesh_normals(m), nbmc_mesh_normals(m) + 3 * nv);
   if (nt) out.tri.assign(nbmc_mesh_triangles(m), nbmc_mesh_triangles(m) + 3 * nt);
   if (const std::uint64_t* g = nbmc_mesh_global_vertex_ids(m)) out.gid.assign(g, g + nv);
@@ -245,6 +247,69 @@ void check_case(const char* name, const std::vector<double>& all, const nbmc_par
   if (g_rank == 0) std::printf("ok  %-10s %-7s (%zu particles)\n", name, rule.c_str(), all.size() / 3);
 }
 
+// double_positions far from the origin (1e7 added to every coordinate): the
+// gathered mesh has the whole frame's doubles bit for bit; the pieces carry
+// doubles, one position per global id, the raw whole mesh's.
+void check_f64(const std::vector<double>& near, nbmc_params prm, const std::string& rule) {
+  std::vector<double> all = near;
+  for (double& x : all) x += 1e7;
+  prm.double_positions = 1;
+  const Mesh ref = whole(all, prm);
+  CHECK(!ref.pos64.empty() && ref.pos64.size() == ref.pos.size(), "f64: the whole mesh has no doubles");
+  const std::vector<double> mine = share(all, rule);
+  {
+    nbmc_context* ctx = context(true);
+    nbmc_context_set_particles_f64(ctx, mine.empty() ? nullptr : mine.data(), mine.size() / 3, 0);
+    nbmc_mesh* m = nullptr;
+    const int32_t st = nbmc_mpi_reconstruct(ctx, &prm, NBMC_MPI_GATHER, 0, &m);
+    CHECK(st == NBMC_OK, "f64 %s gather: %s", rule.c_str(), nbmc_context_last_error(ctx));
+    if (st == NBMC_OK) {
+      const Mesh got = take(m);
+      if (g_rank == 0)
+        CHECK(got.pos64 == ref.pos64 && got.tri == ref.tri && got.nrm == ref.nrm && got.pos == ref.pos,
+              "f64 %s gather: mesh differs (%zu/%zu vertices)", rule.c_str(), got.pos64.size() / 3,
+              ref.pos64.size() / 3);
+    }
+    nbmc_context_destroy(ctx);
+  }
+  {
+    nbmc_context* ctx = context(true);
+    nbmc_context_set_particles_f64(ctx, mine.empty() ? nullptr : mine.data(), mine.size() / 3, 0);
+    nbmc_mesh* m = nullptr;
+    const int32_t st = nbmc_mpi_reconstruct(ctx, &prm, NBMC_MPI_PIECES, 0, &m);
+    CHECK(st == NBMC_OK, "f64 %s pieces: %s", rule.c_str(), nbmc_context_last_error(ctx));
+    Mesh piece;
+    if (st == NBMC_OK) piece = take(m);
+    CHECK(piece.pos64.size() == piece.pos.size(), "f64 pieces: no doubles");
+    const auto pos = gather(piece.pos64);
+    const auto gid = gather(piece.gid);
+    if (g_rank == 0 && st == NBMC_OK) {
+      nbmc_params raw = prm;
+      raw.cleanup = 0;
+      const Mesh ref_raw = whole(all, raw);
+      std::map<std::uint64_t, std::array<double, 3>> by_id;
+      for (int r = 0; r < g_size; ++r)
+        for (std::size_t v = 0; v < gid[std::size_t(r)].size(); ++v) {
+          const std::vector<double>& p = pos[std::size_t(r)];
+          const std::array<double, 3> x = {p[3 * v], p[3 * v + 1], p[3 * v + 2]};
+          const auto it = by_id.find(gid[std::size_t(r)][v]);
+          if (it == by_id.end()) by_id[gid[std::size_t(r)][v]] = x;
+          else CHECK(it->second == x, "f64: global id %llu has two positions", (unsigned long long)gid[std::size_t(r)][v]);
+        }
+      std::vector<std::array<double, 3>> got, want;
+      for (const auto& kv : by_id) got.push_back(kv.second);
+      for (std::size_t v = 0; v < ref_raw.pos64.size() / 3; ++v)
+        want.push_back({ref_raw.pos64[3 * v], ref_raw.pos64[3 * v + 1], ref_raw.pos64[3 * v + 2]});
+      std::sort(got.begin(), got.end());
+      std::sort(want.begin(), want.end());
+      CHECK(got == want, "f64 %s pieces: the vertices differ from the whole raw mesh's (%zu/%zu)", rule.c_str(),
+            got.size(), want.size());
+    }
+    nbmc_context_destroy(ctx);
+  }
+  if (g_rank == 0) std::printf("ok  %-10s %-7s (%zu particles)\n", "f64", rule.c_str(), all.size() / 3);
+}
+
 void check_errors(const std::vector<double>& all, const nbmc_params& prm) {
   std::vector<double> mine = share(all, "slabs");
   // Bad particles on the last rank: every rank fails with its status.
@@ -353,6 +418,7 @@ int main(int argc, char** argv) {
     const std::vector<double> f = read_xyz(std::string(dir) + "/xyz/splashsurf_dambreak_f23_24389.xyz");
     if (!f.empty()) check_case("dambreak", f, prm, "slabs", 0, 0, 0);
   }
+  check_f64(b, prm, "random");
   check_errors(b, prm);
   int failures = g_failures;
   MPI_Allreduce(MPI_IN_PLACE, &failures, 1, MPI_INT, MPI_SUM, MPI_COMM_WORLD);

@@ -134,6 +134,8 @@ pub struct nbmc_params {
     // appended with the isolated-particle filter
     pub isolated: i32,
     pub min_cluster: i32,
+    // appended with double-precision positions
+    pub double_positions: i32,
 }
 
 #[repr(C)]
@@ -281,6 +283,8 @@ extern "C" {
     pub fn nbmc_mesh_normals(mesh: *const nbmc_mesh) -> *const f32;
     pub fn nbmc_mesh_triangles(mesh: *const nbmc_mesh) -> *const u32;
     pub fn nbmc_mesh_destroy(mesh: *mut nbmc_mesh);
+    // double_positions: 3 * vertex_count doubles; null for a float mesh.
+    pub fn nbmc_mesh_positions_f64(mesh: *const nbmc_mesh) -> *const f64;
     // NBMC_MEMORY_DEVICE: the three getters above return CUDA device pointers.
     pub fn nbmc_mesh_memory(mesh: *const nbmc_mesh) -> i32;
     pub fn nbmc_mesh_copy_to_host(

@@ -141,7 +141,8 @@ fn rust_layouts() -> Vec<Layout> {
             smooth_iterations,
             iso_threshold,
             isolated,
-            min_cluster
+            min_cluster,
+            double_positions
         }),
         layout!(nbmc_stats {
             struct_size,

@@ -321,6 +321,9 @@ pub struct Params {
     pub isolated: Isolated,
     /// `Isolated::Drop`: the smallest cluster kept (default 10).
     pub min_cluster: i32,
+    /// Keep the vertex positions in double precision ([`Mesh::positions_f64`]),
+    /// for coordinates far from the origin; host meshes only (default false).
+    pub double_positions: bool,
     /// Only reconstruct inside this box (absolute units), if set.
     pub bbox: Option<([f64; 3], [f64; 3])>,
 }
@@ -348,6 +351,7 @@ impl Params {
             compute_normals: p.compute_normals != 0,
             isolated: Isolated::from_raw(p.isolated).unwrap_or(Isolated::Keep),
             min_cluster: p.min_cluster,
+            double_positions: p.double_positions != 0,
             bbox: None,
         }
     }
@@ -373,6 +377,7 @@ impl Params {
         p.compute_normals = i32::from(self.compute_normals);
         p.isolated = self.isolated.raw();
         p.min_cluster = self.min_cluster;
+        p.double_positions = i32::from(self.double_positions);
         if let Some((lo, hi)) = self.bbox {
             p.use_bbox = 1;
             p.bbox_min = lo;
@@ -967,7 +972,9 @@ impl Mesh {
     }
 
     /// Vertex positions. Empty for a mesh in device memory (see
-    /// [`Mesh::memory`]; use [`Mesh::copy_to_host`] there).
+    /// [`Mesh::memory`]; use [`Mesh::copy_to_host`] there). For a mesh made
+    /// with [`Params::double_positions`], its doubles rounded to f32 (see
+    /// [`Mesh::positions_f64`]).
     pub fn positions(&self) -> &[[f32; 3]] {
         if !self.on_host() {
             return &[];
@@ -975,6 +982,20 @@ impl Mesh {
         // SAFETY: host memory: 3 * vertex_count floats, alive until
         // nbmc_mesh_destroy (drop).
         unsafe { slice3(sys::nbmc_mesh_positions(self.raw.as_ptr()), self.vertex_count()) }
+    }
+
+    /// Double-precision vertex positions of a mesh made with
+    /// [`Params::double_positions`]; None for a float mesh (its
+    /// [`Mesh::positions`] are all it has) and for an empty one.
+    pub fn positions_f64(&self) -> Option<&[[f64; 3]]> {
+        let p = unsafe { sys::nbmc_mesh_positions_f64(self.raw.as_ptr()) };
+        if p.is_null() {
+            None
+        } else {
+            // SAFETY: host memory: 3 * vertex_count doubles, alive until
+            // nbmc_mesh_destroy (drop).
+            Some(unsafe { slice3(p, self.vertex_count()) })
+        }
     }
 
     /// Unit normals pointing out of the fluid; None when not computed, and

@@ -437,6 +437,44 @@ fn attributes_follow_the_particles_onto_the_mesh() {
     assert!(ctx.reconstruct(&Params::new(SPACING)).unwrap().attribute_names().is_empty());
 }
 
+/// Params::double_positions: the sample frame shifted by 1e7 (a float
+/// resolves 1.0 there) keeps its shape in the f64 positions; a float mesh has
+/// none.
+fn double_positions_far_from_the_origin() {
+    let near: Vec<[f64; 3]> = sample().iter().map(|p| [p[0] as f64, p[1] as f64, p[2] as f64]).collect();
+    let far: Vec<[f64; 3]> = near.iter().map(|p| [p[0] + 1e7, p[1] + 1e7, p[2] + 1e7]).collect();
+    let mut ctx = Context::new().unwrap();
+    let mut params = Params::new(SPACING);
+    assert!(!params.double_positions, "off by default");
+    ctx.set_particles_f64(&near).unwrap();
+    let flat = ctx.reconstruct(&params).unwrap();
+    assert!(flat.positions_f64().is_none());
+    params.double_positions = true;
+    ctx.set_particles_f64(&far).unwrap();
+    let mesh = ctx.reconstruct(&params).unwrap();
+    let p64 = mesh.positions_f64().expect("double positions");
+    assert_eq!(p64.len(), mesh.vertex_count());
+    assert_eq!(mesh.positions().len(), mesh.vertex_count());
+    // Same bounding box as the frame at the origin, to a micrometre-ish
+    // (float positions there would be off by up to 0.5).
+    let bounds = |it: &mut dyn Iterator<Item = [f64; 3]>| {
+        let mut lo = [f64::MAX; 3];
+        let mut hi = [f64::MIN; 3];
+        for v in it {
+            for a in 0..3 {
+                lo[a] = lo[a].min(v[a]);
+                hi[a] = hi[a].max(v[a]);
+            }
+        }
+        (lo, hi)
+    };
+    let (lo0, hi0) = bounds(&mut flat.positions().iter().map(|v| [v[0] as f64, v[1] as f64, v[2] as f64]));
+    let (lo1, hi1) = bounds(&mut p64.iter().map(|v| [v[0] - 1e7, v[1] - 1e7, v[2] - 1e7]));
+    for a in 0..3 {
+        assert!((lo0[a] - lo1[a]).abs() < 1e-3 && (hi0[a] - hi1[a]).abs() < 1e-3, "{lo0:?} {hi0:?} vs {lo1:?} {hi1:?}");
+    }
+}
+
 // ------------------------------------------------------------------ runner
 
 fn main() -> std::process::ExitCode {
@@ -459,6 +497,7 @@ fn main() -> std::process::ExitCode {
         ("names_and_version", names_and_version),
         ("auto_traits", auto_traits),
         ("attributes_follow_the_particles_onto_the_mesh", attributes_follow_the_particles_onto_the_mesh),
+        ("double_positions_far_from_the_origin", double_positions_far_from_the_origin),
     ];
     // libtest-like arguments: options are ignored, the first free word filters.
     let filter = std::env::args().skip(1).find(|a| !a.starts_with('-')).unwrap_or_default();
