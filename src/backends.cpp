@@ -382,25 +382,26 @@ void run_on_kokkos_thread(nbmc_context& ctx, const std::function<void()>& fn) {
 }
 
 namespace {
-// One reconstruction (a frame, or a subdomain of one) on the context's
-// backend; the caller holds the backend's lock on nbmc's Kokkos thread.
-void dispatch(nbmc_context& ctx, const ParticleInput& in, const Params& p, const Progress& progress,
-            bool mesh_on_device, HostMesh& mesh, RunStats& st) {
+// Runs run(backend) on the context's backend, the OpenMP one with the
+// context's thread count; the caller holds the backend's lock on nbmc's
+// Kokkos thread.
+template <class F>
+void on_backend(nbmc_context& ctx, F&& run) {
   switch (ctx.backend) {
-    case NBMC_BACKEND_SERIAL: reconstruct_serial(in, p, ctx.memory, progress, mesh, st); break;
+    case NBMC_BACKEND_SERIAL: run(NBMC_BACKEND_SERIAL); break;
     case NBMC_BACKEND_OPENMP: {
 #if defined(KOKKOS_ENABLE_OPENMP)
       const int pool = pool_threads();
       const int hw = int(std::max(1u, std::thread::hardware_concurrency()));
       const int threads = std::min(pool, ctx.num_threads > 0 ? ctx.num_threads : hw);
       if (threads >= pool) {
-        reconstruct_openmp(in, p, ctx.memory, progress, mesh, st);
+        run(NBMC_BACKEND_OPENMP);
       } else {
         std::exception_ptr err;
         Kokkos::OpenMP::partition_master(
             [&](int, int) {
               try {
-                reconstruct_openmp(in, p, ctx.memory, progress, mesh, st);
+                run(NBMC_BACKEND_OPENMP);
               } catch (...) {
                 err = std::current_exception();
               }
@@ -411,12 +412,39 @@ void dispatch(nbmc_context& ctx, const ParticleInput& in, const Params& p, const
 #endif
       break;
     }
-    case NBMC_BACKEND_CUDA: reconstruct_cuda(in, p, ctx.memory, progress, mesh_on_device, mesh, st, ctx.device_id); break;
+    case NBMC_BACKEND_CUDA: run(NBMC_BACKEND_CUDA); break;
     default: throw Error(NBMC_ERROR_BACKEND_UNAVAILABLE, "backend not available");
   }
 }
 
+// One reconstruction (a frame, or a subdomain of one) on the context's
+// backend; the caller holds the backend's lock on nbmc's Kokkos thread.
+void dispatch(nbmc_context& ctx, const ParticleInput& in, const Params& p, const Progress& progress,
+            bool mesh_on_device, HostMesh& mesh, RunStats& st) {
+  on_backend(ctx, [&](int32_t backend) {
+    switch (backend) {
+      case NBMC_BACKEND_SERIAL: reconstruct_serial(in, p, ctx.memory, progress, mesh, st); break;
+      case NBMC_BACKEND_OPENMP: reconstruct_openmp(in, p, ctx.memory, progress, mesh, st); break;
+      default: reconstruct_cuda(in, p, ctx.memory, progress, mesh_on_device, mesh, st, ctx.device_id); break;
+    }
+  });
+}
+
 }  // namespace
+
+bool interpolate_attributes_on_backend(nbmc_context& ctx, const AttributeJob& job) {
+  bool done = false;
+  run_on_kokkos_thread(ctx, [&] {
+    on_backend(ctx, [&](int32_t backend) {
+      switch (backend) {
+        case NBMC_BACKEND_SERIAL: done = interpolate_attributes_serial(job, ctx.memory); break;
+        case NBMC_BACKEND_OPENMP: done = interpolate_attributes_openmp(job, ctx.memory); break;
+        default: done = interpolate_attributes_cuda(job, ctx.memory); break;
+      }
+    });
+  });
+  return done;
+}
 
 void run_region(nbmc_context& ctx, const ParticleInput& in, const Params& p, const Progress& progress, HostMesh& mesh,
                 RunStats& st) {

@@ -47,6 +47,28 @@ void reconstruct_openmp(const ParticleInput& in, const Params& p, MemoryTracker&
 void reconstruct_cuda(const ParticleInput& in, const Params& p, MemoryTracker& t, const Progress& pr,
                       bool mesh_on_device, HostMesh& m, RunStats& st, int device);
 
+// Particle attributes interpolated onto mesh vertices on a backend
+// (backends/kokkos/attributes.hpp). Host arrays except xyz with on_device.
+struct AttributeJob {
+  const double* xyz = nullptr;      // 3 per particle, absolute
+  bool on_device = false;           // xyz in CUDA memory
+  std::size_t count = 0;
+  const double* values = nullptr;   // count * width, particle-major
+  std::size_t width = 0;            // components of all attributes together
+  const float* vertices = nullptr;  // 3 per vertex (or vertices64)
+  const double* vertices64 = nullptr;
+  std::size_t vertex_count = 0;
+  double radius = 0;
+  double* out = nullptr;            // vertex_count * width
+  std::uint8_t* empty = nullptr;    // vertex_count: 1 where no particle is closer than radius
+};
+// Runs job on the context's backend (from any thread); false if the
+// particles' box is too large for its cell grid (use the host path then).
+bool interpolate_attributes_on_backend(nbmc_context& ctx, const AttributeJob& job);
+bool interpolate_attributes_serial(const AttributeJob& job, MemoryTracker& t);
+bool interpolate_attributes_openmp(const AttributeJob& job, MemoryTracker& t);
+bool interpolate_attributes_cuda(const AttributeJob& job, MemoryTracker& t);
+
 // CUDA helpers (pipeline_cuda.cpp; without CUDA they throw
 // NBMC_ERROR_BACKEND_UNAVAILABLE). Copies count positions of type float
 // (f32) or double from device memory at xyz (byte_stride apart, 0 = packed)

@@ -1,8 +1,9 @@
 // SPDX-License-Identifier: MIT
 // The particle-attribute section of include/nbmc.h: per-particle values set
-// on a context, interpolated on the host onto the final vertices of each
-// reconstructed mesh (io/attributes.cpp, the one implementation the CLI uses
-// too), and read back from the mesh.
+// on a context, interpolated onto the final vertices of each reconstructed
+// mesh on the context's backend (backends/kokkos/attributes.hpp; the host's
+// io/attributes.cpp for vertices with no particle within R), and read back
+// from the mesh.
 #include "capi_attributes.hpp"
 
 #include "backends.hpp"
@@ -121,7 +122,7 @@ void interpolate_mesh_attributes(nbmc_context& ctx, const Params& p, nbmc_mesh& 
   const auto t0 = std::chrono::steady_clock::now();
   const HostMesh& m = out.mesh;
   const std::uint64_t nv = m.vertex_count();
-  // Positions of the vertices and particles, on the host.
+  // Positions of the vertices, on the host.
   std::vector<float, NoInitAllocator<float>> vcopy;
   const float* vertices = m.positions.empty() ? nullptr : m.positions.data();
   if (m.on_device && nv) {
@@ -129,35 +130,93 @@ void interpolate_mesh_attributes(nbmc_context& ctx, const Params& p, nbmc_mesh& 
     download_mesh(m, vcopy.data(), nullptr, nullptr);
     vertices = vcopy.data();
   }
-  ParticleVector pcopy;
-  const double* xyz = ctx.particles.data();
-  std::size_t n = ctx.particles.size() / 3;
-  if (ctx.device_particles.count) {
-    n = ctx.device_particles.count;
-    pcopy.resize(3 * n);
-    download_particles(ctx.device_particles.data.get(), n, pcopy.data());
-    xyz = pcopy.data();
-  }
-  for (const io::Attribute& a : ctx.attributes)
+  const bool device_particles = ctx.device_particles.count != 0;
+  const std::size_t n = device_particles ? ctx.device_particles.count : ctx.particles.size() / 3;
+  std::size_t width = 0;
+  for (const io::Attribute& a : ctx.attributes) {
     if (a.count() != n)
       throw Error(NBMC_ERROR_INTERNAL, "attribute '" + a.name + "' has " + std::to_string(a.count()) + " items for " +
                                            std::to_string(n) + " particles");
-  const int threads = ctx.backend == NBMC_BACKEND_SERIAL ? 1 : std::max(0, int(ctx.num_threads));
-  std::vector<io::Attribute> values;
-  try {
-    values = m.f64 ? io::interpolate_attributes(xyz, n, ctx.attributes, {}, m.positions64.data(), nv,
-                                                p.influence_radius, threads)
-                   : io::interpolate_attributes(xyz, n, ctx.attributes, {}, vertices, nv, p.influence_radius, threads);
-  } catch (const io::Error& e) {
-    throw Error(NBMC_ERROR_INVALID_PARAMETER, std::string("attribute interpolation: ") + e.what());
+    width += std::size_t(a.components);
   }
-  out.attributes.resize(values.size());
-  for (std::size_t i = 0; i < values.size(); ++i) {
+  // All attributes side by side, particle-major.
+  std::vector<double, NoInitAllocator<double>> packed(n * width);
+  {
+    std::size_t off = 0;
+    for (const io::Attribute& a : ctx.attributes) {
+      const std::size_t c = std::size_t(a.components);
+      for (std::size_t i = 0; i < n; ++i)
+        for (std::size_t k = 0; k < c; ++k) packed[i * width + off + k] = a.values[i * c + k];
+      off += c;
+    }
+  }
+  // The weighted means on the context's backend (the GPU too).
+  std::vector<double, NoInitAllocator<double>> result(std::size_t(nv) * width);
+  std::vector<std::uint8_t> empty(std::size_t(nv), 0);
+  AttributeJob job;
+  job.xyz = device_particles ? static_cast<const double*>(ctx.device_particles.data.get()) : ctx.particles.data();
+  job.on_device = device_particles;
+  job.count = n;
+  job.values = packed.data();
+  job.width = width;
+  job.vertices = m.f64 ? nullptr : vertices;
+  job.vertices64 = m.f64 ? m.positions64.data() : nullptr;
+  job.vertex_count = std::size_t(nv);
+  job.radius = p.influence_radius;
+  job.out = result.data();
+  job.empty = empty.data();
+  const bool all_host = nv && n && !interpolate_attributes_on_backend(ctx, job);
+  // Vertices with no particle closer than R (and all of them where the
+  // particles' box was too large for the backend's cell grid): the host's
+  // implementation, which gives them the value of their nearest particle.
+  std::vector<std::size_t> rest;
+  for (std::size_t v = 0; v < std::size_t(nv); ++v)
+    if (all_host || empty[v]) rest.push_back(v);
+  if (!rest.empty()) {
+    ParticleVector pcopy;
+    const double* xyz = ctx.particles.data();
+    if (device_particles) {
+      pcopy.resize(3 * n);
+      download_particles(ctx.device_particles.data.get(), n, pcopy.data());
+      xyz = pcopy.data();
+    }
+    const int threads = ctx.backend == NBMC_BACKEND_SERIAL ? 1 : std::max(0, int(ctx.num_threads));
+    std::vector<io::Attribute> values;
+    try {
+      if (m.f64) {
+        std::vector<double> sub(3 * rest.size());
+        for (std::size_t i = 0; i < rest.size(); ++i)
+          for (int a = 0; a < 3; ++a) sub[3 * i + a] = m.positions64[3 * rest[i] + a];
+        values = io::interpolate_attributes(xyz, n, ctx.attributes, {}, sub.data(), rest.size(), p.influence_radius,
+                                            threads);
+      } else {
+        std::vector<float> sub(3 * rest.size());
+        for (std::size_t i = 0; i < rest.size(); ++i)
+          for (int a = 0; a < 3; ++a) sub[3 * i + a] = vertices[3 * rest[i] + a];
+        values = io::interpolate_attributes(xyz, n, ctx.attributes, {}, sub.data(), rest.size(), p.influence_radius,
+                                            threads);
+      }
+    } catch (const io::Error& e) {
+      throw Error(NBMC_ERROR_INVALID_PARAMETER, std::string("attribute interpolation: ") + e.what());
+    }
+    std::size_t off = 0;
+    for (const io::Attribute& a : values) {
+      const std::size_t c = std::size_t(a.components);
+      for (std::size_t i = 0; i < rest.size(); ++i)
+        for (std::size_t k = 0; k < c; ++k) result[rest[i] * width + off + k] = a.values[i * c + k];
+      off += c;
+    }
+  }
+  out.attributes.resize(ctx.attributes.size());
+  std::size_t off = 0;
+  for (std::size_t i = 0; i < ctx.attributes.size(); ++i) {
     MeshAttribute& d = out.attributes[i];
-    d.name = values[i].name;
-    d.components = std::uint32_t(values[i].components);
-    d.values.resize(values[i].values.size());
-    for (std::size_t k = 0; k < d.values.size(); ++k) d.values[k] = float(values[i].values[k]);
+    d.name = ctx.attributes[i].name;
+    d.components = std::uint32_t(ctx.attributes[i].components);
+    d.values.resize(std::size_t(nv) * d.components);
+    for (std::size_t v = 0; v < std::size_t(nv); ++v)
+      for (std::size_t k = 0; k < d.components; ++k) d.values[v * d.components + k] = float(result[v * width + off + k]);
+    off += d.components;
   }
   const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   st.stage[NBMC_STAGE_ATTRIBUTES] += s;
