@@ -575,11 +575,15 @@ NBMC_API uint64_t nbmc_mesh_global_vertex_count(const nbmc_mesh* mesh);
  *   a(x) = sum_j k_j a_j / sum_j k_j,  k_j = max(0, (1 - |x - x_j|^2/R^2)^3),
  * the weights of the scalar field; a vertex with no particle closer than R
  * takes the value of its nearest particle (lowest index on ties). The sums
- * run in double precision in a fixed order, on the host, for every backend:
- * the values are the same on every backend, thread count and subdomain split
- * (a split frame is interpolated on the stitched mesh from all particles).
- * Contexts bound to several processes (nbmc_mpi) do not support attributes
- * yet: the setters return NBMC_ERROR_INVALID_ARGUMENT there.
+ * run in double precision in a fixed order on the context's backend (the GPU
+ * for a CUDA context): the values are the same for any thread count,
+ * subdomain split and MPI rank count, and on every backend for the same
+ * vertices (a split frame is interpolated on the stitched mesh from all
+ * particles). On contexts bound to several processes (nbmc_mpi) each rank
+ * sets the attributes of its own particles; every rank with particles must
+ * set the same names and components (else nbmc_mpi_reconstruct fails with
+ * NBMC_ERROR_INVALID_ARGUMENT on every rank), and the values come on the
+ * root's gathered mesh or on each rank's piece.
  * ---------------------------------------------------------------------- */
 
 /* Sets (copies) the attribute called name: components (1, a scalar, or 3, a

@@ -8,6 +8,8 @@
 
 #include <functional>
 
+struct nbmc_mesh;
+
 namespace nbmc {
 
 const char* version_string();
@@ -32,9 +34,11 @@ void run_backend(nbmc_context& ctx, const Params& p, HostMesh& mesh, RunStats& s
 // One subdomain (in.region) or frame on the context's backend, from any thread.
 void run_region(nbmc_context& ctx, const ParticleInput& in, const Params& p, const Progress& progress, HostMesh& mesh,
                 RunStats& st);
-// The frame over the processes of a collective (src/distributed.cpp).
+// The frame over the processes of a collective (src/distributed.cpp): the
+// reconstruction, the root's clean-up and smoothing (gather output), and the
+// particle attributes onto the final vertices.
 void reconstruct_collective(nbmc_context& ctx, const nbmc_params& params, const nbmc__collective& hooks,
-                            int32_t output, int32_t root, HostMesh& mesh);
+                            int32_t output, int32_t root, nbmc_mesh& mesh);
 // Runs fn where the context's backend runs its work (nbmc's Kokkos thread,
 // serialised with the reconstructions of that backend).
 void run_on_kokkos_thread(nbmc_context& ctx, const std::function<void()>& fn);
@@ -59,6 +63,8 @@ struct AttributeJob {
   const double* vertices64 = nullptr;
   std::size_t vertex_count = 0;
   double radius = 0;
+  bool use_bounds = false;          // bounds (lo[3], hi[3]) fix the cell grid in place of the particles' own
+  double bounds[6] = {0, 0, 0, 0, 0, 0};
   double* out = nullptr;            // vertex_count * width
   std::uint8_t* empty = nullptr;    // vertex_count: 1 where no particle is closer than radius
 };

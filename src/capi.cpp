@@ -646,7 +646,6 @@ extern "C" {
 int32_t nbmc__context_bind_collective(nbmc_context* ctx, int32_t bound) {
   if (!ctx) return NBMC_ERROR_INVALID_ARGUMENT;
   ctx->collective = bound != 0;
-  if (ctx->collective) ctx->attributes.clear();  // not supported over MPI yet
   ctx->pending_status = 0;
   ctx->pending_error.clear();
   ctx->last_error.clear();
@@ -685,17 +684,7 @@ int32_t nbmc__reconstruct_collective(nbmc_context* ctx, const nbmc_params* param
   check_double_positions(*ctx, full, "nbmc_mpi_reconstruct");
   auto m = std::make_unique<nbmc_mesh>();
   ctx->has_stats = false;
-  nbmc::reconstruct_collective(*ctx, full, *c, output, root, m->mesh);
-  // Clean-up and smoothing work on whole meshes: on the root's stitched
-  // mesh; pieces stay as marching cubes made them (their shared vertices
-  // must stay shared).
-  ctx->postprocess = nbmc::mesh::PostprocessStats();
-  if (output == NBMC__OUTPUT_GATHER && c->rank == root) {
-    nbmc::RunStats& st = ctx->stats;
-    ctx->postprocess = nbmc::postprocess_mesh(full, m->mesh, st);
-  } else if (output == NBMC__OUTPUT_PIECES) {
-    ctx->postprocess.raw_triangles = m->mesh.triangle_count();
-  }
+  nbmc::reconstruct_collective(*ctx, full, *c, output, root, *m);
   ctx->has_stats = true;
   *mesh = m.release();
   return NBMC_OK;

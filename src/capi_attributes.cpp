@@ -96,9 +96,6 @@ std::uint64_t check_set(nbmc_context& ctx, const char* name, const T* data, std:
                         std::uint64_t& byte_stride, const char* fn) {
   check_name(name, fn);
   if (!data) return 0;
-  if (ctx.collective)
-    throw Error(NBMC_ERROR_INVALID_ARGUMENT,
-                std::string(fn) + ": attributes are not supported on contexts bound to several processes (MPI) yet");
   const std::uint64_t count = particle_count(ctx);
   if (count == 0)
     throw Error(NBMC_ERROR_NO_PARTICLES,
@@ -116,6 +113,111 @@ std::uint64_t check_set(nbmc_context& ctx, const char* name, const T* data, std:
 
 }  // namespace
 
+std::vector<double, NoInitAllocator<double>> interpolate_at_vertices(nbmc_context& ctx, const double* xyz,
+                                                                      bool on_device, std::size_t n,
+                                                                      const std::vector<io::Attribute>& attributes,
+                                                                      const float* vertices, const double* vertices64,
+                                                                      std::size_t nv, double radius,
+                                                                      const double* bounds) {
+  std::size_t width = 0;
+  for (const io::Attribute& a : attributes) {
+    if (a.count() != n)
+      throw Error(NBMC_ERROR_INTERNAL, "attribute '" + a.name + "' has " + std::to_string(a.count()) + " items for " +
+                                           std::to_string(n) + " particles");
+    width += std::size_t(a.components);
+  }
+  std::vector<double, NoInitAllocator<double>> result(nv * width);
+  if (nv == 0 || width == 0) return result;
+  if (n == 0) throw Error(NBMC_ERROR_NO_PARTICLES, "attribute interpolation: there are no particles");
+  // All attributes side by side, particle-major.
+  std::vector<double, NoInitAllocator<double>> packed(n * width);
+  {
+    std::size_t off = 0;
+    for (const io::Attribute& a : attributes) {
+      const std::size_t c = std::size_t(a.components);
+      for (std::size_t i = 0; i < n; ++i)
+        for (std::size_t k = 0; k < c; ++k) packed[i * width + off + k] = a.values[i * c + k];
+      off += c;
+    }
+  }
+  // The weighted means on the context's backend (the GPU too).
+  std::vector<std::uint8_t> empty(nv, 0);
+  AttributeJob job;
+  job.xyz = xyz;
+  job.on_device = on_device;
+  job.count = n;
+  job.values = packed.data();
+  job.width = width;
+  job.vertices = vertices64 ? nullptr : vertices;
+  job.vertices64 = vertices64;
+  job.vertex_count = nv;
+  job.radius = radius;
+  if (bounds) {
+    job.use_bounds = true;
+    for (int a = 0; a < 6; ++a) job.bounds[a] = bounds[a];
+  }
+  job.out = result.data();
+  job.empty = empty.data();
+  const bool all_host = !interpolate_attributes_on_backend(ctx, job);
+  packed = {};
+  // Vertices with no particle closer than R (and all of them where the
+  // particles' box was too large for the backend's cell grid): the host's
+  // implementation, which gives them the value of their nearest particle.
+  std::vector<std::size_t> rest;
+  for (std::size_t v = 0; v < nv; ++v)
+    if (all_host || empty[v]) rest.push_back(v);
+  if (rest.empty()) return result;
+  ParticleVector pcopy;
+  const double* hxyz = xyz;
+  if (on_device) {
+    pcopy.resize(3 * n);
+    download_particles(xyz, n, pcopy.data());
+    hxyz = pcopy.data();
+  }
+  const int threads = ctx.backend == NBMC_BACKEND_SERIAL ? 1 : std::max(0, int(ctx.num_threads));
+  std::vector<io::Attribute> values;
+  try {
+    if (vertices64) {
+      std::vector<double> sub(3 * rest.size());
+      for (std::size_t i = 0; i < rest.size(); ++i)
+        for (int a = 0; a < 3; ++a) sub[3 * i + a] = vertices64[3 * rest[i] + a];
+      values = io::interpolate_attributes(hxyz, n, attributes, {}, sub.data(), rest.size(), radius, threads);
+    } else {
+      std::vector<float> sub(3 * rest.size());
+      for (std::size_t i = 0; i < rest.size(); ++i)
+        for (int a = 0; a < 3; ++a) sub[3 * i + a] = vertices[3 * rest[i] + a];
+      values = io::interpolate_attributes(hxyz, n, attributes, {}, sub.data(), rest.size(), radius, threads);
+    }
+  } catch (const io::Error& e) {
+    throw Error(NBMC_ERROR_INVALID_PARAMETER, std::string("attribute interpolation: ") + e.what());
+  }
+  std::size_t off = 0;
+  for (const io::Attribute& a : values) {
+    const std::size_t c = std::size_t(a.components);
+    for (std::size_t i = 0; i < rest.size(); ++i)
+      for (std::size_t k = 0; k < c; ++k) result[rest[i] * width + off + k] = a.values[i * c + k];
+    off += c;
+  }
+  return result;
+}
+
+void store_mesh_attributes(const std::vector<io::Attribute>& layout, const double* result, nbmc_mesh& out) {
+  std::size_t width = 0;
+  for (const io::Attribute& a : layout) width += std::size_t(a.components);
+  const std::size_t nv = std::size_t(out.mesh.vertex_count());
+  out.attributes.resize(layout.size());
+  std::size_t off = 0;
+  for (std::size_t i = 0; i < layout.size(); ++i) {
+    MeshAttribute& d = out.attributes[i];
+    d.name = layout[i].name;
+    d.components = std::uint32_t(layout[i].components);
+    d.values.resize(nv * d.components);
+    for (std::size_t v = 0; v < nv; ++v)
+      for (std::size_t k = 0; k < d.components; ++k) d.values[v * d.components + k] = float(result[v * width + off + k]);
+    off += d.components;
+  }
+}
+
 void interpolate_mesh_attributes(nbmc_context& ctx, const Params& p, nbmc_mesh& out, RunStats& st) {
   out.attributes.clear();
   if (ctx.attributes.empty()) return;
@@ -132,92 +234,12 @@ void interpolate_mesh_attributes(nbmc_context& ctx, const Params& p, nbmc_mesh& 
   }
   const bool device_particles = ctx.device_particles.count != 0;
   const std::size_t n = device_particles ? ctx.device_particles.count : ctx.particles.size() / 3;
-  std::size_t width = 0;
-  for (const io::Attribute& a : ctx.attributes) {
-    if (a.count() != n)
-      throw Error(NBMC_ERROR_INTERNAL, "attribute '" + a.name + "' has " + std::to_string(a.count()) + " items for " +
-                                           std::to_string(n) + " particles");
-    width += std::size_t(a.components);
-  }
-  // All attributes side by side, particle-major.
-  std::vector<double, NoInitAllocator<double>> packed(n * width);
-  {
-    std::size_t off = 0;
-    for (const io::Attribute& a : ctx.attributes) {
-      const std::size_t c = std::size_t(a.components);
-      for (std::size_t i = 0; i < n; ++i)
-        for (std::size_t k = 0; k < c; ++k) packed[i * width + off + k] = a.values[i * c + k];
-      off += c;
-    }
-  }
-  // The weighted means on the context's backend (the GPU too).
-  std::vector<double, NoInitAllocator<double>> result(std::size_t(nv) * width);
-  std::vector<std::uint8_t> empty(std::size_t(nv), 0);
-  AttributeJob job;
-  job.xyz = device_particles ? static_cast<const double*>(ctx.device_particles.data.get()) : ctx.particles.data();
-  job.on_device = device_particles;
-  job.count = n;
-  job.values = packed.data();
-  job.width = width;
-  job.vertices = m.f64 ? nullptr : vertices;
-  job.vertices64 = m.f64 ? m.positions64.data() : nullptr;
-  job.vertex_count = std::size_t(nv);
-  job.radius = p.influence_radius;
-  job.out = result.data();
-  job.empty = empty.data();
-  const bool all_host = nv && n && !interpolate_attributes_on_backend(ctx, job);
-  // Vertices with no particle closer than R (and all of them where the
-  // particles' box was too large for the backend's cell grid): the host's
-  // implementation, which gives them the value of their nearest particle.
-  std::vector<std::size_t> rest;
-  for (std::size_t v = 0; v < std::size_t(nv); ++v)
-    if (all_host || empty[v]) rest.push_back(v);
-  if (!rest.empty()) {
-    ParticleVector pcopy;
-    const double* xyz = ctx.particles.data();
-    if (device_particles) {
-      pcopy.resize(3 * n);
-      download_particles(ctx.device_particles.data.get(), n, pcopy.data());
-      xyz = pcopy.data();
-    }
-    const int threads = ctx.backend == NBMC_BACKEND_SERIAL ? 1 : std::max(0, int(ctx.num_threads));
-    std::vector<io::Attribute> values;
-    try {
-      if (m.f64) {
-        std::vector<double> sub(3 * rest.size());
-        for (std::size_t i = 0; i < rest.size(); ++i)
-          for (int a = 0; a < 3; ++a) sub[3 * i + a] = m.positions64[3 * rest[i] + a];
-        values = io::interpolate_attributes(xyz, n, ctx.attributes, {}, sub.data(), rest.size(), p.influence_radius,
-                                            threads);
-      } else {
-        std::vector<float> sub(3 * rest.size());
-        for (std::size_t i = 0; i < rest.size(); ++i)
-          for (int a = 0; a < 3; ++a) sub[3 * i + a] = vertices[3 * rest[i] + a];
-        values = io::interpolate_attributes(xyz, n, ctx.attributes, {}, sub.data(), rest.size(), p.influence_radius,
-                                            threads);
-      }
-    } catch (const io::Error& e) {
-      throw Error(NBMC_ERROR_INVALID_PARAMETER, std::string("attribute interpolation: ") + e.what());
-    }
-    std::size_t off = 0;
-    for (const io::Attribute& a : values) {
-      const std::size_t c = std::size_t(a.components);
-      for (std::size_t i = 0; i < rest.size(); ++i)
-        for (std::size_t k = 0; k < c; ++k) result[rest[i] * width + off + k] = a.values[i * c + k];
-      off += c;
-    }
-  }
-  out.attributes.resize(ctx.attributes.size());
-  std::size_t off = 0;
-  for (std::size_t i = 0; i < ctx.attributes.size(); ++i) {
-    MeshAttribute& d = out.attributes[i];
-    d.name = ctx.attributes[i].name;
-    d.components = std::uint32_t(ctx.attributes[i].components);
-    d.values.resize(std::size_t(nv) * d.components);
-    for (std::size_t v = 0; v < std::size_t(nv); ++v)
-      for (std::size_t k = 0; k < d.components; ++k) d.values[v * d.components + k] = float(result[v * width + off + k]);
-    off += d.components;
-  }
+  const double* xyz =
+      device_particles ? static_cast<const double*>(ctx.device_particles.data.get()) : ctx.particles.data();
+  const auto result = interpolate_at_vertices(ctx, xyz, device_particles, n, ctx.attributes, vertices,
+                                              m.f64 ? m.positions64.data() : nullptr, std::size_t(nv),
+                                              p.influence_radius, nullptr);
+  store_mesh_attributes(ctx.attributes, result.data(), out);
   const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   st.stage[NBMC_STAGE_ATTRIBUTES] += s;
   st.total += s;

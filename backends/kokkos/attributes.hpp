@@ -84,6 +84,11 @@ bool interpolate_attributes(const ExecSpace& space, MemoryTracker& tracker, cons
     hi[a] = m.max_val;
   }
   trace("attributes: particles staged, bounds", n);
+  if (job.use_bounds)
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = job.bounds[a];
+      hi[a] = job.bounds[3 + a];
+    }
   Grid g;
   if (!attribute_grid(lo, hi, job.radius, g)) return false;
 
