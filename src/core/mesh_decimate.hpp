@@ -94,6 +94,13 @@ class QuadHeap {
     for (;;) {
       const std::size_t c = 4 * i + 1;
       if (c >= n) break;
+#if defined(__GNUC__)
+      // The grandchildren are 16 consecutive entries (4 cache lines): fetch
+      // them while this level is compared (the sifting waits on memory).
+      const std::size_t g = 4 * c + 1;
+      if (g < n)
+        for (std::size_t k = 0; k < 16 && g + k < n; k += 4) __builtin_prefetch(&h_[g + k]);
+#endif
       std::size_t best = c;
       const std::size_t end = std::min(n, c + 4);
       for (std::size_t k = c + 1; k < end; ++k)
