@@ -334,3 +334,52 @@ TEST(IsolatedSpheres, DroppedParticlesBecomeSpheres) {
   EXPECT_EQ(nbmc_mesh_sphere_count(nullptr), 0u);
   EXPECT_EQ(nbmc_mesh_spheres(nullptr), nullptr);
 }
+
+// Decimation of a mesh with double positions far from the origin: closed,
+// manifold and oriented, the count met, the shape of the same frame at the
+// origin (its bounding box within 0.05 r).
+TEST(MeshDecimateCapi, DoublePositionsFarAway) {
+  Points near = frame_like(1);
+  Points far = near;
+  for (std::size_t i = 0; i < far.size(); i += 3) far[i] += 5e6;
+  nbmc_params prm = params(1);
+  prm.decimate_fraction = 0.2;
+  prm.double_positions = 1;
+  nbmc_context_desc d;
+  nbmc_context_desc_init(&d);
+  d.backend = NBMC_BACKEND_OPENMP;
+  nbmc_context* ctx = nullptr;
+  ASSERT_EQ(nbmc_context_create(&d, &ctx), NBMC_OK);
+  double lo[2][3], hi[2][3];
+  int k = 0;
+  for (const Points* p : {&near, &far}) {
+    ASSERT_EQ(nbmc_context_set_particles_f64(ctx, p->data(), p->size() / 3, 0), NBMC_OK);
+    nbmc_mesh* m = nullptr;
+    ASSERT_EQ(nbmc_context_reconstruct(ctx, &prm, &m), NBMC_OK) << nbmc_context_last_error(ctx);
+    nbmc_stats st;
+    nbmc_stats_init(&st);
+    ASSERT_EQ(nbmc_context_stats(ctx, &st), NBMC_OK);
+    EXPECT_LE(double(st.triangle_count), std::ceil(0.2 * double(st.pre_decimation_triangle_count)));
+    nbmc_mesh_check_result c;
+    nbmc_mesh_check_result_init(&c);
+    ASSERT_EQ(nbmc_mesh_check(m, &c), NBMC_OK);
+    EXPECT_TRUE(c.closed && c.manifold && c.oriented) << k;
+    EXPECT_EQ(c.degenerate_triangle_count, 0u) << k;
+    const double* x = nbmc_mesh_positions_f64(m);
+    ASSERT_NE(x, nullptr);
+    for (int a = 0; a < 3; ++a) lo[k][a] = 1e300, hi[k][a] = -1e300;
+    for (std::size_t v = 0; v < nbmc_mesh_vertex_count(m); ++v)
+      for (int a = 0; a < 3; ++a) {
+        const double y = x[3 * v + a] - (k == 1 && a == 0 ? 5e6 : 0.0);
+        lo[k][a] = std::min(lo[k][a], y);
+        hi[k][a] = std::max(hi[k][a], y);
+      }
+    nbmc_mesh_destroy(m);
+    ++k;
+  }
+  for (int a = 0; a < 3; ++a) {
+    EXPECT_NEAR(lo[1][a], lo[0][a], 0.05) << a;
+    EXPECT_NEAR(hi[1][a], hi[0][a], 0.05) << a;
+  }
+  nbmc_context_destroy(ctx);
+}
