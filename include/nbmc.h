@@ -450,12 +450,13 @@ NBMC_API int32_t nbmc_kokkos_finalize(void);
  *    back to its volume about its centroid; normals are then recomputed from
  *    the faces, and with the clean-up on, it runs once more.
  *    With nbmc_params.smooth_weighting = NBMC_SMOOTH_FEATURE, each vertex's
- *    step is scaled by w = s(min(1, n / n_flat)), s(x) = 3x^2 - 2x^3, with
- *    n = sum over the particles j within the influence radius R of
- *    (1 - |x - x_j|^2 / R^2) at the vertex x before smoothing, and n_flat the
- *    same sum for a vertex on a flat surface of a lattice of the spacing,
- *    n_flat = 0.2 * (4/3) pi (R / spacing)^3 (Loeschner et al. 2023): thin
- *    sheets, filaments and droplets, with few particles near, barely move.
+ *    steps are scaled by w = s(clamp((n / n_bulk - 0.15) / 0.2, 0, 1)),
+ *    s(x) = 3x^2 - 2x^3, with n = sum over the particles j within the
+ *    influence radius R of (1 - |x - x_j|^2 / R^2) at the vertex x before
+ *    smoothing, and n_bulk = (8/15) pi (R / spacing)^3 the same sum inside a
+ *    lattice of the spacing (Loeschner et al. 2023): a flat surface gets 1,
+ *    thin sheets, filaments and droplets, with few particles near, barely
+ *    move. The particles are those the surface was made of (host work).
  *  - decimation (nbmc_params.decimate_fraction < 1): Garland and Heckbert's
  *    quadric-error edge collapses, cheapest first (ties by vertex index),
  *    until the mesh has at most that fraction of its triangles; each collapse
