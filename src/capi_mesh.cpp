@@ -89,7 +89,8 @@ void postprocess_host(const nbmc_params& params, HostMesh& m, mesh::PostprocessS
 
 // A mesh left in GPU memory: copied to the host, post-processed there, and
 // copied back into its own device arrays (the counts only shrink).
-void postprocess_device(const nbmc_params& params, HostMesh& m, mesh::PostprocessStats& ps, const FeatureParticles* fp) {
+void postprocess_device(const nbmc_params& params, HostMesh& m, mesh::PostprocessStats& ps,
+                        const FeatureParticles* fp) {
   if (m.triangle_count() == 0) return;
   HostMesh h;
   h.positions.resize(3 * m.vertex_count());
