@@ -694,7 +694,10 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
               (prm.method == NBMC_METHOD_SSP07 || prm.method == NBMC_METHOD_ZB05 ||
                prm.method == NBMC_METHOD_SPH) &&
               std::isfinite(eff.iso_threshold) && eff.iso_threshold > 0 && eff.iso_threshold < 1 &&
-              (eff.isolated == NBMC_ISOLATED_KEEP || eff.isolated == NBMC_ISOLATED_DROP) && eff.min_cluster >= 1 &&
+              (eff.isolated == NBMC_ISOLATED_KEEP || eff.isolated == NBMC_ISOLATED_DROP ||
+               eff.isolated == NBMC_ISOLATED_SPHERE) &&
+              eff.min_cluster >= 1 && eff.decimate_fraction > 0 && eff.decimate_fraction <= 1 &&
+              (eff.smooth_weighting == NBMC_SMOOTH_UNIFORM || eff.smooth_weighting == NBMC_SMOOTH_FEATURE) &&
               (prm.field >= NBMC_FIELD_NARROW_BAND && prm.field <= NBMC_FIELD_SCATTER) && pos(prm.cell_size) &&
               pos(prm.influence_radius) && pos(prm.band_width) && pos(prm.surface_radius) && pos(prm.iso_radius) &&
               std::isfinite(prm.t_low) && std::isfinite(prm.t_high) && prm.t_low < prm.t_high &&

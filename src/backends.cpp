@@ -298,8 +298,10 @@ Params resolve_params(const nbmc_params& in) {
   require(std::isfinite(in.iso_threshold) && in.iso_threshold > 0 && in.iso_threshold < 1,
           "iso_threshold must lie strictly between 0 and 1, a fraction of the rest density (got " +
               num(in.iso_threshold) + ")");
-  require(in.isolated == NBMC_ISOLATED_KEEP || in.isolated == NBMC_ISOLATED_DROP,
-          "isolated must be NBMC_ISOLATED_KEEP or NBMC_ISOLATED_DROP (got " + std::to_string(in.isolated) + ")");
+  require(in.isolated == NBMC_ISOLATED_KEEP || in.isolated == NBMC_ISOLATED_DROP ||
+              in.isolated == NBMC_ISOLATED_SPHERE,
+          "isolated must be NBMC_ISOLATED_KEEP, NBMC_ISOLATED_DROP or NBMC_ISOLATED_SPHERE (got " +
+              std::to_string(in.isolated) + ")");
   require(in.min_cluster >= 1, "min_cluster must be at least 1 (got " + std::to_string(in.min_cluster) + ")");
   require(std::isfinite(in.color_threshold) && in.color_threshold >= 0, "color_threshold must be >= 0");
   require(in.neighbour_threshold >= 0, "neighbour_threshold must be >= 0");
@@ -322,7 +324,7 @@ Params resolve_params(const nbmc_params& in) {
   p.t_low = in.t_low;
   p.t_high = in.t_high;
   p.iso_threshold = in.iso_threshold;
-  p.drop_isolated = in.isolated == NBMC_ISOLATED_DROP;
+  p.drop_isolated = in.isolated == NBMC_ISOLATED_DROP || in.isolated == NBMC_ISOLATED_SPHERE;
   p.min_cluster = std::uint32_t(in.min_cluster);
   p.color_threshold = in.color_threshold;
   p.neighbour_threshold = in.neighbour_threshold;
@@ -451,7 +453,8 @@ void run_region(nbmc_context& ctx, const ParticleInput& in, const Params& p, con
   run_on_kokkos_thread(ctx, [&] { dispatch(ctx, in, p, progress, false, mesh, st); });
 }
 
-void run_backend(nbmc_context& ctx, const Params& p, HostMesh& mesh, RunStats& st) {
+void run_backend(nbmc_context& ctx, const Params& p, HostMesh& mesh, RunStats& st,
+                 std::vector<std::uint32_t>* kept_out) {
   Progress progress;
   if (ctx.progress_fn) {
     nbmc_progress_fn fn = ctx.progress_fn;
@@ -536,6 +539,7 @@ void run_backend(nbmc_context& ctx, const Params& p, HostMesh& mesh, RunStats& s
   kokkos_thread().run(job);
   st.dropped_particles = clusters.dropped_particles;
   st.dropped_clusters = clusters.dropped_clusters;
+  if (kept_out) kept_out->swap(clusters.kept);
   ctx.peak_memory = ctx.memory.peak.load();
 }
 

@@ -30,7 +30,10 @@ Params resolve_params(const nbmc_params& in);
 // Rejects parameter/particle combinations whose grid could not be indexed.
 void check_domain(const Params& p);
 
-void run_backend(nbmc_context& ctx, const Params& p, HostMesh& mesh, RunStats& st);
+// kept_out (may be null): with p.drop_isolated, the indices of the particles
+// the isolated-particle filter kept (ascending); else left empty.
+void run_backend(nbmc_context& ctx, const Params& p, HostMesh& mesh, RunStats& st,
+                 std::vector<std::uint32_t>* kept_out = nullptr);
 // One subdomain (in.region) or frame on the context's backend, from any thread.
 void run_region(nbmc_context& ctx, const ParticleInput& in, const Params& p, const Progress& progress, HostMesh& mesh,
                 RunStats& st);

@@ -402,6 +402,8 @@ void nbmc_params_init(nbmc_params* p) {
   p->iso_threshold = 0.6;
   p->isolated = NBMC_ISOLATED_KEEP;
   p->min_cluster = 10;
+  p->decimate_fraction = 1;
+  p->smooth_weighting = NBMC_SMOOTH_UNIFORM;
 }
 
 int32_t nbmc_context_reconstruct(nbmc_context* ctx, const nbmc_params* params, nbmc_mesh** mesh) {
@@ -429,8 +431,51 @@ int32_t nbmc_context_reconstruct(nbmc_context* ctx, const nbmc_params* params, n
   nbmc::check_domain(p);
   auto m = std::make_unique<nbmc_mesh>();
   nbmc::RunStats st;
-  nbmc::run_backend(*ctx, p, m->mesh, st);
-  ctx->postprocess = nbmc::postprocess_mesh(full, m->mesh, st);
+  std::vector<std::uint32_t> kept;  // isolated drop/sphere: the particles kept
+  nbmc::run_backend(*ctx, p, m->mesh, st, &kept);
+  // The particles on the host, for feature weights and isolated spheres.
+  const bool feature = full.smooth_weighting == NBMC_SMOOTH_FEATURE && full.smooth_iterations > 0;
+  const bool spheres = full.isolated == NBMC_ISOLATED_SPHERE;
+  nbmc::ParticleVector downloaded;
+  const double* all_xyz = ctx->particles.data();
+  std::size_t all_n = ctx->particles.size() / 3;
+  if ((feature || spheres) && ctx->device_particles.count) {
+    all_n = ctx->device_particles.count;
+    downloaded.resize(3 * all_n);
+    nbmc::run_on_kokkos_thread(*ctx, [&] {
+      nbmc::download_particles(ctx->device_particles.data.get(), all_n, downloaded.data());
+    });
+    all_xyz = downloaded.data();
+  }
+  nbmc::FeatureParticles fp;
+  std::vector<double> kept_xyz;
+  if (feature) {
+    fp.xyz = all_xyz;
+    fp.count = all_n;
+    if (p.drop_isolated && kept.size() < all_n) {  // only those the surface was made of
+      kept_xyz.resize(3 * kept.size());
+      for (std::size_t i = 0; i < kept.size(); ++i)
+        for (int a = 0; a < 3; ++a) kept_xyz[3 * i + a] = all_xyz[3 * std::size_t(kept[i]) + a];
+      fp.xyz = kept_xyz.data();
+      fp.count = kept.size();
+    }
+    fp.radius = p.influence_radius;
+    fp.spacing = p.spacing;
+  }
+  if (spheres && kept.size() < all_n) {
+    const float radius = float(p.method == nbmc::Method::SPH ? 0.5 * p.spacing : p.iso_radius);
+    m->spheres.reserve(4 * (all_n - kept.size()));
+    std::size_t k = 0;
+    for (std::size_t i = 0; i < all_n; ++i) {
+      if (k < kept.size() && kept[k] == i) {
+        ++k;
+        continue;
+      }
+      for (int a = 0; a < 3; ++a) m->spheres.push_back(float(all_xyz[3 * i + a]));
+      m->spheres.push_back(radius);
+    }
+  }
+  ctx->postprocess = nbmc::postprocess_mesh(full, m->mesh, st, feature ? &fp : nullptr);
   // On the final vertices, after the clean-up and smoothing.
   nbmc::interpolate_mesh_attributes(*ctx, p, *m, st);
   ctx->stats = st;
@@ -485,6 +530,7 @@ int32_t nbmc_context_stats(const nbmc_context* ctx, nbmc_stats* s) {
   s->smoothing_volume_change = ctx->postprocess.volume_change;
   s->dropped_particle_count = st.dropped_particles;
   s->dropped_cluster_count = st.dropped_clusters;
+  s->pre_decimation_triangle_count = ctx->postprocess.pre_decimation_triangles;
   std::memcpy(caller, &full, caller_size);
   caller->struct_size = uint32_t(caller_size);
   return NBMC_OK;
@@ -535,6 +581,8 @@ int32_t nbmc_mesh_copy_to_host(const nbmc_mesh* m, float* positions, float* norm
   }
 }
 void nbmc_mesh_destroy(nbmc_mesh* m) { delete m; }
+uint64_t nbmc_mesh_sphere_count(const nbmc_mesh* m) { return m ? m->spheres.size() / 4 : 0; }
+const float* nbmc_mesh_spheres(const nbmc_mesh* m) { return m && !m->spheres.empty() ? m->spheres.data() : nullptr; }
 
 int32_t nbmc_kokkos_finalize(void) {
   try {

@@ -567,7 +567,10 @@ void reconstruct_collective(nbmc_context& ctx, const nbmc_params& full, const nb
       throw Error(NBMC_ERROR_INVALID_PARAMETER, "MPI reconstruction needs the narrow-band field");
     if (p.drop_isolated)
       throw Error(NBMC_ERROR_INVALID_PARAMETER,
-                  "isolated = drop is not available over MPI (clusters may span the ranks)");
+                  "isolated = drop or sphere is not available over MPI (clusters may span the ranks)");
+    if (full.smooth_weighting == NBMC_SMOOTH_FEATURE)
+      throw Error(NBMC_ERROR_INVALID_PARAMETER,
+                  "smooth_weighting = feature is not available over MPI (the root has no particles)");
     if (output != NBMC__OUTPUT_GATHER && output != NBMC__OUTPUT_PIECES)
       throw Error(NBMC_ERROR_INVALID_ARGUMENT, "unknown MPI output mode " + std::to_string(output));
     if (root < 0 || root >= c.size())
@@ -833,7 +836,7 @@ void reconstruct_collective(nbmc_context& ctx, const nbmc_params& full, const nb
     if (output == NBMC__OUTPUT_GATHER && c.rank() == root)
       ctx.postprocess = postprocess_mesh(full, mesh, frame);
     else if (output == NBMC__OUTPUT_PIECES)
-      ctx.postprocess.raw_triangles = mesh.triangle_count();
+      ctx.postprocess.raw_triangles = ctx.postprocess.pre_decimation_triangles = mesh.triangle_count();
   });
   // 10. Particle attributes onto the final vertices.
   out.attributes.clear();

@@ -52,7 +52,9 @@ struct Named {
   std::int32_t value;
 };
 const Named kMethods[] = {{"ssp07", NBMC_METHOD_SSP07}, {"zb05", NBMC_METHOD_ZB05}, {"sph", NBMC_METHOD_SPH}};
-const Named kIsolated[] = {{"keep", NBMC_ISOLATED_KEEP}, {"drop", NBMC_ISOLATED_DROP}};
+const Named kIsolated[] = {
+    {"keep", NBMC_ISOLATED_KEEP}, {"drop", NBMC_ISOLATED_DROP}, {"sphere", NBMC_ISOLATED_SPHERE}};
+const Named kSmoothWeights[] = {{"uniform", NBMC_SMOOTH_UNIFORM}, {"feature", NBMC_SMOOTH_FEATURE}};
 const Named kFields[] = {
     {"narrow-band", NBMC_FIELD_NARROW_BAND}, {"dense", NBMC_FIELD_DENSE}, {"scatter", NBMC_FIELD_SCATTER}};
 const Named kBackends[] = {{"auto", NBMC_BACKEND_AUTO},
@@ -89,7 +91,7 @@ struct Options {
   double particle_radius = 0;
   nbmc_params params{};
   nbmc_context_desc desc{};
-  std::string method, field, backend, isolated;
+  std::string method, field, backend, isolated, smooth_weights;
   std::vector<double> bbox;
   bool no_normals = false;
   bool double_positions = false;
@@ -248,6 +250,39 @@ std::int32_t set_attributes(nbmc_context* ctx, const nbmc::io::Particles& p, con
   return NBMC_OK;
 }
 
+// --isolated sphere: where the spheres of the mesh written to output go,
+// <output without its extension>_spheres.ply ("file.h5:/group": beside the file).
+std::string spheres_path(const std::string& output) {
+  const std::string file = nbmc::io::mesh_output_file(output);
+  const std::size_t slash = file.find_last_of('/');
+  const std::size_t dot = file.rfind('.');
+  const std::string stem = dot != std::string::npos && (slash == std::string::npos || dot > slash) ? file.substr(0, dot)
+                                                                                                   : file;
+  return stem + "_spheres.ply";
+}
+
+// Writes the mesh's spheres (NBMC_ISOLATED_SPHERE) as a PLY point set: vertex
+// x y z and a float property radius, no faces. Throws io::Error.
+void write_spheres(const std::string& path, const nbmc_mesh* mesh) {
+  const std::uint64_t n = nbmc_mesh_sphere_count(mesh);
+  const float* s = nbmc_mesh_spheres(mesh);
+  std::vector<float> xyz(3 * n);
+  nbmc::io::Attribute radius;
+  radius.name = "radius";
+  radius.components = 1;
+  radius.values.resize(n);
+  for (std::uint64_t i = 0; i < n; ++i) {
+    for (int a = 0; a < 3; ++a) xyz[3 * i + a] = s[4 * i + a];
+    radius.values[i] = s[4 * i + 3];
+  }
+  nbmc::io::MeshView view;
+  view.positions = xyz.empty() ? nullptr : xyz.data();
+  view.vertex_count = n;
+  view.attributes = &radius;
+  view.attribute_count = 1;
+  nbmc::io::write_mesh(path, view, "ply", [] { return nbmc::cli::interrupted(); });
+}
+
 // The attributes the library interpolated onto mesh, for the writers.
 std::vector<nbmc::io::Attribute> mesh_attributes(const nbmc_mesh* mesh) {
   std::vector<nbmc::io::Attribute> out(nbmc_mesh_attribute_count(mesh));
@@ -323,6 +358,7 @@ nbmc::cli::FrameResult run_frame(const Options& o, nbmc_context* ctx, const nbmc
       view.attribute_count = attrs.size();
       cli::make_parent_folders(f.output);
       io::write_mesh(f.output, view, "", [] { return cli::interrupted(); });
+      if (o.params.isolated == NBMC_ISOLATED_SPHERE) write_spheres(spheres_path(f.output), mesh.get());
       r.vertices = view.vertex_count;
       r.triangles = view.triangle_count;
       r.status = "written";
@@ -492,6 +528,10 @@ int reconstruct(Options& o) {
     }
     const auto t0 = Clock::now();
     io::write_mesh(o.output, view, report.output_format, [] { return cli::interrupted(); });
+    if (o.params.isolated == NBMC_ISOLATED_SPHERE) {
+      report.spheres_path = spheres_path(o.output);
+      write_spheres(report.spheres_path, mesh.get());
+    }
     report.write_seconds = seconds_since(t0);
   } catch (const io::Cancelled&) {
     return cancelled(progress);
@@ -928,6 +968,7 @@ int main(int argc, char** argv) {
   o.method = name_of(kMethods, p.method);
   o.field = name_of(kFields, p.field);
   o.isolated = name_of(kIsolated, p.isolated);
+  o.smooth_weights = name_of(kSmoothWeights, p.smooth_weighting);
   o.backend = name_of(kBackends, o.desc.backend);
 
   CLI::App app{"nbmc: narrow-band marching cubes surface reconstruction of particle-based fluids"};
@@ -983,7 +1024,8 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   rec->add_option("--isolated", o.isolated,
                   "keep: every particle makes surface; drop: clusters (particles linked closer than "
-                  "--surface-radius) of fewer than --min-cluster particles make none")
+                  "--surface-radius) of fewer than --min-cluster particles make none; sphere: as drop, and "
+                  "their particles are written to <output>_spheres.ply (x y z radius, no faces)")
       ->check(CLI::IsMember(names(kIsolated), CLI::ignore_case))
       ->capture_default_str();
   rec->add_option("--min-cluster", p.min_cluster, "--isolated drop: smallest cluster kept (particles)")
@@ -1005,6 +1047,25 @@ int main(int argc, char** argv) {
   rec->add_option("--smooth", p.smooth_iterations,
                   "Taubin smoothing iterations after the clean-up (lambda 0.5, mu -0.53)")
       ->check(CLI::Range(0, 100000))
+      ->capture_default_str();
+  rec->add_option("--smooth-weights", o.smooth_weights,
+                  "uniform: every vertex smoothed alike; feature: each vertex's step scaled by the particles "
+                  "near it (thin sheets, filaments and droplets are not eroded; Loeschner et al. 2023)")
+      ->check(CLI::IsMember(names(kSmoothWeights), CLI::ignore_case))
+      ->capture_default_str();
+  rec->add_option("--decimate", p.decimate_fraction,
+                  "Keep this fraction of the triangles (0 < f <= 1; 1 = off): quadric-error edge collapses "
+                  "that keep the mesh closed and manifold, after the clean-up and smoothing")
+      ->check(CLI::Validator(
+          [](std::string& s) {
+            double v = 0;
+            try {
+              v = std::stod(s);
+            } catch (...) {
+            }
+            return v > 0 && v <= 1 ? std::string() : std::string("must be in (0, 1]");
+          },
+          "FRACTION in (0, 1]"))
       ->capture_default_str();
   rec->add_flag("--check", o.check,
                 "Check the mesh (closed, manifold, oriented, bad triangles, components, volume) and report it");
@@ -1078,6 +1139,7 @@ int main(int argc, char** argv) {
   p.method = value_of(kMethods, o.method);
   p.field = value_of(kFields, o.field);
   p.isolated = value_of(kIsolated, o.isolated);
+  p.smooth_weighting = value_of(kSmoothWeights, o.smooth_weights);
   o.desc.backend = value_of(kBackends, o.backend);
   if (o.no_normals) p.compute_normals = 0;
   if (o.double_positions) p.double_positions = 1;

@@ -92,6 +92,8 @@ int main(void) {
   CHECK(params.cleanup == 1 && params.smooth_iterations == 0 && params.iso_threshold == 0.6);
   CHECK(NBMC_METHOD_SPH == 2);
   CHECK(params.isolated == NBMC_ISOLATED_KEEP && params.min_cluster == 10 && NBMC_ISOLATED_DROP == 1);
+  CHECK(params.decimate_fraction == 1.0 && params.smooth_weighting == NBMC_SMOOTH_UNIFORM && params.reserved1 == 0);
+  CHECK(NBMC_ISOLATED_SPHERE == 2 && NBMC_SMOOTH_FEATURE == 1);
   memset(&stats, 0xff, sizeof stats);
   nbmc_stats_init(&stats);
   CHECK(stats.struct_size == sizeof(nbmc_stats) && stats.triangle_count == 0);
@@ -105,6 +107,7 @@ int main(void) {
   CHECK(nbmc_mesh_vertex_count(NULL) == 0 && nbmc_mesh_triangle_count(NULL) == 0);
   CHECK(nbmc_mesh_positions(NULL) == NULL && nbmc_mesh_normals(NULL) == NULL && nbmc_mesh_triangles(NULL) == NULL);
   CHECK(nbmc_mesh_positions_f64(NULL) == NULL);
+  CHECK(nbmc_mesh_sphere_count(NULL) == 0 && nbmc_mesh_spheres(NULL) == NULL);
   CHECK(nbmc_context_backend(NULL, &backend) == NBMC_ERROR_INVALID_ARGUMENT);
   CHECK(nbmc_context_set_particles_f32(NULL, one, 1, 0) == NBMC_ERROR_INVALID_ARGUMENT);
   CHECK(nbmc_context_set_particles_f64(NULL, NULL, 1, 0) == NBMC_ERROR_INVALID_ARGUMENT);
