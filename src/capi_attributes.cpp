@@ -7,6 +7,7 @@
 #include "capi_attributes.hpp"
 
 #include "backends.hpp"
+#include "core/parallel.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -130,16 +131,20 @@ std::vector<double, NoInitAllocator<double>> interpolate_at_vertices(nbmc_contex
   if (nv == 0 || width == 0) return result;
   if (n == 0) throw Error(NBMC_ERROR_NO_PARTICLES, "attribute interpolation: there are no particles");
   // All attributes side by side, particle-major.
+  // (Host copies on the host's threads: one for a serial context.)
+  const auto chunks = [&](std::size_t items) {
+    return ctx.backend == NBMC_BACKEND_SERIAL ? std::size_t(1) : chunk_count(items, 1 << 16);
+  };
   std::vector<double, NoInitAllocator<double>> packed(n * width);
-  {
+  for_chunks(n, chunks(n), [&](std::size_t, std::size_t b, std::size_t e) {
     std::size_t off = 0;
     for (const io::Attribute& a : attributes) {
       const std::size_t c = std::size_t(a.components);
-      for (std::size_t i = 0; i < n; ++i)
+      for (std::size_t i = b; i < e; ++i)
         for (std::size_t k = 0; k < c; ++k) packed[i * width + off + k] = a.values[i * c + k];
       off += c;
     }
-  }
+  });
   // The weighted means on the context's backend (the GPU too).
   std::vector<std::uint8_t> empty(nv, 0);
   AttributeJob job;
@@ -212,8 +217,11 @@ void store_mesh_attributes(const std::vector<io::Attribute>& layout, const doubl
     d.name = layout[i].name;
     d.components = std::uint32_t(layout[i].components);
     d.values.resize(nv * d.components);
-    for (std::size_t v = 0; v < nv; ++v)
-      for (std::size_t k = 0; k < d.components; ++k) d.values[v * d.components + k] = float(result[v * width + off + k]);
+    for_chunks(nv, chunk_count(nv, 1 << 16), [&](std::size_t, std::size_t b, std::size_t e) {
+      for (std::size_t v = b; v < e; ++v)
+        for (std::size_t k = 0; k < d.components; ++k)
+          d.values[v * d.components + k] = float(result[v * width + off + k]);
+    });
     off += d.components;
   }
 }

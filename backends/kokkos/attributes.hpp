@@ -15,6 +15,7 @@
 #pragma once
 
 #include "../../src/backends.hpp"
+#include "../../src/core/parallel.hpp"
 #include "neighbourhood.hpp"
 
 #include <limits>
@@ -131,8 +132,11 @@ bool interpolate_attributes(const ExecSpace& space, MemoryTracker& tracker, cons
     auto h = Kokkos::create_mirror_view(verts.view());
     double* hp = h.data();
     const double o[3] = {g.origin[0], g.origin[1], g.origin[2]};
-    for (std::size_t i = 0; i < 3 * nv; ++i)
-      hp[i] = (job.vertices64 ? job.vertices64[i] : double(job.vertices[i])) - o[i % 3];
+    for_chunks(nv, chunk_count(nv, 1 << 16), [&](std::size_t, std::size_t b, std::size_t e) {
+      for (std::size_t v = b; v < e; ++v)
+        for (std::size_t a = 0; a < 3; ++a)
+          hp[3 * v + a] = (job.vertices64 ? job.vertices64[3 * v + a] : double(job.vertices[3 * v + a])) - o[a];
+    });
     Kokkos::deep_copy(space, verts.view(), h);
   }
   trace("attributes: vertices", nv);
