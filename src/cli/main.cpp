@@ -10,6 +10,7 @@
 #include "io/attributes.hpp"
 #include "io/error.hpp"
 #include "io/mesh.hpp"
+#include "io/mesh_xdmf.hpp"
 #include "io/particles.hpp"
 #include "progress.hpp"
 #include "report.hpp"
@@ -626,7 +627,6 @@ int reconstruct_mpi(Options& o, int rank, int size, bool pieces) {
     if (root) std::fprintf(stderr, "nbmc: error: %s\n", msg.c_str());
     return code;
   };
-  if (!o.attributes.empty()) return fail("--attributes is not supported under MPI yet (run one process)", 2);
   std::string piece_ext;
   if (pieces) {
     const std::string lower_out = lower(o.output);
@@ -650,9 +650,12 @@ int reconstruct_mpi(Options& o, int rank, int size, bool pieces) {
   } catch (const std::exception& e) {
     error = e.what();
   }
-  const bool parallel_read = !o.read_on_root && (format == "h5part" || format == "hdf5" || format == "pysph" ||
-                                                 format == "gadget");
+  // (--attributes: rank 0 reads them with the positions and scatters both;
+  // the per-rank hyperslab reads take positions only.)
+  const bool parallel_read = !o.read_on_root && o.attributes.empty() &&
+                             (format == "h5part" || format == "hdf5" || format == "pysph" || format == "gadget");
   std::vector<double> mine;
+  io::Particles mine_attributes;  // this rank's share of the --attributes (names as in the file)
   if (parallel_read && error.empty()) {
     const auto t0 = Clock::now();
     try {
@@ -687,7 +690,10 @@ int reconstruct_mpi(Options& o, int rank, int size, bool pieces) {
       io::ReadOptions ro;
       ro.format = o.input_format;
       ro.frame = o.step;
+      ro.attributes = !o.attributes.empty();
+      ro.only = o.attributes;
       particles = io::read_particles(o.input, ro);
+      check_attributes(o.input, particles, o.attributes, ro);
       report.read_seconds = seconds_since(t0);
     } catch (const std::exception& e) {
       error = e.what();
@@ -712,6 +718,28 @@ int reconstruct_mpi(Options& o, int rank, int size, bool pieces) {
   mine.resize(static_cast<std::size_t>(counts[static_cast<std::size_t>(rank)]));
   MPI_Scatterv(root ? particles.xyz.data() : nullptr, counts.data(), displs.data(), MPI_DOUBLE, mine.data(),
                counts[std::size_t(rank)], MPI_DOUBLE, 0, MPI_COMM_WORLD);
+  // The attributes asked for, the same shares (each name is in the file:
+  // check_attributes on rank 0 agreed above).
+  for (const std::string& name : o.attributes) {
+    const io::Attribute* a = root ? particles.attribute(name) : nullptr;
+    int comps = a ? a->components : 0;
+    MPI_Bcast(&comps, 1, MPI_INT, 0, MPI_COMM_WORLD);
+    std::vector<int> c(counts), d(displs);
+    for (int r = 0; r < size; ++r) {
+      if (std::int64_t(c[std::size_t(r)] / 3) * comps > std::int64_t(INT32_MAX) ||
+          std::int64_t(d[std::size_t(r)] / 3) * comps > std::int64_t(INT32_MAX))
+        return fail("the attribute '" + name + "' is too large to scatter from rank 0; use more ranks", 1);
+      c[std::size_t(r)] = c[std::size_t(r)] / 3 * comps;
+      d[std::size_t(r)] = d[std::size_t(r)] / 3 * comps;
+    }
+    io::Attribute part;
+    part.name = a ? a->name : name;
+    part.components = comps;
+    part.values.resize(std::size_t(c[std::size_t(rank)]));
+    MPI_Scatterv(a ? a->values.data() : nullptr, c.data(), d.data(), MPI_DOUBLE, part.values.data(),
+                 c[std::size_t(rank)], MPI_DOUBLE, 0, MPI_COMM_WORLD);
+    mine_attributes.attributes.push_back(std::move(part));
+  }
   particles = io::Particles();
   }
 
@@ -725,7 +753,18 @@ int reconstruct_mpi(Options& o, int rank, int size, bool pieces) {
   std::int32_t st = nbmc_mpi_context_set_comm(ctx.get(), MPI_COMM_WORLD);
   if (st != NBMC_OK) return fail(nbmc_context_last_error(ctx.get()), 1);
   nbmc_context_set_particles_f64(ctx.get(), mine.empty() ? nullptr : mine.data(), mine.size() / 3, 0);
+  {
+    std::string attr_error;
+    if (!mine.empty()) {
+      std::vector<std::string> names;
+      for (const io::Attribute& a : mine_attributes.attributes) names.push_back(a.name);
+      if (set_attributes(ctx.get(), mine_attributes, names) != NBMC_OK) attr_error = nbmc_context_last_error(ctx.get());
+    }
+    attr_error = agree_error(attr_error, rank, size);
+    if (!attr_error.empty()) return fail(attr_error, 1);
+  }
   std::vector<double>().swap(mine);
+  mine_attributes = io::Particles();
 
   nbmc_mesh* raw_mesh = nullptr;
   st = nbmc_mpi_reconstruct(ctx.get(), &o.params, pieces ? NBMC_MPI_PIECES : NBMC_MPI_GATHER, 0, &raw_mesh);
@@ -757,15 +796,29 @@ int reconstruct_mpi(Options& o, int rank, int size, bool pieces) {
           nbmc_mesh_check_result_init(&report.check);
           report.has_check = nbmc_mesh_check(mesh.get(), &report.check) == NBMC_OK;
         }
-        io::write_mesh(o.output, mesh_view(mesh.get()), report.output_format, [] { return cli::interrupted(); });
+        io::MeshView view = mesh_view(mesh.get());
+        const std::vector<io::Attribute> attrs = mesh_attributes(mesh.get());
+        view.attributes = attrs.empty() ? nullptr : attrs.data();
+        view.attribute_count = attrs.size();
+        for (const io::Attribute& a : attrs) report.attributes.push_back(a.name);
+        report.interpolate_seconds = report.stats.stage_seconds[NBMC_STAGE_ATTRIBUTES];
+        io::write_mesh(o.output, view, report.output_format, [] { return cli::interrupted(); });
       } catch (const std::exception& e) {
         write_error = e.what();
       }
     }
   } else {
     const std::string mine_path = piece_path(o.output, rank, piece_ext);
+    const std::vector<io::Attribute> attrs = mesh_attributes(mesh.get());
+    if (root) {
+      for (const io::Attribute& a : attrs) report.attributes.push_back(a.name);
+      report.interpolate_seconds = report.stats.stage_seconds[NBMC_STAGE_ATTRIBUTES];
+    }
     try {
-      io::write_mesh(mine_path, mesh_view(mesh.get()), piece_ext, [] { return cli::interrupted(); });
+      io::MeshView view = mesh_view(mesh.get());
+      view.attributes = attrs.empty() ? nullptr : attrs.data();
+      view.attribute_count = attrs.size();
+      io::write_mesh(mine_path, view, piece_ext, [] { return cli::interrupted(); });
     } catch (const std::exception& e) {
       write_error = e.what();
     }
@@ -779,9 +832,16 @@ int reconstruct_mpi(Options& o, int rank, int size, bool pieces) {
       std::string x = "<?xml version=\"1.0\"?>\n<VTKFile type=\"" + type +
                       "\" version=\"0.1\" byte_order=\"LittleEndian\" header_type=\"UInt64\">\n  <" + type +
                       " GhostLevel=\"0\">\n";
-      if (o.params.compute_normals)
-        x += "    <PPointData Normals=\"Normals\">\n      <PDataArray type=\"Float32\" Name=\"Normals\" "
-             "NumberOfComponents=\"3\"/>\n    </PPointData>\n";
+      if (o.params.compute_normals || !attrs.empty()) {
+        x += o.params.compute_normals ? "    <PPointData Normals=\"Normals\">\n" : "    <PPointData>\n";
+        if (o.params.compute_normals)
+          x += "      <PDataArray type=\"Float32\" Name=\"Normals\" NumberOfComponents=\"3\"/>\n";
+        for (const io::Attribute& a : attrs)
+          x += "      <PDataArray type=\"Float32\" Name=\"" + io::detail::xml_escape(a.name) + "\"" +
+               (a.components != 1 ? " NumberOfComponents=\"" + std::to_string(a.components) + "\"" : std::string()) +
+               "/>\n";
+        x += "    </PPointData>\n";
+      }
       x += std::string("    <PPoints>\n      <PDataArray type=\"") +
            (o.params.double_positions ? "Float64" : "Float32") + "\" NumberOfComponents=\"3\"/>\n    </PPoints>\n";
       if (!vtp)
