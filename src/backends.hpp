@@ -72,8 +72,10 @@ void move_mesh_to_device(HostMesh& m);
 // to be device memory of the current GPU, aligned to value_bytes), packed
 // into host. Throws Error(NBMC_ERROR_INVALID_ARGUMENT) for a host or
 // misaligned pointer, (NBMC_ERROR_BACKEND_UNAVAILABLE) without CUDA.
+// host_hint names the setter for host arrays (in the message for a host pointer).
 void download_device_items(const void* src, std::uint64_t count, std::uint64_t byte_stride, std::size_t item_bytes,
-                           std::size_t value_bytes, void* host, const char* fn);
+                           std::size_t value_bytes, void* host, const char* fn,
+                           const char* host_hint = "nbmc_context_set_attribute_f32/f64");
 // Free memory of the current CUDA device (0 without CUDA).
 std::uint64_t cuda_free_memory();
 

@@ -143,11 +143,20 @@ void interpolate_mesh_attributes(nbmc_context& ctx, const Params& p, nbmc_mesh& 
       throw Error(NBMC_ERROR_INTERNAL, "attribute '" + a.name + "' has " + std::to_string(a.count()) + " items for " +
                                            std::to_string(n) + " particles");
   const int threads = ctx.backend == NBMC_BACKEND_SERIAL ? 1 : std::max(0, int(ctx.num_threads));
+  // Per-particle radii: particle j's kernel support is R r_j / r_max.
+  std::vector<double> scale;
+  if (p.radius_ref > 0) {
+    if (ctx.radii.size() != n) throw Error(NBMC_ERROR_INTERNAL, "attribute interpolation: the radii do not match");
+    scale.resize(n);
+    for (std::size_t j = 0; j < n; ++j) scale[j] = ctx.radii[j] / p.radius_ref;
+  }
+  const double* sc = scale.empty() ? nullptr : scale.data();
   std::vector<io::Attribute> values;
   try {
     values = m.f64 ? io::interpolate_attributes(xyz, n, ctx.attributes, {}, m.positions64.data(), nv,
-                                                p.influence_radius, threads)
-                   : io::interpolate_attributes(xyz, n, ctx.attributes, {}, vertices, nv, p.influence_radius, threads);
+                                                p.influence_radius, threads, sc)
+                   : io::interpolate_attributes(xyz, n, ctx.attributes, {}, vertices, nv, p.influence_radius, threads,
+                                                sc);
   } catch (const io::Error& e) {
     throw Error(NBMC_ERROR_INVALID_PARAMETER, std::string("attribute interpolation: ") + e.what());
   }

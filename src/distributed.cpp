@@ -348,6 +348,29 @@ void reconstruct_collective(nbmc_context& ctx, const nbmc_params& full, const nb
       xyz = ctx.particles.data();
     }
   });
+  // Per-particle radii: the frame's smallest and largest, over the ranks that
+  // have particles (all with radii, or none), scale the parameters alike on
+  // every rank (scale_for_radii).
+  {
+    const bool mine = !ctx.radii.empty();
+    double rr[4] = {mine ? ctx.radius_min : std::numeric_limits<double>::infinity(),
+                    mine ? -ctx.radius_max : std::numeric_limits<double>::infinity(),
+                    count > 0 && !mine ? 0.0 : 1.0,  // 0 somewhere: a rank with particles and no radii
+                    mine ? -1.0 : 0.0};              // -1 somewhere: a rank with radii
+    c.reduce(rr, 4, NBMC__MIN_F64);
+    step(c, [&] {
+      if (mine && ctx.radii.size() != count)
+        throw Error(NBMC_ERROR_INTERNAL, "MPI: the radii do not match the particles");
+      if (rr[3] < 0 && rr[2] == 0)
+        throw Error(NBMC_ERROR_INVALID_ARGUMENT,
+                    "nbmc_mpi_reconstruct: some ranks set per-particle radii (nbmc_context_set_radii_*) and some "
+                    "ranks with particles did not");
+      if (rr[3] < 0) scale_for_radii(p, rr[0], -rr[1]);
+    });
+  }
+  // Sent with the particles when they differ (then every rank with particles has them).
+  const bool with_radii = p.radius_ref > 0;
+  const double* const radii = with_radii ? ctx.radii.data() : nullptr;
   double box[6];
   particle_bounds(xyz, count, box, box + 3);
   for (int a = 0; a < 3; ++a) box[3 + a] = -box[3 + a];
@@ -391,7 +414,7 @@ void reconstruct_collective(nbmc_context& ctx, const nbmc_params& full, const nb
       mine.push_back(int(s));
     }
   // 4. Particles to the ranks of their subdomains.
-  std::vector<std::vector<double>> parts_xyz(mine.size());
+  std::vector<std::vector<double>> parts_xyz(mine.size()), parts_radii(mine.size());
   {
     std::vector<std::vector<char>> out(static_cast<std::size_t>(c.size()));
     step(c, [&] {
@@ -402,6 +425,8 @@ void reconstruct_collective(nbmc_context& ctx, const nbmc_params& full, const nb
         put(b, std::uint64_t(sel[s].size()));
         for (std::uint32_t i : sel[s]) b.insert(b.end(), reinterpret_cast<const char*>(xyz + 3 * std::size_t(i)),
                                                reinterpret_cast<const char*>(xyz + 3 * std::size_t(i) + 3));
+        if (with_radii)  // then the same particles' radii
+          for (std::uint32_t i : sel[s]) put(b, radii[i]);
       }
       sel.clear();
       sel.shrink_to_fit();
@@ -421,6 +446,10 @@ void reconstruct_collective(nbmc_context& ctx, const nbmc_params& full, const nb
           if (rd.at + 3 * n * sizeof(double) > rd.b.size()) throw Error(NBMC_ERROR_INTERNAL, "MPI: short particle message");
           std::memcpy(dst.data() + at, rd.b.data() + rd.at, 3 * std::size_t(n) * sizeof(double));
           rd.at += 3 * std::size_t(n) * sizeof(double);
+          if (with_radii) {
+            std::vector<double>& rdst = parts_radii[it->second];
+            for (std::uint64_t k = 0; k < n; ++k) rdst.push_back(rd.get<double>());
+          }
         }
       }
     });
@@ -464,9 +493,15 @@ void reconstruct_collective(nbmc_context& ctx, const nbmc_params& full, const nb
   RunStats st;
   ctx.memory.reset_peak();
   std::vector<Piece> pieces = run_subdomain_job(
-      d, q, mine, [&](std::size_t i, std::vector<double>& out) { out = parts_xyz[i]; }, run, comm, st, rep);
+      d, q, mine,
+      [&](std::size_t i, std::vector<double>& out, std::vector<double>& out_radii) {
+        out = parts_xyz[i];
+        out_radii = parts_radii[i];
+      },
+      run, comm, st, rep);
   for (SubdomainEntry& e : rep.entries) e.rank = c.rank();
   parts_xyz.clear();
+  parts_radii.clear();
   // 6. This rank's subdomains merged into one piece (with keys).
   Piece merged;
   step(c, [&] {

@@ -29,6 +29,9 @@ struct Neighbourhood {
   Buffer<std::uint32_t, MemSpace> cell_start;  // n_cells + 1
   HashMapStorage<MemSpace> cells;              // Morton key -> cell index
   Buffer<float, MemSpace> weight;              // n, sorted order: weighted methods only (field_sph.hpp)
+  // Per-particle radii (radii.hpp), sorted order; empty without them.
+  Buffer<float, MemSpace> scale;    // t_j = r_j / r_max, in (0, 1]
+  Buffer<float, MemSpace> support;  // 1 / R_j^2, R_j = R t_j
 };
 
 // Read-only device view of a neighbourhood for kernels.
@@ -43,6 +46,9 @@ struct NeighbourView {
   // Per-particle weights of a weighted field method (sorted order); empty
   // for the others.
   Kokkos::View<const float*, MemSpace> weight;
+  // Per-particle radii (radii.hpp; sorted order, empty without them): the
+  // radius relative to the largest, t_j, and the kernel's 1 / R_j^2.
+  Kokkos::View<const float*, MemSpace> scale, support;
 
   // Range of particles of neighbour cell (x, y, z); empty if unoccupied.
   KOKKOS_INLINE_FUNCTION bool cell_range(std::int64_t x, std::int64_t y, std::int64_t z, std::uint32_t& b,
@@ -65,6 +71,8 @@ NeighbourView<MemSpace> view_of(const Neighbourhood<MemSpace>& nb, const Grid& g
   for (int a = 0; a < 3; ++a) v.nb_dims[a] = g.nb_dims[a];
   v.inv_nb_cell = float(1.0 / g.nb_cell);
   v.weight = nb.weight.view();
+  v.scale = nb.scale.view();
+  v.support = nb.support.view();
   return v;
 }
 
