@@ -12,8 +12,11 @@
 //  - the same mesh for every subdomain split, backend and thread count;
 //  - radii follow the particles: cleared by an upload and by NULL; the
 //    isolated-particle filter and attribute interpolation keep them aligned;
-//  - bad input gets exact statuses.
+//  - bad input gets exact statuses;
+//  - the CLI's --radius-attribute/--radius-scale give the C API's mesh.
+#include "cli_fixture.hpp"
 #include "nbmc_test.hpp"
+#include "io/particles.hpp"
 
 #include <gtest/gtest.h>
 
@@ -21,6 +24,7 @@
 #include <array>
 #include <cmath>
 #include <cstring>
+#include <fstream>
 #include <limits>
 #include <string>
 #include <vector>
@@ -431,4 +435,70 @@ TEST(Radii, Errors) {
   ASSERT_EQ(nbmc_mesh_vertex_count(m), plain.mesh.vertex_count());
   EXPECT_EQ(std::memcmp(nbmc_mesh_positions(m), plain.mesh.positions.data(), plain.mesh.positions.size() * 4), 0);
   nbmc_mesh_destroy(m);
+}
+
+namespace {
+
+class RadiiCli : public nbmc_test::CliFixture {
+ protected:
+  RadiiCli() : CliFixture("nbmc_radii_cli_") {}
+  // The two-resolution frame as an ASCII PLY point cloud with a property h,
+  // half the radius (as a smoothing length to scale), and a vector v.
+  void write_frame(const Frame& f, const std::string& name, double h_of_radius = 0.5) const {
+    std::ofstream out(path(name));
+    const std::size_t n = f.radii.size();
+    out << "ply\nformat ascii 1.0\nelement vertex " << n
+        << "\nproperty double x\nproperty double y\nproperty double z\nproperty double h\n"
+           "property float vx\nproperty float vy\nproperty float vz\nend_header\n";
+    out.precision(17);
+    for (std::size_t i = 0; i < n; ++i)
+      out << f.xyz[3 * i] << ' ' << f.xyz[3 * i + 1] << ' ' << f.xyz[3 * i + 2] << ' ' << f.radii[i] * h_of_radius
+          << " 0 0 0\n";
+  }
+  // The vertices of a PLY mesh the CLI wrote (read back as a point cloud).
+  std::vector<double> vertices(const std::string& name) const {
+    return nbmc::io::read_particles(path(name), "ply").xyz;
+  }
+};
+
+}  // namespace
+
+TEST_F(RadiiCli, RadiusAttributeGivesTheApiMesh) {
+  const Frame f = two_resolutions();
+  write_frame(f, "frame.ply");
+  const nbmc_params prm = two_resolution_params(NBMC_METHOD_SSP07, 2);
+  const Outcome api = ::run(f.xyz, &f.radii, prm);
+  ASSERT_EQ(api.status, NBMC_OK) << api.error;
+  const std::vector<double> expect(api.mesh.positions.begin(), api.mesh.positions.end());
+  // --spacing given: the lengths of a particle of radius 0.1; and without it,
+  // the largest radius (0.1 too). --cell-size is relative to the spacing.
+  for (const std::string spacing : {"--spacing 0.1 ", ""}) {
+    const auto r = run("reconstruct frame.ply -o mesh.ply " + spacing +
+                       "--cell-size 0.5 --radius-attribute h --radius-scale 2 -q");
+    ASSERT_EQ(r.exit_code, 0) << r.err;
+    EXPECT_EQ(vertices("mesh.ply"), expect) << spacing;
+  }
+}
+
+TEST_F(RadiiCli, BadRadiusAttributes) {
+  const Frame f = two_resolutions();
+  write_frame(f, "frame.ply");
+  auto r = run("reconstruct frame.ply -o m.ply --radius-attribute nope -q");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_TRUE(nbmc_test::contains(r.err, "no particle attribute 'nope'")) << r.err;
+  r = run("reconstruct frame.ply -o m.ply --radius-attribute h --radius-scale 0 -q");
+  EXPECT_EQ(r.exit_code, 2) << r.err;
+  r = run("reconstruct frame.ply -o m.ply --radius-attribute v -q");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_TRUE(nbmc_test::contains(r.err, "radii need a scalar attribute")) << r.err;
+  r = run("reconstruct frame.ply -o m.ply -q");
+  EXPECT_EQ(r.exit_code, 2);
+  EXPECT_TRUE(nbmc_test::contains(r.err, "--radius-attribute")) << r.err;
+  Frame bad = f;
+  bad.radii[3] = -1;
+  write_frame(bad, "bad.ply");
+  r = run("reconstruct bad.ply -o m.ply --radius-attribute h -q");
+  EXPECT_EQ(r.exit_code, 1);
+  EXPECT_TRUE(nbmc_test::contains(r.err, "invalid parameter")) << r.err;
+  EXPECT_TRUE(nbmc_test::contains(r.err, "first at particle 3")) << r.err;
 }
