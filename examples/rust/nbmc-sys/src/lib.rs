@@ -354,6 +354,23 @@ extern "C" {
     pub fn nbmc_mesh_attribute_name(mesh: *const nbmc_mesh, i: u32) -> *const c_char;
     // Host memory for every mesh (also one in device memory).
     pub fn nbmc_mesh_attribute(mesh: *const nbmc_mesh, name: *const c_char, components: *mut u32) -> *const f32;
+
+    // per-particle radii (`radii` NULL removes them; count = the particle count)
+    pub fn nbmc_context_set_radii_f32(ctx: *mut nbmc_context, radii: *const f32, count: u64, byte_stride: u64) -> i32;
+    pub fn nbmc_context_set_radii_f64(ctx: *mut nbmc_context, radii: *const f64, count: u64, byte_stride: u64) -> i32;
+    // `radii` is CUDA device memory of the context's GPU (CUDA backend only).
+    pub fn nbmc_context_set_radii_device_f32(
+        ctx: *mut nbmc_context,
+        radii: *const f32,
+        count: u64,
+        byte_stride: u64,
+    ) -> i32;
+    pub fn nbmc_context_set_radii_device_f64(
+        ctx: *mut nbmc_context,
+        radii: *const f64,
+        count: u64,
+        byte_stride: u64,
+    ) -> i32;
 }
 
 /// include/nbmc_mpi.h (feature `mpi`, links libnbmc_mpi): one frame over the
