@@ -491,7 +491,8 @@ fn radii_follow_the_particles() {
     assert_eq!(equal.positions(), plain.positions());
     assert_eq!(equal.triangles(), plain.triangles());
     // The left half of the frame half as large.
-    let radii: Vec<f32> = particles.iter().map(|p| if p[0] < 0.5 { 0.5 * SPACING as f32 } else { SPACING as f32 }).collect();
+    let radii: Vec<f32> =
+        particles.iter().map(|p| if p[0] < 0.5 { 0.5 * SPACING as f32 } else { SPACING as f32 }).collect();
     ctx.set_radii_f32(&radii).unwrap();
     let mixed = ctx.reconstruct(&params).unwrap();
     assert_closed(&mixed);
