@@ -373,6 +373,24 @@ TEST(Radii, IsolatedParticlesTakeTheirRadiiAlong) {
   EXPECT_TRUE(same_mesh(a.mesh, b.mesh));
 }
 
+// A clipping box around the sphere keeps the particles within R of it with
+// their radii (the selection re-indexes them): the sphere alone, as well fit.
+TEST(Radii, ClippingBoxKeepsTheRadiiOfItsParticles) {
+  const Frame f = two_resolutions();
+  nbmc_params prm = two_resolution_params(NBMC_METHOD_SSP07, 2);
+  prm.use_bbox = 1;
+  for (int a = 0; a < 3; ++a) {
+    prm.bbox_min[a] = (a == 0 ? kSphereX : 0.0) - 0.5;
+    prm.bbox_max[a] = (a == 0 ? kSphereX : 0.0) + 0.5;
+  }
+  const Outcome r = run(f.xyz, &f.radii, prm);
+  ASSERT_EQ(r.status, NBMC_OK) << r.error;
+  expect_closed(r.mesh, 1, "clipped to the sphere");
+  const SphereFit s = fit_sphere(r.mesh);
+  EXPECT_EQ(s.vertices, r.mesh.vertex_count());
+  EXPECT_LE(std::fabs(s.mean), 0.25);
+}
+
 // Attributes are interpolated with each particle's own support: the box's
 // vertices get the box's value, the sphere's the sphere's.
 TEST(Radii, AttributesFollowThePerParticleKernel) {
