@@ -42,10 +42,6 @@ void check_name(const char* name, const char* fn) {
   }
 }
 
-std::uint64_t particle_count(const nbmc_context& ctx) {
-  return ctx.device_particles.count ? ctx.device_particles.count : ctx.particles.size() / 3;
-}
-
 void remove_attribute(nbmc_context& ctx, const char* name) {
   auto& list = ctx.attributes;
   list.erase(std::remove_if(list.begin(), list.end(), [&](const io::Attribute& a) { return a.name == name; }),
@@ -98,7 +94,7 @@ std::uint64_t check_set(nbmc_context& ctx, const char* name, const T* data, std:
   if (ctx.collective)
     throw Error(NBMC_ERROR_INVALID_ARGUMENT,
                 std::string(fn) + ": attributes are not supported on contexts bound to several processes (MPI) yet");
-  const std::uint64_t count = particle_count(ctx);
+  const std::uint64_t count = ctx.particle_count();
   if (count == 0)
     throw Error(NBMC_ERROR_NO_PARTICLES,
                 std::string(fn) + ": no particles uploaded; upload the particles first (an upload removes all attributes)");

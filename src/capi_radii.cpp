@@ -26,14 +26,10 @@ namespace {
 // The largest radius accepted (positions stop at 1e15 too).
 constexpr double kMaxRadius = 1e15;
 
-std::uint64_t particle_count(const nbmc_context& ctx) {
-  return ctx.device_particles.count ? ctx.device_particles.count : ctx.particles.size() / 3;
-}
-
 // The checks both setters share, before any value is read.
 void check_set(const nbmc_context& ctx, std::uint64_t count, std::uint64_t& byte_stride, std::size_t value,
                const char* fn) {
-  const std::uint64_t n = particle_count(ctx);
+  const std::uint64_t n = ctx.particle_count();
   if (n == 0 && !(ctx.collective && count == 0))
     throw Error(NBMC_ERROR_NO_PARTICLES,
                 std::string(fn) + ": no particles uploaded; upload the particles first (an upload removes the radii)");
@@ -170,9 +166,9 @@ int32_t set_radii_device(nbmc_context* ctx, const T* radii, std::uint64_t count,
 
 void apply_radii(const nbmc_context& ctx, Params& p) {
   if (ctx.radii.empty()) return;
-  if (ctx.radii.size() != particle_count(ctx))
+  if (ctx.radii.size() != ctx.particle_count())
     throw Error(NBMC_ERROR_INVALID_ARGUMENT, "nbmc_context_reconstruct: " + std::to_string(ctx.radii.size()) +
-                                                 " radii for " + std::to_string(particle_count(ctx)) + " particles");
+                                                 " radii for " + std::to_string(ctx.particle_count()) + " particles");
   scale_for_radii(p, ctx.radius_min, ctx.radius_max);
 }
 

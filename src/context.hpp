@@ -10,6 +10,7 @@
 #include "core/mesh_postprocess.hpp"
 #include "io/attributes.hpp"
 
+#include <cstdint>
 #include <memory>
 #include <mutex>
 #include <new>
@@ -62,6 +63,10 @@ struct nbmc_context {
   // clears them.
   std::vector<double> radii;
   double radius_min = 0, radius_max = 0;
+  // Particles uploaded last (on the host or the device).
+  std::uint64_t particle_count() const {
+    return device_particles.count ? device_particles.count : particles.size() / 3;
+  }
   // What belongs to the particles uploaded last (attributes, radii): every
   // particle upload removes it.
   void clear_particle_values() {
