@@ -365,7 +365,10 @@ void reconstruct_collective(nbmc_context& ctx, const nbmc_params& full, const nb
         throw Error(NBMC_ERROR_INVALID_ARGUMENT,
                     "nbmc_mpi_reconstruct: some ranks set per-particle radii (nbmc_context_set_radii_*) and some "
                     "ranks with particles did not");
-      if (rr[3] < 0) scale_for_radii(p, rr[0], -rr[1]);
+      if (rr[3] < 0) {
+        scale_for_radii(p, rr[0], -rr[1]);
+        check_domain(p);
+      }
     });
   }
   // Sent with the particles when they differ (then every rank with particles has them).
