@@ -261,9 +261,10 @@ Outcome run(const Exec& space, const Points& xyz, const Params& p, bool dense, c
     }
   const Grid g = make_grid(lo, hi, p);
   Neighbourhood<Host> nbh;
-  build_neighbourhood(space, tracker, xyz.data(), n, {}, g, nbh);
+  build_neighbourhood(space, tracker, xyz.data(), n, {}, g, nbh, Method::radii ? radii.data() : nullptr);
   const FieldConstants fc = field_constants(p.influence_radius, p.iso_radius, p.t_low, p.t_high, p.iso_threshold);
-  if (Method::radii) attach_radii(space, tracker, radii.data(), n, p, nbh);
+  if (Method::radii)
+    attach_radii(space, tracker, Kokkos::View<const double*, Host>(radii.data(), radii.size()), p, nbh);
   const bool sph = p.method == nbmc::Method::SPH;
   if (sph) compute_sph_weights<Method::radii>(space, tracker, nbh, g, fc);
   const NeighbourView<Host> nb = view_of(nbh, g);

@@ -246,18 +246,25 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
   }
 
   // ---------------------------------------------------------- neighbourhood
+  // Per-particle radii (radii.hpp): they order coincident particles, then
+  // give every particle its lengths.
+  const bool radii = p.radius_ref > 0;
+  Buffer<double, MemSpace> radii_copy;
+  Kokkos::View<const double*, MemSpace> radii_in =
+      radii ? radii_view(space, tracker, in.radii, count, radii_copy) : Kokkos::View<const double*, MemSpace>();
   Neighbourhood<MemSpace> nbh;
   if constexpr (host_memory) {
-    build_neighbourhood(space, tracker, xyz, count, keep, g, nbh);
+    build_neighbourhood(space, tracker, xyz, count, keep, g, nbh, radii ? in.radii : nullptr);
   } else {
     build_neighbourhood_device(space, tracker, dxyz, Kokkos::View<const std::uint32_t*, MemSpace>(dkeep.view()),
-                               n_used, g, nbh);
+                               n_used, g, nbh, radii_in);
     dkeep.release();
     staged.release();
     dxyz = Kokkos::View<const double*, MemSpace>();
   }
-  const bool radii = p.radius_ref > 0;
-  if (radii) attach_radii(space, tracker, in.radii, count, p, nbh);
+  if (radii) attach_radii(space, tracker, radii_in, p, nbh);
+  radii_in = Kokkos::View<const double*, MemSpace>();
+  radii_copy.release();
   const NeighbourView<MemSpace> nb = view_of(nbh, g);
   st.occupied_cells = nbh.n_cells;
   lap(1);

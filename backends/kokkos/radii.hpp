@@ -22,22 +22,36 @@
 namespace nbmc {
 namespace Details {
 
+// The radii of the uploaded particles (host memory, count of them) where the
+// kernels read them: the host array itself, or a copy in device memory
+// (held by `copy`).
 template <class ExecSpace>
-void attach_radii(const ExecSpace& space, MemoryTracker& tracker, const double* radii, std::size_t count,
-                  const Params& p, Neighbourhood<typename ExecSpace::memory_space>& nbh) {
+Kokkos::View<const double*, typename ExecSpace::memory_space> radii_view(
+    const ExecSpace& space, MemoryTracker& tracker, const double* radii, std::size_t count,
+    Buffer<double, typename ExecSpace::memory_space>& copy) {
   using MemSpace = typename ExecSpace::memory_space;
-  ScopedRegion region("nbmc::radii");
-  if (!radii || !(p.radius_ref > 0)) throw Error(9 /*NBMC_ERROR_INTERNAL*/, "per-particle radii: no radii or r_max");
+  if (!radii) throw Error(9 /*NBMC_ERROR_INTERNAL*/, "per-particle radii: no radii");
   using HostIn = Kokkos::View<const double*, Kokkos::HostSpace, Kokkos::MemoryTraits<Kokkos::Unmanaged>>;
-  Buffer<double, MemSpace> copy;
-  Kokkos::View<const double*, MemSpace> in;
   if constexpr (Kokkos::SpaceAccessibility<Kokkos::HostSpace, MemSpace>::accessible) {
-    in = HostIn(radii, count);
+    (void)space;
+    (void)tracker;
+    (void)copy;
+    return HostIn(radii, count);
   } else {
     copy = Buffer<double, MemSpace>(tracker, "radii::input", count);
     Kokkos::deep_copy(space, copy.view(), HostIn(radii, count));
-    in = copy.view();
+    return copy.view();
   }
+}
+
+// in: the uploaded particles' radii (radii_view); nbh.perm indexes them.
+template <class ExecSpace>
+void attach_radii(const ExecSpace& space, MemoryTracker& tracker,
+                  const Kokkos::View<const double*, typename ExecSpace::memory_space>& in, const Params& p,
+                  Neighbourhood<typename ExecSpace::memory_space>& nbh) {
+  using MemSpace = typename ExecSpace::memory_space;
+  ScopedRegion region("nbmc::radii");
+  if (!(p.radius_ref > 0)) throw Error(9 /*NBMC_ERROR_INTERNAL*/, "per-particle radii: no r_max");
   const std::size_t n = nbh.n;
   nbh.scale = Buffer<float, MemSpace>(tracker, "radii::scale", n);
   nbh.support = Buffer<float, MemSpace>(tracker, "radii::support", n);
