@@ -354,6 +354,33 @@ TEST(Radii, FollowTheParticles) {
   EXPECT_TRUE(same_mesh(reconstruct(ctx).mesh, without.mesh));
 }
 
+// The input order does not matter, also for particles at one position with
+// different radii (they are summed in the order of their radii).
+TEST(Radii, SameMeshForAnyInputOrder) {
+  Frame f = two_resolutions();
+  const std::size_t n = f.radii.size();
+  for (std::size_t i = f.coarse; i < n; i += 7) {  // a larger twin of every 7th fine particle
+    f.xyz.insert(f.xyz.end(), {f.xyz[3 * i], f.xyz[3 * i + 1], f.xyz[3 * i + 2]});
+    f.radii.push_back(1.5 * kFine);
+  }
+  const std::size_t m = f.radii.size();
+  std::vector<std::size_t> order(m);
+  for (std::size_t i = 0; i < m; ++i) order[i] = (i * 7919) % m;  // a permutation (7919 is prime, m is not a multiple)
+  ASSERT_NE(m % 7919, 0u);
+  Frame g;
+  for (std::size_t i : order) {
+    g.xyz.insert(g.xyz.end(), {f.xyz[3 * i], f.xyz[3 * i + 1], f.xyz[3 * i + 2]});
+    g.radii.push_back(f.radii[i]);
+  }
+  for (int32_t method : {NBMC_METHOD_SSP07, NBMC_METHOD_SPH}) {
+    const nbmc_params prm = two_resolution_params(method, 2);
+    const Outcome a = run(f.xyz, &f.radii, prm), b = run(g.xyz, &g.radii, prm);
+    ASSERT_EQ(a.status, NBMC_OK) << a.error;
+    ASSERT_EQ(b.status, NBMC_OK) << b.error;
+    EXPECT_TRUE(same_mesh(a.mesh, b.mesh)) << "method " << method;
+  }
+}
+
 // Isolated particles dropped before the reconstruction take their radii
 // with them: the mesh is the one of the particles kept.
 TEST(Radii, IsolatedParticlesTakeTheirRadiiAlong) {
