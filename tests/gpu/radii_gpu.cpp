@@ -1,6 +1,7 @@
 // SPDX-License-Identifier: MIT
 // Per-particle radii on the CUDA backend (run on a GPU machine):
-//  - a coarse box and a sphere sampled four times finer, with their radii:
+//  - a coarse box and a sphere sampled four times finer, with their radii
+//    (and larger twins of some fine particles at their very positions):
 //    OpenMP and CUDA give the same topology (the SPH density the same mesh
 //    bit for bit; SSP07 and ZB05 positions within 1e-3 of a cell, as
 //    cuda_equivalence allows for the eigenvalue's acosf/cosf);
@@ -102,9 +103,15 @@ int main() {
   Points p = box(lo, hi, rc);
   const std::size_t coarse = p.size() / 3;
   p = concat(p, sphere(0.6, 0, 0, 0.4, rf));
+  // Larger twins of every 7th fine particle: coincident particles of
+  // different radii, which both backends order by radius (the device by a
+  // radix pass, the host by order_by_radius).
+  const std::size_t singles = p.size() / 3;
+  for (std::size_t i = coarse; i < singles; i += 7) p.insert(p.end(), {p[3 * i], p[3 * i + 1], p[3 * i + 2]});
   const std::size_t n = p.size() / 3;
   std::vector<double> radii(n, rf);
   std::fill(radii.begin(), radii.begin() + std::ptrdiff_t(coarse), rc);
+  std::fill(radii.begin() + std::ptrdiff_t(singles), radii.end(), 1.5 * rf);
   nbmc_params prm = params(rc);
   prm.cell_size = rf / rc;
 
