@@ -104,6 +104,20 @@ inline bool host_any_of(M m) {
 #endif
 #endif
 
+// 1/R_j^2 of particle j in accumulate(): its own (Q[j]) for the radii
+// variants, the frame's inv_R2 otherwise.
+template <bool Radii>
+KOKKOS_INLINE_FUNCTION float inv_support2(const float* Q, std::uint32_t j, float inv_R2) {
+  if constexpr (Radii) {
+    (void)inv_R2;
+    return Q[j];
+  } else {
+    (void)Q;
+    (void)j;
+    return inv_R2;
+  }
+}
+
 struct FieldConstants {
   float R = 0;           // influence radius
   float inv_R2 = 0;      // 1 / R^2

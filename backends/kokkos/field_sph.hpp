@@ -99,15 +99,13 @@ struct FieldSPHT {
     std::uint32_t count = 0;
     for (std::uint32_t j = b; j < e; ++j) {
       const float dx = X[j] - x0, dy = Y[j] - x1, dz = Z[j] - x2;
-      float q = inv_R2;
-      if constexpr (Radii) q = Q[j];
+      const float q = inv_support2<Radii>(Q, j, inv_R2);
       const float s2 = (dx * dx + dy * dy + dz * dz) * q;
       const float k = s2 < 1.f ? 1.f - s2 : 0.f;
       count += s2 < 1.f ? 1u : 0u;
       a0 += sph_kernel(k) * W[j];
     }
     a[0] = a0;
-    (void)Q;
     return count;
   }
   KOKKOS_INLINE_FUNCTION static float value(const float* a, const FieldConstants& c) {
@@ -136,15 +134,13 @@ struct SphDensityT {
     std::uint32_t count = 0;
     for (std::uint32_t j = b; j < e; ++j) {
       const float dx = X[j] - x0, dy = Y[j] - x1, dz = Z[j] - x2;
-      float q = inv_R2;
-      if constexpr (Radii) q = Q[j];
+      const float q = inv_support2<Radii>(Q, j, inv_R2);
       const float s2 = (dx * dx + dy * dy + dz * dz) * q;
       const float k = s2 < 1.f ? 1.f - s2 : 0.f;
       count += s2 < 1.f ? 1u : 0u;
       a0 += sph_kernel(k);
     }
     a[0] = a0;
-    (void)Q;
     return count;
   }
   KOKKOS_INLINE_FUNCTION static float value(const float* a, const FieldConstants&) { return a[0]; }

@@ -85,8 +85,7 @@ struct FieldSSP07T {
     std::uint32_t count = 0;
     for (std::uint32_t j = b; j < e; ++j) {
       const float dx = X[j] - x0, dy = Y[j] - x1, dz = Z[j] - x2;
-      float q = inv_R2;
-      if constexpr (Radii) q = Q[j];
+      const float q = inv_support2<Radii>(Q, j, inv_R2);
       const float s2 = (dx * dx + dy * dy + dz * dz) * q;
       const float k = s2 < 1.f ? 1.f - s2 : 0.f;
       count += s2 < 1.f ? 1u : 0u;
@@ -112,7 +111,6 @@ struct FieldSSP07T {
     a[7] = m00; a[8] = m01; a[9] = m02; a[10] = m10; a[11] = m11; a[12] = m12; a[13] = m20; a[14] = m21; a[15] = m22;
     if constexpr (Radii) a[N - 1] = rs;
     (void)Rj;
-    (void)Q;
     return count;
   }
   KOKKOS_INLINE_FUNCTION static float eigenvalue(const float* a, const FieldConstants& c) {

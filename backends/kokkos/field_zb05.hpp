@@ -42,8 +42,7 @@ struct FieldZB05T {
     std::uint32_t count = 0;
     for (std::uint32_t j = b; j < e; ++j) {
       const float dx = X[j] - x0, dy = Y[j] - x1, dz = Z[j] - x2;
-      float q = inv_R2;
-      if constexpr (Radii) q = Q[j];
+      const float q = inv_support2<Radii>(Q, j, inv_R2);
       const float s2 = (dx * dx + dy * dy + dz * dz) * q;
       const float k = s2 < 1.f ? 1.f - s2 : 0.f;
       count += s2 < 1.f ? 1u : 0u;
@@ -57,7 +56,6 @@ struct FieldZB05T {
     a[0] = a0; a[1] = a1; a[2] = a2; a[3] = a3;
     if constexpr (Radii) a[N - 1] = rs;
     (void)Rj;
-    (void)Q;
     return count;
   }
   KOKKOS_INLINE_FUNCTION static float value(const float* a, const FieldConstants& c) {
