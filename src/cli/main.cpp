@@ -280,9 +280,10 @@ nbmc::io::ReadOptions read_options(const Options& o) {
 // --radius-attribute: the attribute's values times --radius-scale as the
 // particles' radii (nbmc_context_set_radii_f64), and the parameters of the
 // frame (without --spacing/--particle-radius, spacing is its largest radius).
-// Returns the status (the message is the context's, or in error).
+// Returns the status (the message is the context's, or in error); the report
+// (may be null) gets the smallest and largest radius.
 std::int32_t set_radii(nbmc_context* ctx, const Options& o, const nbmc::io::Particles& p, nbmc_params& params,
-                       std::string& error) {
+                       std::string& error, nbmc::cli::Report* report = nullptr) {
   params = o.params;
   if (o.radius_attribute.empty()) return NBMC_OK;
   const nbmc::io::Attribute* a = p.attribute(o.radius_attribute);
@@ -292,10 +293,11 @@ std::int32_t set_radii(nbmc_context* ctx, const Options& o, const nbmc::io::Part
     return NBMC_ERROR_INVALID_PARAMETER;
   }
   std::vector<double> radii(a->values.size());
-  double largest = 0;
+  double largest = 0, smallest = radii.empty() ? 0 : a->values[0] * o.radius_scale;
   for (std::size_t i = 0; i < radii.size(); ++i) {
     radii[i] = a->values[i] * o.radius_scale;
     largest = std::max(largest, radii[i]);
+    smallest = std::min(smallest, radii[i]);
   }
   const std::int32_t st = nbmc_context_set_radii_f64(ctx, radii.data(), radii.size(), 0);
   if (st != NBMC_OK) {
@@ -303,6 +305,12 @@ std::int32_t set_radii(nbmc_context* ctx, const Options& o, const nbmc::io::Part
     return st;
   }
   if (o.spacing_from_radii) params.spacing = largest;
+  if (report) {
+    report->radius_attribute = a->name;
+    report->radius_scale = o.radius_scale;
+    report->radius_min = smallest;
+    report->radius_max = largest;
+  }
   return NBMC_OK;
 }
 
@@ -495,7 +503,7 @@ int reconstruct(Options& o) {
   if (st != NBMC_OK) return library_error(st, nbmc_context_last_error(ctx.get()));
   nbmc_params params;
   std::string radii_error;
-  st = set_radii(ctx.get(), o, particles, params, radii_error);
+  st = set_radii(ctx.get(), o, particles, params, radii_error, &report);
   if (st != NBMC_OK) return library_error(st, radii_error.c_str());
   particles = io::Particles(); // the context has its copies
 

@@ -26,6 +26,9 @@ struct Report {
   int ranks = 0;  // MPI ranks that shared the frame (0: none)
   bool normals = false;  // the mesh has normals
   std::vector<std::string> attributes; // interpolated onto the vertices
+  // --radius-attribute: the attribute, the factor, the smallest and largest radius
+  std::string radius_attribute;
+  double radius_scale = 1, radius_min = 0, radius_max = 0;
   double interpolate_seconds = 0;
   bool has_check = false;             // --check
   nbmc_mesh_check_result check{};     // of the written mesh
