@@ -26,6 +26,7 @@
 #include <chrono>
 #include <cstdio>
 #include <cstring>
+#include <limits>
 #include <memory>
 #include <new>
 #include <string>
@@ -681,9 +682,6 @@ int reconstruct_mpi(Options& o, int rank, int size, bool pieces) {
     if (root) std::fprintf(stderr, "nbmc: error: %s\n", msg.c_str());
     return code;
   };
-  if (!o.radius_attribute.empty())
-    return fail("--radius-attribute is not supported for one frame over MPI ranks yet (run one process; a sequence "
-                "under mpirun works: each rank reads its frames whole)", 2);
   std::string piece_ext;
   if (pieces) {
     const std::string lower_out = lower(o.output);
@@ -709,7 +707,7 @@ int reconstruct_mpi(Options& o, int rank, int size, bool pieces) {
   }
   // (--attributes: rank 0 reads them with the positions and scatters both;
   // the per-rank hyperslab reads take positions only.)
-  const bool parallel_read = !o.read_on_root && o.attributes.empty() &&
+  const bool parallel_read = !o.read_on_root && o.attributes.empty() && o.radius_attribute.empty() &&
                              (format == "h5part" || format == "hdf5" || format == "pysph" || format == "gadget");
   std::vector<double> mine;
   io::Particles mine_attributes;  // this rank's share of the --attributes (names as in the file)
@@ -744,13 +742,10 @@ int reconstruct_mpi(Options& o, int rank, int size, bool pieces) {
       report.output_format = pieces ? piece_ext : io::mesh_format(o.output);
       report.input_format = io::particle_format(o.input, o.input_format);
       const auto t0 = Clock::now();
-      io::ReadOptions ro;
-      ro.format = o.input_format;
+      io::ReadOptions ro = read_options(o);
       ro.frame = o.step;
-      ro.attributes = !o.attributes.empty();
-      ro.only = o.attributes;
       particles = io::read_particles(o.input, ro);
-      check_attributes(o.input, particles, o.attributes, ro);
+      check_attributes(o.input, particles, ro.only, ro);
       report.read_seconds = seconds_since(t0);
     } catch (const std::exception& e) {
       error = e.what();
@@ -777,7 +772,9 @@ int reconstruct_mpi(Options& o, int rank, int size, bool pieces) {
                counts[std::size_t(rank)], MPI_DOUBLE, 0, MPI_COMM_WORLD);
   // The attributes asked for, the same shares (each name is in the file:
   // check_attributes on rank 0 agreed above).
-  for (const std::string& name : o.attributes) {
+  std::vector<std::string> scattered = o.attributes;
+  if (!o.radius_attribute.empty()) scattered.push_back(o.radius_attribute);
+  for (const std::string& name : scattered) {
     const io::Attribute* a = root ? particles.attribute(name) : nullptr;
     int comps = a ? a->components : 0;
     MPI_Bcast(&comps, 1, MPI_INT, 0, MPI_COMM_WORLD);
@@ -810,21 +807,37 @@ int reconstruct_mpi(Options& o, int rank, int size, bool pieces) {
   std::int32_t st = nbmc_mpi_context_set_comm(ctx.get(), MPI_COMM_WORLD);
   if (st != NBMC_OK) return fail(nbmc_context_last_error(ctx.get()), 1);
   nbmc_context_set_particles_f64(ctx.get(), mine.empty() ? nullptr : mine.data(), mine.size() / 3, 0);
+  // This rank's attributes and radii (--radius-attribute: the spacing
+  // without --spacing is the largest radius over all ranks).
+  nbmc_params params = o.params;
   {
     std::string attr_error;
+    double extent[2] = {0, -std::numeric_limits<double>::infinity()};  // -smallest, largest
     if (!mine.empty()) {
-      std::vector<std::string> names;
-      for (const io::Attribute& a : mine_attributes.attributes) names.push_back(a.name);
-      if (set_attributes(ctx.get(), mine_attributes, names) != NBMC_OK) attr_error = nbmc_context_last_error(ctx.get());
+      if (set_attributes(ctx.get(), mine_attributes, o.attributes) != NBMC_OK)
+        attr_error = nbmc_context_last_error(ctx.get());
+      else if (set_radii(ctx.get(), o, mine_attributes, params, attr_error, &report) != NBMC_OK && attr_error.empty())
+        attr_error = nbmc_context_last_error(ctx.get());
+      if (!o.radius_attribute.empty()) extent[0] = -report.radius_min, extent[1] = report.radius_max;
     }
     attr_error = agree_error(attr_error, rank, size);
     if (!attr_error.empty()) return fail(attr_error, 1);
+    if (!o.radius_attribute.empty()) {
+      if (mine.empty()) extent[0] = -std::numeric_limits<double>::infinity();
+      MPI_Allreduce(MPI_IN_PLACE, extent, 2, MPI_DOUBLE, MPI_MAX, MPI_COMM_WORLD);
+      report.radius_attribute = o.radius_attribute;
+      report.radius_scale = o.radius_scale;
+      report.radius_min = -extent[0];
+      report.radius_max = extent[1];
+      params = o.params;
+      if (o.spacing_from_radii) params.spacing = extent[1];
+    }
   }
   std::vector<double>().swap(mine);
   mine_attributes = io::Particles();
 
   nbmc_mesh* raw_mesh = nullptr;
-  st = nbmc_mpi_reconstruct(ctx.get(), &o.params, pieces ? NBMC_MPI_PIECES : NBMC_MPI_GATHER, 0, &raw_mesh);
+  st = nbmc_mpi_reconstruct(ctx.get(), &params, pieces ? NBMC_MPI_PIECES : NBMC_MPI_GATHER, 0, &raw_mesh);
   MeshPtr mesh(raw_mesh);
   progress.finish();
   if (st != NBMC_OK) {
@@ -833,7 +846,7 @@ int reconstruct_mpi(Options& o, int rank, int size, bool pieces) {
   }
   nbmc_stats_init(&report.stats);
   nbmc_context_stats(ctx.get(), &report.stats);
-  report.params = o.params;
+  report.params = params;
   report.ranks = size;
   nbmc_subdomain_stats_init(&report.subdomains);
   if (nbmc_context_subdomain_stats(ctx.get(), &report.subdomains) == NBMC_OK && root)
