@@ -234,6 +234,49 @@ TEST(MeshCleanup, DegenerateSpecksAreRemoved) {
   EXPECT_EQ(out.components, 1u);
 }
 
+// A spindle a tenth of the sphere's size but ten thousand times thinner
+// (marching cubes' flat droplet smaller than a cell): every triangle is a
+// needle that no move, flip, collapse or cut can repair. Without a cell size
+// it stays; with a cell that the spindle's volume is far below, it is
+// removed whole, counted, and the sphere is left as it was.
+TEST(MeshCleanup, SmallBadComponentsAreRemoved) {
+  TestMesh m = icosphere(2);
+  const TestMesh sphere = m;
+  const std::uint32_t base = std::uint32_t(m.p.size() / 3);
+  const float c[3] = {3.f, 0.f, 0.f}, s = 0.1f, e = 1e-5f;
+  const float dirs[6][3] = {{s, 0, 0}, {-s, 0, 0}, {0, e, 0}, {0, -e, 0}, {0, 0, e}, {0, 0, -e}};
+  for (const auto& d : dirs)
+    for (int a = 0; a < 3; ++a) {
+      m.p.push_back(c[a] + d[a]);
+      m.n.push_back(d[a] > 0 ? 1.f : d[a] < 0 ? -1.f : 0.f);
+    }
+  const std::uint32_t oct[8][3] = {{0, 2, 4}, {2, 1, 4}, {1, 3, 4}, {3, 0, 4},
+                                   {2, 0, 5}, {1, 2, 5}, {3, 1, 5}, {0, 3, 5}};
+  for (const auto& f : oct) m.t.insert(m.t.end(), {base + f[0], base + f[1], base + f[2]});
+  const CheckResult in = m.check();
+  ASSERT_TRUE(in.closed && in.manifold && in.oriented);
+  ASSERT_EQ(in.components, 2u);
+  ASSERT_EQ(in.degenerate_triangles, 0u);
+  ASSERT_EQ(in.sliver_triangles, 8u);
+  {
+    TestMesh kept = m;
+    const auto r = nbmc::mesh::cleanup_mesh(kept.p, kept.n, kept.t);  // no cell: nothing removed
+    EXPECT_GT(r.bad_after, 0u);
+    EXPECT_EQ(r.small_component_triangles, 0u);
+    EXPECT_EQ(kept.check().components, 2u);
+  }
+  const auto r = nbmc::mesh::cleanup_mesh(m.p, m.n, m.t, 0.1);
+  EXPECT_EQ(r.bad_before, 8u);
+  EXPECT_EQ(r.bad_after, 0u);
+  EXPECT_GT(r.small_component_triangles, 0u);
+  EXPECT_EQ(m.p, sphere.p);
+  EXPECT_EQ(m.t, sphere.t);
+  const CheckResult out = m.check();
+  EXPECT_TRUE(out.closed && out.manifold && out.oriented);
+  EXPECT_EQ(out.components, 1u);
+  EXPECT_EQ(out.degenerate_triangles + out.sliver_triangles, 0u);
+}
+
 TEST(MeshCleanup, NeedlesAreRepaired) {
   TestMesh m = icosphere(2);
   // Move vertex 0 almost onto its neighbour: its two shared triangles become needles.
