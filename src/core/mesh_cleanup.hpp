@@ -22,17 +22,42 @@
 //  3. collapsing one of its edges (to the midpoint or to either end), when
 //     the link condition holds (the two ends share no neighbour but the two
 //     opposite vertices) and the opposite vertices keep three neighbours.
+// Rounds: passes of these until nothing more is repaired with the normal
+// turn limit of 60 degrees, then with 90 degrees (a fold, beyond 90, never),
+// then a last round that adds the last resorts (never pre-empting a repair
+// that keeps more of the mesh):
+//  - in 3., a triangle that was degenerate may stay degenerate (several
+//    vertices at one point, where the field is zero at a grid vertex, as
+//    SPH's level set makes: one collapse after the other merges them);
+//  - 4. cutting a pinched tube: when the needle's short edge (a, b) and a
+//    third vertex c nearly coincide (edges below sin(1 degree) times the
+//    needle's long edge) and form a 3-cycle that is no triangle (ZB05 makes
+//    these where the zero set pinches off at a grid vertex, often with a cap
+//    of three triangles around a fourth vertex on one side), no collapse
+//    passes the link condition. The cycle is cut: the triangles on its left
+//    take a, those on its right take b (c, and a cap's apex, go), both at the
+//    cycle's centre; the six triangles with two vertices on the cycle go.
+//    Every vertex around must keep one closed fan of at least three
+//    triangles; a cap closes its side, otherwise the component splits in two
+//    (or loses a handle) that touch at one point, as the zero set does. Six
+//    triangles fewer; the Euler characteristic is kept for a cap and grows by
+//    2 otherwise.
 // Every repair must make the bad triangle good (or remove it), keep every
-// good triangle good, create no degenerate triangle, and turn no triangle's
-// normal by 60 degrees or more (a second round allows 90 degrees for what is
-// left; a fold, beyond 90, never). Vertices on a boundary, non-manifold or
-// misoriented edge are left alone, so an open or broken input is never made
-// worse. Orientation is kept by construction (collapses rename a vertex,
-// flips keep the quad's boundary direction).
+// good triangle good, create no degenerate triangle (but for the last
+// resort in 3.), and turn no triangle's normal beyond the round's limit.
+// Vertices on a boundary, non-manifold or misoriented edge are left alone, so
+// an open or broken input is never made worse. Orientation is kept by
+// construction (collapses and cuts rename vertices, flips keep the quad's
+// boundary direction).
 //
-// Last, a connected component made of degenerate triangles only (a speck
-// where the field barely dips below zero at one grid vertex) is removed as a
-// whole.
+// Last, what no repair could fix and is only noise is removed, whole
+// connected components at a time (the rest of the mesh is untouched):
+//  - components made of degenerate triangles only (a speck where the field
+//    barely dips below zero at one grid vertex);
+//  - given the cell size, components that still hold a bad triangle and
+//    enclose less than kSmallComponentCells cells (cell^3): droplets the
+//    grid cannot resolve (such as a flat ZB05 droplet of 22 triangles and
+//    0.3 cell^3). CleanupResult counts their triangles.
 //
 // Serial and in a fixed order (worst triangle first, then by index), so the
 // result depends only on the input mesh: the same on every backend and
@@ -115,6 +140,9 @@ class Cleaner {
   std::uint64_t collapses = 0, flips = 0, moves = 0, cuts = 0;
   // Largest turn of a triangle's normal a repair may cause (cosine).
   double cos_limit = kCosMaxNormalTurn;
+  // The last round: a collapse may leave degenerate triangles degenerate,
+  // and pinched tubes may be cut.
+  bool last_resort = false;
 
   // Bad triangles now: (class, sin of the smallest angle, index), worst first.
   // (A scan on all host threads; the sort makes the list independent of them.)
@@ -169,7 +197,9 @@ class Cleaner {
       apply_collapse(best);
       return true;
     }
-    // Last, a needle in a pinched tube: cut the tube.
+    // Last, a needle in a pinched tube: cut the tube (in the last round
+    // only, when nothing else worked).
+    if (!last_resort) return false;
     CutCandidate cut;
     consider_cut(t, cut);
     if (!cut.valid) return false;
@@ -431,7 +461,7 @@ class Cleaner {
         // A triangle that was degenerate may stay so: where several
         // vertices coincide (the field is zero at a grid vertex), one
         // collapse after the other removes their degenerate triangles.
-        if (c_old == 2 && c_new == 2) continue;
+        if (last_resort && c_old == 2 && c_new == 2) continue;
         if (c_new == 2 || (c_old == 0 && c_new != 0)) return;
         const Vec3 n_new = cross(q[1] - q[0], q[2] - q[0]);
         const Vec3 n_ref = c_old == 0 ? cross(o[1] - o[0], o[2] - o[0]) : ref;
@@ -935,13 +965,17 @@ CleanupResult cleanup_mesh(PosVec& positions, NormalVec& normals, IndexVec& tria
   const bool has_normals = !normals.empty() && normals.size() == positions.size();
   detail::Cleaner<typename PosVec::value_type> c(positions.data(), has_normals ? normals.data() : nullptr, nv, triangles.data(), nt);
   // Passes until nothing more can be repaired; then again with a looser
-  // limit on the normals' turn for what is left (folds stay excluded).
+  // limit on the normals' turn for what is left (folds stay excluded);
+  // then, for what is still left, with the last resorts (collapses that
+  // leave degenerate triangles degenerate, cuts of pinched tubes), so that
+  // they never pre-empt a repair that keeps more of the mesh.
   // (A scan costs about 40 ns per triangle: none is repeated needlessly.)
   constexpr std::uint64_t kUnknown = ~std::uint64_t(0);
   std::uint64_t remaining = kUnknown;
   bool first = true;
-  for (double cos_limit : {kCosMaxNormalTurn, kCosMaxNormalTurnLast}) {
-    c.cos_limit = cos_limit;
+  for (int round = 0; round < 3; ++round) {
+    c.cos_limit = round == 0 ? kCosMaxNormalTurn : kCosMaxNormalTurnLast;
+    c.last_resort = round == 2;
     for (int pass = 0; pass < kCleanupPasses && remaining != 0; ++pass) {
       const auto bad = c.bad_triangles();
       if (first) r.bad_before = bad.size();
