@@ -401,6 +401,63 @@ TEST(MeshCleanup, PinchedCapIsCut) {
   EXPECT_EQ(out.components, 1u);
 }
 
+// Random holes as above (closed by a triangle or a cap, their vertices 1e-7
+// to 1e-4 apart in random directions) at several vertices of a sphere: the
+// clean-up, its last round included, keeps the mesh closed, manifold,
+// oriented and of genus 0, never adds bad triangles, and is a function of
+// its input.
+TEST(MeshCleanup, RandomPinchedHolesStayClosed) {
+  const TestMesh sphere = icosphere(3);
+  std::uint64_t bad_in = 0, bad_out = 0, cuts = 0;
+  for (unsigned seed = 1; seed <= 200; ++seed) {
+    TestMesh m = sphere;
+    std::mt19937 rng(seed);
+    std::uniform_real_distribution<float> u(-1, 1);
+    std::vector<std::uint8_t> used(m.p.size() / 3, 0);
+    const int holes = 1 + int(rng() % 4);
+    for (int h = 0; h < holes; ++h) {
+      // A vertex of degree 6 away from the earlier holes.
+      const std::uint32_t n0 = std::uint32_t(sphere.p.size() / 3);
+      std::vector<int> degree(m.p.size() / 3, 0);
+      for (std::uint32_t i : m.t) ++degree[i];
+      used.resize(m.p.size() / 3, 1);  // (the new vertices)
+      std::uint32_t v = std::uint32_t(rng() % n0);
+      while (degree[v] != 6 || used[v]) v = (v + 1) % n0;
+      for (std::size_t i = 0; i < m.t.size(); i += 3)
+        for (int k = 0; k < 3; ++k)
+          if (m.t[i + k] == v)
+            for (int j = 0; j < 3; ++j) used[m.t[i + j]] = 1;
+      const float scale = std::pow(10.0f, -7 + 3 * (u(rng) + 1) / 2);
+      float off[4][3];
+      for (auto& o : off)
+        for (float& x : o) x = scale * u(rng);
+      split_vertex(m, v, off, rng() % 2 == 0);
+    }
+    const CheckResult before = m.check();
+    ASSERT_TRUE(before.closed && before.manifold && before.oriented) << "seed " << seed;
+    TestMesh again = m;
+    const auto r = nbmc::mesh::cleanup_mesh(m.p, m.n, m.t);
+    nbmc::mesh::cleanup_mesh(again.p, again.n, again.t);
+    ASSERT_EQ(m.t, again.t) << "seed " << seed;
+    ASSERT_EQ(m.p, again.p) << "seed " << seed;
+    const CheckResult after = m.check();
+    ASSERT_TRUE(after.closed && after.manifold && after.oriented) << "seed " << seed;
+    ASSERT_EQ(after.euler_characteristic, 2) << "seed " << seed;
+    ASSERT_EQ(after.components, 1u) << "seed " << seed;
+    ASSERT_EQ(after.unreferenced_vertices, 0u);
+    ASSERT_LE(after.degenerate_triangles + after.sliver_triangles,
+              before.degenerate_triangles + before.sliver_triangles) << "seed " << seed;
+    ASSERT_EQ(r.bad_after, after.degenerate_triangles + after.sliver_triangles);
+    bad_in += before.degenerate_triangles + before.sliver_triangles;
+    bad_out += after.degenerate_triangles + after.sliver_triangles;
+    cuts += r.cuts;
+  }
+  EXPECT_EQ(bad_out, 0u) << bad_in << " -> " << bad_out;
+  EXPECT_GT(cuts, 0u);
+  std::printf("random pinched holes: %llu bad triangles -> %llu, %llu cuts\n", (unsigned long long)bad_in,
+              (unsigned long long)bad_out, (unsigned long long)cuts);
+}
+
 TEST(MeshCleanup, NeedlesAreRepaired) {
   TestMesh m = icosphere(2);
   // Move vertex 0 almost onto its neighbour: its two shared triangles become needles.

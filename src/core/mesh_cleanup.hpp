@@ -26,9 +26,10 @@
 // turn limit of 60 degrees, then with 90 degrees (a fold, beyond 90, never),
 // then a last round that adds the last resorts (never pre-empting a repair
 // that keeps more of the mesh):
-//  - in 3., a triangle that was degenerate may stay degenerate (several
-//    vertices at one point, where the field is zero at a grid vertex, as
-//    SPH's level set makes: one collapse after the other merges them);
+//  - in 3., a triangle that was degenerate may stay degenerate, and one
+//    that was bad may stay bad whatever its normal (several vertices at or
+//    near one point, where the field is zero at a grid vertex, as SPH's
+//    level set makes: one collapse after the other merges them);
 //  - 4. cutting a pinched tube: when the needle's short edge (a, b) and a
 //    third vertex c nearly coincide (edges below sin(1 degree) times the
 //    needle's long edge) and form a 3-cycle that is no triangle (ZB05 makes
@@ -463,6 +464,8 @@ class Cleaner {
         // collapse after the other removes their degenerate triangles.
         if (last_resort && c_old == 2 && c_new == 2) continue;
         if (c_new == 2 || (c_old == 0 && c_new != 0)) return;
+        // (and one that was bad may stay bad, its normal noise as before)
+        if (last_resort && c_old != 0 && c_new != 0) continue;
         const Vec3 n_new = cross(q[1] - q[0], q[2] - q[0]);
         const Vec3 n_ref = c_old == 0 ? cross(o[1] - o[0], o[2] - o[0]) : ref;
         if (dot(n_new, n_ref) <= cos_limit * norm(n_new) * norm(n_ref)) return;
