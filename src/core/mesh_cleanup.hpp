@@ -838,7 +838,8 @@ class Cleaner {
       for (int k = 0; k < 3; ++k) T_[3 * std::size_t(r.first) + k] = r.second[k];
       add_incidence(contains(r.second.data(), c.a) ? c.a : c.b, r.first);
     }
-    for (std::uint32_t x : {c.a, c.b}) {
+    const std::uint32_t ends[2] = {c.a, c.b};  // (nvcc's front end rejects {c.a, c.b} in a range-for)
+    for (std::uint32_t x : ends) {
       P_[3 * std::size_t(x)] = Real(c.p.x);
       P_[3 * std::size_t(x) + 1] = Real(c.p.y);
       P_[3 * std::size_t(x) + 2] = Real(c.p.z);
