@@ -402,6 +402,11 @@ void nbmc_params_init(nbmc_params* p) {
   p->iso_threshold = 0.6;
   p->isolated = NBMC_ISOLATED_KEEP;
   p->min_cluster = 10;
+  p->aniso_kr = 4;
+  p->aniso_ks = 1;
+  p->aniso_kn = 0.5;
+  p->aniso_lambda = 0.3;
+  p->aniso_neighbours = 25;
 }
 
 int32_t nbmc_context_reconstruct(nbmc_context* ctx, const nbmc_params* params, nbmc_mesh** mesh) {

@@ -5,18 +5,19 @@
 //
 // A method is a type with
 //   static constexpr int N;                       // accumulator size (floats, zero-initialised)
-//   static constexpr bool weighted;               // reads a per-particle weight (below)
-//   static void add(float* a, dx, dy, dz, k, w)   // contribution of one particle, d = x_j - x,
+//   static constexpr int P;                       // floats of per-particle data it reads (below)
+//   static void add(float* a, dx, dy, dz, k, pd)  // contribution of one particle, d = x_j - x,
 //                                                 // k = max(0, 1 - |d|^2/R^2) (0: no contribution),
-//                                                 // w = weight of particle j (1 if not weighted)
-//   static uint32_t accumulate(a, X, Y, Z, W, b, e, x0, x1, x2, inv_R2)
+//                                                 // pd = particle j's P floats (nullptr if P = 0)
+//   static uint32_t accumulate(a, X, Y, Z, PD, b, e, x0, x1, x2, inv_R2)
 //                                                 // the same for particles [b, e), in order
-//                                                 // (W: the weights, nullptr if not weighted)
+//                                                 // (PD: the data, P floats per particle, nullptr if P = 0)
 //   static float value(const float* a, const FieldConstants&)  // phi(x); negative inside
 // so the gather (narrow band, dense) and the scatter drivers are written once.
-// A weighted method's weights come from a pass over the particles before the
-// field (NeighbourView::weight; see field_sph.hpp); a particle that
-// contributes nothing (k = 0) must add exactly +0 whatever its weight.
+// A method's per-particle data come from a pass over the particles before the
+// field (NeighbourView::pdata, P floats per particle in the sorted order; SPH:
+// a weight, field_sph.hpp; YT10: a kernel, field_yt10.hpp); a particle that
+// contributes nothing (k = 0) must add exactly +0 whatever its data.
 //
 // Summation order: every backend adds a vertex's contributions one at a time,
 // in the order of eval_vertex_direct (cells in z, y, x order, particles in
@@ -93,12 +94,19 @@ inline bool host_any_of(M m) {
 #endif
 #endif
 
+// v in every lane of T (a float, or a host SIMD vector of floats); v - (+0)
+// is v for every v, -0 included.
+template <class T>
+KOKKOS_INLINE_FUNCTION T lanes_of(float v) {
+  return v - T{};
+}
+
 struct FieldConstants {
   float R = 0;           // influence radius
   float inv_R2 = 0;      // 1 / R^2
   float iso_radius = 0;  // r-bar
   float t_low = 0.4f, t_high = 3.5f;
-  float iso_threshold = 0.6f;  // SPH: iso level of the normalised density
+  float iso_threshold = 0.6f;  // SPH, YT10: iso level of the normalised density
   float outside = 0;     // phi where no particle contributes
 };
 

@@ -1,13 +1,14 @@
 // SPDX-License-Identifier: MIT
 // The one place where a field method (Method) becomes a kernel type: every
 // stage that evaluates the field calls with_field_method(p.method, f) and
-// gets f(FieldSSP07{}), f(FieldZB05{}) or f(FieldSPH{}). A new method is a new file
+// gets f(FieldSSP07{}), f(FieldZB05{}), f(FieldSPH{}) or f(FieldYT10{}). A new method is a new file
 // field_<name>.hpp with its kernel type and one case here.
 #pragma once
 
 #include "common.hpp"
 #include "field_sph.hpp"
 #include "field_ssp07.hpp"
+#include "field_yt10.hpp"
 #include "field_zb05.hpp"
 
 namespace nbmc {
@@ -18,6 +19,7 @@ auto with_field_method(Method m, F&& f) {
   switch (m) {
     case Method::ZB05: return f(FieldZB05{});
     case Method::SPH: return f(FieldSPH{});
+    case Method::YT10: return f(FieldYT10{});
     case Method::SSP07: break;
   }
   return f(FieldSSP07{});

@@ -38,11 +38,11 @@ struct FieldSSP07 {
   static constexpr const char* name = "ssp07";
   // a[0] = W = sum k^3, a[1..3] = sum k^3 d, a[4..6] = sum k^2 d (grad k without 6/R^2),
   // a[7..15] = sum d_a k^2 d_b (row-major)
-  static constexpr bool weighted = false;
+  static constexpr int P = 0;
   static constexpr int N = 16;
   // T is float, or a host SIMD vector of floats (same formula, lane-wise).
   template <class T>
-  KOKKOS_INLINE_FUNCTION static void add(T* a, T dx, T dy, T dz, T k, T /*w: unweighted*/) {
+  KOKKOS_INLINE_FUNCTION static void add(T* a, T dx, T dy, T dz, T k, const float* /*no particle data*/) {
     const T k2 = k * k;
     const T w = k2 * k;
     a[0] += w;
@@ -61,7 +61,7 @@ struct FieldSSP07 {
   // order of the sums is part of the result: see field_common.hpp); returns how
   // many contribute. Same operations as add().
   KOKKOS_INLINE_FUNCTION static std::uint32_t accumulate(float* a, const float* X, const float* Y, const float* Z,
-                                                         const float* /*W: unweighted*/, std::uint32_t b,
+                                                         const float* /*no particle data*/, std::uint32_t b,
                                                          std::uint32_t e, float x0, float x1, float x2,
                                                          float inv_R2) {
     float w0 = a[0], d0 = a[1], d1 = a[2], d2 = a[3], g0 = a[4], g1 = a[5], g2 = a[6];

@@ -14,11 +14,11 @@ namespace Details {
 struct FieldZB05 {
   static constexpr const char* name = "zb05";
   // a[0] = sum k^3, a[1..3] = sum k^3 d
-  static constexpr bool weighted = false;
+  static constexpr int P = 0;
   static constexpr int N = 4;
   // T is float, or a host SIMD vector of floats (same formula, lane-wise).
   template <class T>
-  KOKKOS_INLINE_FUNCTION static void add(T* a, T dx, T dy, T dz, T k, T /*w: unweighted*/) {
+  KOKKOS_INLINE_FUNCTION static void add(T* a, T dx, T dy, T dz, T k, const float* /*no particle data*/) {
     const T w = k * k * k;
     a[0] += w;
     a[1] += w * dx;
@@ -29,7 +29,7 @@ struct FieldZB05 {
   // order of the sums is part of the result: see field_common.hpp); returns how
   // many contribute. Same operations as add().
   KOKKOS_INLINE_FUNCTION static std::uint32_t accumulate(float* a, const float* X, const float* Y, const float* Z,
-                                                         const float* /*W: unweighted*/, std::uint32_t b,
+                                                         const float* /*no particle data*/, std::uint32_t b,
                                                          std::uint32_t e, float x0, float x1, float x2,
                                                          float inv_R2) {
     float a0 = a[0], a1 = a[1], a2 = a[2], a3 = a[3];

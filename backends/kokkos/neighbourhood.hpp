@@ -28,7 +28,10 @@ struct Neighbourhood {
   Buffer<std::uint64_t, MemSpace> cell_keys;
   Buffer<std::uint32_t, MemSpace> cell_start;  // n_cells + 1
   HashMapStorage<MemSpace> cells;              // Morton key -> cell index
-  Buffer<float, MemSpace> weight;              // n, sorted order: weighted methods only (field_sph.hpp)
+  // Per-particle data of a field method with a pass over the particles (P
+  // floats per particle, sorted order: SPH's weight, YT10's kernel); empty
+  // for the others.
+  Buffer<float, MemSpace> pdata;
 };
 
 // Read-only device view of a neighbourhood for kernels.
@@ -40,9 +43,9 @@ struct NeighbourView {
   HashMap<MemSpace> cells;
   std::int64_t nb_dims[3];
   float inv_nb_cell;
-  // Per-particle weights of a weighted field method (sorted order); empty
-  // for the others.
-  Kokkos::View<const float*, MemSpace> weight;
+  // Per-particle data of the field method (Neighbourhood::pdata): particle
+  // j's P floats at pdata(P j), ..., pdata(P j + P - 1); empty if P = 0.
+  Kokkos::View<const float*, MemSpace> pdata;
 
   // Range of particles of neighbour cell (x, y, z); empty if unoccupied.
   KOKKOS_INLINE_FUNCTION bool cell_range(std::int64_t x, std::int64_t y, std::int64_t z, std::uint32_t& b,
@@ -64,7 +67,7 @@ NeighbourView<MemSpace> view_of(const Neighbourhood<MemSpace>& nb, const Grid& g
   v.cells = nb.cells.map;
   for (int a = 0; a < 3; ++a) v.nb_dims[a] = g.nb_dims[a];
   v.inv_nb_cell = float(1.0 / g.nb_cell);
-  v.weight = nb.weight.view();
+  v.pdata = nb.pdata.view();
   return v;
 }
 

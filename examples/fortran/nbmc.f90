@@ -96,6 +96,7 @@ module nbmc
   integer(c_int32_t), parameter, public :: NBMC_METHOD_SSP07 = 0
   integer(c_int32_t), parameter, public :: NBMC_METHOD_ZB05  = 1
   integer(c_int32_t), parameter, public :: NBMC_METHOD_SPH   = 2
+  integer(c_int32_t), parameter, public :: NBMC_METHOD_YT10  = 3
 
   integer(c_int32_t), parameter, public :: NBMC_ISOLATED_KEEP = 0
   integer(c_int32_t), parameter, public :: NBMC_ISOLATED_DROP = 1
@@ -175,6 +176,12 @@ module nbmc
     integer(c_int32_t) :: isolated = 0            ! appended (isolated-particle filter)
     integer(c_int32_t) :: min_cluster = 0
     integer(c_int32_t) :: double_positions = 0    ! appended (double-precision positions)
+    real(c_double)     :: aniso_kr = 0            ! appended (NBMC_METHOD_YT10)
+    real(c_double)     :: aniso_ks = 0
+    real(c_double)     :: aniso_kn = 0
+    real(c_double)     :: aniso_lambda = 0
+    integer(c_int32_t) :: aniso_neighbours = 0
+    integer(c_int32_t) :: reserved1 = 0
   end type nbmc_params
 
   type, bind(c), public :: nbmc_stats

@@ -49,7 +49,12 @@ struct NoInitAllocator : std::allocator<T> {
 
 // The field method (the kernel of the scalar field): one value per
 // NBMC_METHOD_*; backends/kokkos/field_methods.hpp maps it to a kernel type.
-enum class Method : int32_t { SSP07 = NBMC_METHOD_SSP07, ZB05 = NBMC_METHOD_ZB05, SPH = NBMC_METHOD_SPH };
+enum class Method : int32_t {
+  SSP07 = NBMC_METHOD_SSP07,
+  ZB05 = NBMC_METHOD_ZB05,
+  SPH = NBMC_METHOD_SPH,
+  YT10 = NBMC_METHOD_YT10
+};
 // Where the field is evaluated: the narrow band (the method of the paper) or
 // one of its baselines.
 enum class FieldKind : int32_t {
@@ -69,7 +74,10 @@ struct Params {
   Method method = Method::SSP07;
   FieldKind field = FieldKind::NarrowBand;
   double t_low = 0.4, t_high = 3.5;
-  double iso_threshold = 0.6;  // SPH: iso level of the normalised density
+  double iso_threshold = 0.6;  // SPH, YT10: iso level of the normalised density
+  // YT10: Yu & Turk's anisotropy (nbmc_params.aniso_*; backends/kokkos/field_yt10.hpp)
+  double aniso_kr = 4, aniso_ks = 1, aniso_kn = 0.5, aniso_lambda = 0.3;
+  int aniso_neighbours = 25;
   bool drop_isolated = false;  // NBMC_ISOLATED_DROP
   std::uint32_t min_cluster = 10;
   double color_threshold = 0.75;
@@ -80,19 +88,34 @@ struct Params {
   double bbox_min[3] = {0, 0, 0}, bbox_max[3] = {0, 0, 0};
 };
 
+// YT10's bounds (backends/kokkos/field_yt10.hpp): a kernel's longest axis is
+// at most kYt10MaxAxis h = 0.75 R (h = R/2, the isotropic support), and its
+// centre moves at most kYt10MaxShift R, so that every kernel lies within
+// 0.95 R of its particle: inside the influence radius that the band, the
+// neighbour search and the ghost layers use.
+constexpr double kYt10MaxAxis = 1.5;
+constexpr double kYt10MaxShift = 0.2;
+
+// The methods with a pass over the particles before the field, whose
+// per-particle values (SPH: the density; YT10: the density, the smoothed
+// centre and the anisotropy) are sums over the particles within R.
+inline bool has_particle_pass(Method m) { return m == Method::SPH || m == Method::YT10; }
+
 // How far from a point the particles that change its field value can lie:
-// R, or 2R for the SPH density, whose value at a point also depends on the
-// densities of the particles within R of it (each a sum over R around that
-// particle). Ghost layers and the particles kept around a clipping box are
-// this wide.
+// R, or 2R for the SPH density and YT10, whose value at a point also depends
+// on per-particle values of the particles within R of it (each a sum over R
+// around that particle). Ghost layers and the particles kept around a
+// clipping box are this wide.
 inline double particle_reach(const Params& p) {
-  return p.method == Method::SPH ? 2 * p.influence_radius : p.influence_radius;
+  return has_particle_pass(p.method) ? 2 * p.influence_radius : p.influence_radius;
 }
 
 // How far beyond the particles the iso-surface can lie: iso_radius for the
-// distance-like fields (SSP07, ZB05), R for the SPH density (zero beyond R).
+// distance-like fields (SSP07, ZB05), R for the SPH density (zero beyond R)
+// and YT10 (a kernel's support, plus its centre's displacement, is at most
+// 0.95 R: field_yt10.hpp).
 inline double surface_reach(const Params& p) {
-  return p.method == Method::SPH ? p.influence_radius : p.iso_radius;
+  return has_particle_pass(p.method) ? p.influence_radius : p.iso_radius;
 }
 
 }  // namespace nbmc

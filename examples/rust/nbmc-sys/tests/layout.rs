@@ -56,6 +56,7 @@ fn rust_constants() -> BTreeMap<&'static str, i128> {
         NBMC_METHOD_SSP07,
         NBMC_METHOD_ZB05,
         NBMC_METHOD_SPH,
+        NBMC_METHOD_YT10,
         NBMC_ISOLATED_KEEP,
         NBMC_ISOLATED_DROP,
         NBMC_FIELD_NARROW_BAND,
@@ -142,7 +143,13 @@ fn rust_layouts() -> Vec<Layout> {
             iso_threshold,
             isolated,
             min_cluster,
-            double_positions
+            double_positions,
+            aniso_kr,
+            aniso_ks,
+            aniso_kn,
+            aniso_lambda,
+            aniso_neighbours,
+            reserved1
         }),
         layout!(nbmc_stats {
             struct_size,
