@@ -17,6 +17,7 @@
 #include "common.hpp"
 #include "field_sph.hpp"
 #include "field_ssp07.hpp"
+#include "field_yt10.hpp"
 #include "field_zb05.hpp"
 #include "grid.hpp"
 #include "narrow_band.hpp"
@@ -24,6 +25,7 @@
 #include "scalar_field.hpp"
 #include "sph_density.hpp"
 #include "surface_particles.hpp"
+#include "yt10_kernels.hpp"
 
 #include <cmath>
 #include <cstdint>
@@ -177,12 +179,25 @@ std::size_t reference_surface(const NeighbourView<Host>& nb, const std::vector<s
   return surface;
 }
 
-// The field at x in the GPU's order (gather_words_direct / eval_vertex_direct).
+// One particle's contribution: Method::add, or, for the per-particle
+// moments (which have accumulate only), accumulate over that one particle.
 template <class Method>
-float reference_field(const NeighbourView<Host>& nb, const float x[3], float S, const FieldConstants& fc,
-                      std::uint64_t& evals) {
-  float acc[Method::N];
-  for (float& a : acc) a = 0.f;
+void add_reference(float* acc, float dx, float dy, float dz, float k, const float* pd, float inv_R2) {
+  if constexpr (std::is_same<Method, Yt10Moments>::value) {
+    (void)k;
+    (void)pd;
+    const float X[1] = {dx}, Y[1] = {dy}, Z[1] = {dz};
+    Method::accumulate(acc, X, Y, Z, nullptr, 0, 1, 0.f, 0.f, 0.f, inv_R2);  // d - 0 is d
+  } else {
+    Method::add(acc, dx, dy, dz, k, pd);
+  }
+}
+
+// The sums at x in the GPU's order (gather_words_direct / eval_vertex_direct).
+template <class Method>
+void reference_sums(const NeighbourView<Host>& nb, const float x[3], float S, const FieldConstants& fc, float* acc,
+                    std::uint32_t& evals) {
+  for (int q = 0; q < Method::N; ++q) acc[q] = 0.f;
   std::int64_t lo[3], hi[3];
   for (int a = 0; a < 3; ++a) {
     lo[a] = std::int64_t(std::floor((x[a] - fc.R) * nb.inv_nb_cell));
@@ -211,9 +226,20 @@ float reference_field(const NeighbourView<Host>& nb, const float x[3], float S, 
           const float dx = X[j] - x[0], dy = Y[j] - x[1], dz = Z[j] - x[2];
           const float s2 = (dx * dx + dy * dy + dz * dz) * fc.inv_R2;
           evals += s2 < 1.f ? 1 : 0;
-          Method::add(acc, dx, dy, dz, s2 < 1.f ? 1.f - s2 : 0.f, Method::weighted ? nb.weight(j) : 1.f);
+          add_reference<Method>(acc, dx, dy, dz, s2 < 1.f ? 1.f - s2 : 0.f,
+                                Method::P ? nb.pdata.data() + std::size_t(Method::P) * j : nullptr, fc.inv_R2);
         }
       }
+}
+
+// The field at x in the GPU's order.
+template <class Method>
+float reference_field(const NeighbourView<Host>& nb, const float x[3], float S, const FieldConstants& fc,
+                      std::uint64_t& evals) {
+  float acc[Method::N];
+  std::uint32_t count = 0;
+  reference_sums<Method>(nb, x, S, fc, acc, count);
+  evals += count;
   return Method::value(acc, fc);
 }
 
@@ -240,16 +266,33 @@ Outcome run(const Exec& space, const Points& xyz, const Params& p, bool dense) {
   const Grid g = make_grid(lo, hi, p);
   Neighbourhood<Host> nbh;
   build_neighbourhood(space, tracker, xyz.data(), n, {}, g, nbh);
-  const FieldConstants fc = field_constants(p.influence_radius, p.iso_radius, p.t_low, p.t_high, p.iso_threshold);
-  if (Method::weighted) compute_sph_weights(space, tracker, nbh, g, fc);
+  FieldConstants fc = field_constants(p.influence_radius, p.iso_radius, p.t_low, p.t_high, p.iso_threshold);
+  if (std::is_same<Method, FieldSPH>::value) compute_sph_weights(space, tracker, nbh, g, fc);
+  if (std::is_same<Method, FieldYT10>::value) fc = compute_yt10_kernels(space, tracker, nbh, g, p, fc);
   const NeighbourView<Host> nb = view_of(nbh, g);
-  if (Method::weighted) {
+  if (std::is_same<Method, FieldSPH>::value) {
     // Each particle's weight: 1 / (its density summed in the serial order).
+    const FieldConstants fc0 = field_constants(p.influence_radius, p.iso_radius, p.t_low, p.t_high, p.iso_threshold);
     std::uint64_t unused = 0;
     for (std::size_t j = 0; j < n; ++j) {
       const float x[3] = {nb.pos(j), nb.pos(n + j), nb.pos(2 * n + j)};
-      const float ref = 1.f / reference_field<SphDensity>(nb, x, float(g.nb_cell), fc, unused);
-      out.weight_mismatches += bits(nb.weight(j)) != bits(ref);
+      const float ref = 1.f / reference_field<SphDensity>(nb, x, float(g.nb_cell), fc0, unused);
+      out.weight_mismatches += bits(nb.pdata(j)) != bits(ref);
+    }
+  }
+  if (std::is_same<Method, FieldYT10>::value) {
+    // Each particle's kernel from its moments summed in the serial order.
+    const FieldConstants fc0 = field_constants(p.influence_radius, p.iso_radius, p.t_low, p.t_high, p.iso_threshold);
+    const Yt10Constants k = yt10_constants(p);
+    for (std::size_t j = 0; j < n; ++j) {
+      const float x[3] = {nb.pos(j), nb.pos(n + j), nb.pos(2 * n + j)};
+      float a[Yt10Moments::N];
+      std::uint32_t count = 0;
+      reference_sums<Yt10Moments>(nb, x, float(g.nb_cell), fc0, a, count);
+      float kern[kYt10Floats];
+      yt10_kernel(a, count, k, kern);
+      for (int q = 0; q < kYt10Floats; ++q)
+        out.weight_mismatches += bits(nb.pdata(std::size_t(kYt10Floats) * j + q)) != bits(kern[q]);
     }
   }
 
@@ -334,6 +377,7 @@ void check(const char* name, const Points& xyz, double r, double cell, bool dens
   const Params p = make_params(r, cell,
                                std::is_same<Method, FieldZB05>::value  ? NBMC_METHOD_ZB05
                                : std::is_same<Method, FieldSPH>::value ? NBMC_METHOD_SPH
+                               : std::is_same<Method, FieldYT10>::value ? NBMC_METHOD_YT10
                                                                        : NBMC_METHOD_SSP07);
   for (int backend = 0; backend < 2; ++backend) {
     const Outcome o = backend == 0 ? run<Method>(Kokkos::Serial(), xyz, p, dense)
@@ -350,7 +394,7 @@ void check(const char* name, const Points& xyz, double r, double cell, bool dens
     EXPECT_EQ(o.field_mismatches, 0u) << what << ": " << o.field_mismatches << " of " << o.band_vertices
                                       << " field values differ from the serial per-vertex order; first: " << o.first;
     EXPECT_EQ(o.direct_mismatches, 0u) << what << ": eval_vertex_direct does not sum in plain serial order";
-    EXPECT_EQ(o.weight_mismatches, 0u) << what << ": SPH particle weights differ from the serial order";
+    EXPECT_EQ(o.weight_mismatches, 0u) << what << ": SPH weights or YT10 kernels differ from the serial order";
     EXPECT_EQ(o.evals, o.ref_evals) << what << ": contributing-particle count";
   }
 }
@@ -365,6 +409,7 @@ TEST(FieldOrder, RandomCloud) {
     check<FieldSSP07>("random cloud", p, kR, cell);
     check<FieldZB05>("random cloud", p, kR, cell);
     check<FieldSPH>("random cloud", p, kR, cell);
+    check<FieldYT10>("random cloud", p, kR, cell);
   }
 }
 
@@ -374,6 +419,7 @@ TEST(FieldOrder, JitteredLatticeBall) {
     check<FieldSSP07>("jittered ball", p, kR, cell);
     check<FieldZB05>("jittered ball", p, kR, cell);
     check<FieldSPH>("jittered ball", p, kR, cell);
+    check<FieldYT10>("jittered ball", p, kR, cell);
   }
 }
 
@@ -386,6 +432,7 @@ TEST(FieldOrder, LatticeBall) {
     check<FieldSSP07>("lattice ball", p, kR, cell);
     check<FieldZB05>("lattice ball", p, kR, cell);
     check<FieldSPH>("lattice ball", p, kR, cell);
+    check<FieldYT10>("lattice ball", p, kR, cell);
   }
 }
 
@@ -395,6 +442,7 @@ TEST(FieldOrder, DenseGridWithEmptyVertices) {
   check<FieldSSP07>("dense grid", p, kR, 1.0, true);
   check<FieldZB05>("dense grid", p, kR, 1.0, true);
   check<FieldSPH>("dense grid", p, kR, 1.0, true);
+  check<FieldYT10>("dense grid", p, kR, 1.0, true);
 }
 
 TEST(FieldOrder, CrowdedTile) {
@@ -405,6 +453,7 @@ TEST(FieldOrder, CrowdedTile) {
   check<FieldSSP07>("crowded tile", p, kR, 1.0);
   check<FieldZB05>("crowded tile", p, kR, 0.5);
   check<FieldSPH>("crowded tile", p, kR, 0.5);
+  check<FieldYT10>("crowded tile", p, kR, 0.5);
 }
 
 TEST(FieldOrder, CoarseCells) {
@@ -414,6 +463,7 @@ TEST(FieldOrder, CoarseCells) {
   check<FieldSSP07>("coarse cells", p, kR, 6.0);
   check<FieldZB05>("coarse cells", p, kR, 6.0);
   check<FieldSPH>("coarse cells", p, kR, 6.0);
+  check<FieldYT10>("coarse cells", p, kR, 6.0);
 }
 
 TEST(FieldOrder, RealFrame) {
@@ -422,4 +472,5 @@ TEST(FieldOrder, RealFrame) {
   if (p.empty()) GTEST_SKIP() << f << " not present";
   check<FieldSSP07>("cbd46k", p, 0.0156, 1.0, false, 1000);
   check<FieldSPH>("cbd46k", p, 0.0156, 1.0, false, 1000);
+  check<FieldYT10>("cbd46k", p, 0.0156, 1.0, false, 1000);
 }
