@@ -25,7 +25,12 @@
 //    vertices lie within the box plus the margin nbmc.h documents for use_bbox
 //    (plus one cell: the grid's last vertex);
 //  - a second run gives the same status and the bitwise identical mesh, and so
-//    does the same set uploaded in a shuffled order.
+//    does the same set uploaded in a shuffled order;
+//  - every successful free run again with post-processing drawn from the
+//    permutation seed (0-5 smoothing steps, uniform or feature weights,
+//    decimation to 0.1-1, isolated particles kept or as spheres): closed,
+//    manifold, oriented without a bounding box, no more triangles than
+//    before decimation, one sphere per dropped particle, deterministic.
 //
 // One serial context is created on the first input and reused. Each input is
 // capped (<= 400 particles; an estimate of the band vertices and the field work
@@ -287,6 +292,7 @@ struct Run {
   nbmc_stats stats{};
   bool has_normals = false;
   std::vector<double> positions64;  // nbmc_mesh_positions_f64 (double_positions)
+  std::uint64_t spheres = 0;        // nbmc_mesh_sphere_count (NBMC_ISOLATED_SPHERE)
 };
 
 Run reconstruct(nbmc_context* ctx, const nbmc_params& prm, int cancel_at) {
@@ -325,6 +331,11 @@ Run reconstruct(nbmc_context* ctx, const nbmc_params& prm, int cancel_at) {
   const double* pos64 = nbmc_mesh_positions_f64(m);
   if (bool(pos64) != (prm.double_positions && nv > 0)) die("double positions present/absent against double_positions");
   if (pos64) r.positions64.assign(pos64, pos64 + 3 * nv);
+  r.spheres = nbmc_mesh_sphere_count(m);
+  if ((r.spheres > 0) != (nbmc_mesh_spheres(m) != nullptr)) die("sphere pointer does not match the sphere count");
+  for (std::uint64_t i = 0; i < r.spheres; ++i)
+    for (int k = 0; k < 4; ++k)
+      if (!std::isfinite(nbmc_mesh_spheres(m)[4 * i + std::uint64_t(k)])) die("non-finite sphere");
   nbmc_mesh_destroy(m);
   nbmc_stats_init(&r.stats);
   if (nbmc_context_stats(ctx, &r.stats) != NBMC_OK) die("nbmc_context_stats failed after a success");
@@ -732,7 +743,10 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
               std::isfinite(eff.aniso_kn) && eff.aniso_kn > 0 && eff.aniso_kn <= 1.5 &&
               std::isfinite(eff.aniso_lambda) && eff.aniso_lambda >= 0 && eff.aniso_lambda <= 1 &&
               eff.aniso_neighbours >= 0 &&
-              (eff.isolated == NBMC_ISOLATED_KEEP || eff.isolated == NBMC_ISOLATED_DROP) && eff.min_cluster >= 1 &&
+              (eff.isolated == NBMC_ISOLATED_KEEP || eff.isolated == NBMC_ISOLATED_DROP ||
+               eff.isolated == NBMC_ISOLATED_SPHERE) &&
+              eff.min_cluster >= 1 && eff.decimate_fraction > 0 && eff.decimate_fraction <= 1 &&
+              (eff.smooth_weighting == NBMC_SMOOTH_UNIFORM || eff.smooth_weighting == NBMC_SMOOTH_FEATURE) &&
               (prm.field >= NBMC_FIELD_NARROW_BAND && prm.field <= NBMC_FIELD_SCATTER) && pos(prm.cell_size) &&
               pos(prm.influence_radius) && pos(prm.band_width) && pos(prm.surface_radius) && pos(prm.iso_radius) &&
               std::isfinite(prm.t_low) && std::isfinite(prm.t_high) && prm.t_low < prm.t_high &&
@@ -886,6 +900,50 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     expect_same(f, d, "double_positions (rounded to float)", false);
     for (std::size_t i = 0; i < d.positions64.size(); ++i)
       if (float(d.positions64[i]) != d.mesh.positions[i]) die("double_positions: float positions are not the doubles rounded");
+  }
+
+  // Post-processing (issue #11: smoothing with either weighting, decimation,
+  // isolated particles as spheres) on every successful free run, with values
+  // drawn from the permutation seed (no new input bytes, so the corpus keeps
+  // its meaning): the mesh stays closed, manifold and oriented without a
+  // bounding box, decimation never adds triangles, the spheres are the
+  // dropped particles, and a second run gives the same mesh.
+  if (a.status == NBMC_OK && free_run && ex.struct_ok && us == NBMC_OK && prm.struct_size == sizeof(nbmc_params)) {
+    SplitMix g{perm_seed ^ 0x5bd1e995u};
+    nbmc_params pp = prm;
+    pp.smooth_iterations = int32_t(g.next() % 6);
+    pp.smooth_weighting = g.next() % 2 ? NBMC_SMOOTH_FEATURE : NBMC_SMOOTH_UNIFORM;
+    pp.decimate_fraction = 0.1 + 0.9 * double(g.next() % 1000 + 1) / 1000.0;
+    pp.isolated = g.next() % 2 ? NBMC_ISOLATED_SPHERE : NBMC_ISOLATED_KEEP;
+    pp.min_cluster = int32_t(1 + g.next() % 20);
+    const Run p1 = reconstruct(ctx, pp, -1);
+    // Every particle may fall in a small cluster (nothing left to mesh), and
+    // the cluster filter indexes at most 2^21 - 2 cells of the surface radius
+    // per axis (a sparse cloud spread wider: DOMAIN_TOO_LARGE, said so).
+    const bool filter_limit = p1.status == NBMC_ERROR_DOMAIN_TOO_LARGE &&
+                              p1.message.find("isolated-particle filter") != std::string::npos;
+    if (p1.status != NBMC_OK &&
+        !(pp.isolated == NBMC_ISOLATED_SPHERE && (p1.status == NBMC_ERROR_NO_PARTICLES || filter_limit)))
+      die("post-processing run gave " + status_text(p1.status) + ": \"" + p1.message + "\"");
+    if (p1.status == NBMC_OK) {
+      const std::size_t nt = p1.mesh.triangle_count();
+      if (nt > p1.stats.pre_decimation_triangle_count) die("decimation added triangles");
+      if (pp.decimate_fraction >= 1 && nt != p1.stats.pre_decimation_triangle_count)
+        die("decimate_fraction 1 removed triangles");
+      if (pp.isolated == NBMC_ISOLATED_SPHERE ? p1.spheres != p1.stats.dropped_particle_count : p1.spheres != 0)
+        die("spheres: " + std::to_string(p1.spheres) + " for " + std::to_string(p1.stats.dropped_particle_count) +
+            " dropped particles");
+      if (!prm.use_bbox) {
+        const nbmc_test::MeshReport rep = nbmc_test::check_mesh(p1.mesh);
+        if (!rep.closed || !rep.edge_manifold || !rep.vertex_manifold || !rep.oriented || rep.unreferenced_vertices)
+          die("post-processed mesh is not closed/manifold/oriented: " + rep.summary() + " (smooth " +
+              std::to_string(pp.smooth_iterations) + ", weighting " + std::to_string(pp.smooth_weighting) +
+              ", decimate " + std::to_string(pp.decimate_fraction) + ", isolated " + std::to_string(pp.isolated) +
+              ")");
+      }
+    }
+    const Run p2 = reconstruct(ctx, pp, -1);
+    expect_same(p1, p2, "post-processing, second run", true);
   }
 
   // The context stays usable after whatever happened: leave it clean.

@@ -92,6 +92,12 @@ extern "C" {
 /* Isolated particles (nbmc_params.isolated). */
 #define NBMC_ISOLATED_KEEP  0  /* every particle makes surface (default) */
 #define NBMC_ISOLATED_DROP  1  /* clusters of fewer than min_cluster particles make none */
+#define NBMC_ISOLATED_SPHERE 2 /* as DROP, and their particles are returned as spheres
+                                  (nbmc_mesh_sphere_count, nbmc_mesh_spheres) */
+
+/* Smoothing weights (nbmc_params.smooth_weighting). */
+#define NBMC_SMOOTH_UNIFORM  0  /* every vertex smoothed alike (default) */
+#define NBMC_SMOOTH_FEATURE  1  /* per vertex, by the particles near it: thin features are kept */
 
 /* Field evaluation strategies (nbmc_params.field). */
 #define NBMC_FIELD_NARROW_BAND  0  /* gather on band vertices only (the method; default) */
@@ -284,6 +290,16 @@ typedef struct nbmc_params {
                                keeps the field's relative precision there). Host meshes only:
                                with NBMC_MEMORY_DEVICE, NBMC_ERROR_INVALID_PARAMETER.
                                0 (default): float positions, as before */
+  /* Appended with decimation and feature-weighted smoothing (older callers:
+     the defaults; see "Mesh post-processing" below). */
+  double decimate_fraction; /* 0 < f <= 1: after the clean-up and smoothing, quadric-error edge
+                               collapses down to f times the triangles (fewer collapses where
+                               one would open, fold or break the mesh); 1 (default): off */
+  int32_t smooth_weighting; /* NBMC_SMOOTH_UNIFORM (default) or NBMC_SMOOTH_FEATURE: each vertex's
+                               smoothing step scaled by a weight in [0, 1] from the particles
+                               around it (few, as on a thin sheet, a filament or a droplet:
+                               near 0; the bulk: 1). Not available over MPI */
+  int32_t reserved1;        /* 0 */
   /* Appended with NBMC_METHOD_YT10 (older callers: the defaults). Yu & Turk's
      anisotropic kernels (docs/methods.md): each particle's neighbours within
      influence_radius R give a weighted covariance, whose principal axes
@@ -304,7 +320,7 @@ typedef struct nbmc_params {
   int32_t aniso_neighbours; /* N_eps: more neighbours than this within R (the particle itself not
                                counted) give an anisotropic kernel, fewer a sphere; >= 0;
                                default 25 (Yu & Turk) */
-  int32_t reserved1;
+  int32_t reserved2;        /* 0 */
 } nbmc_params;
 
 /* Fills *params with the defaults (spacing is 0 and must be set). */
@@ -345,6 +361,9 @@ typedef struct nbmc_stats {
   /* Appended with the isolated-particle filter (nbmc_params.isolated). */
   uint64_t dropped_particle_count; /* particles left out as isolated (0 with NBMC_ISOLATED_KEEP) */
   uint64_t dropped_cluster_count;  /* the clusters they formed */
+  /* Appended with decimation (nbmc_params.decimate_fraction). */
+  uint64_t pre_decimation_triangle_count; /* triangles before the decimation (after the clean-up
+                                             and smoothing); triangle_count without decimation */
 } nbmc_stats;
 
 NBMC_API void nbmc_stats_init(nbmc_stats* stats);
@@ -453,8 +472,26 @@ NBMC_API int32_t nbmc_kokkos_finalize(void);
  *    1% (a droplet of a few vertices, which the filter shrinks) is scaled
  *    back to its volume about its centroid; normals are then recomputed from
  *    the faces, and with the clean-up on, it runs once more.
+ *    With nbmc_params.smooth_weighting = NBMC_SMOOTH_FEATURE, each vertex's
+ *    steps are scaled by w = s(clamp((n / n_bulk - 0.15) / 0.2, 0, 1)),
+ *    s(x) = 3x^2 - 2x^3, with n = sum over the particles j within the
+ *    influence radius R of (1 - |x - x_j|^2 / R^2) at the vertex x before
+ *    smoothing, and n_bulk = (8/15) pi (R / spacing)^3 the same sum inside a
+ *    lattice of the spacing (Loeschner et al. 2023): a flat surface gets 1,
+ *    thin sheets, filaments and droplets, with few particles near, barely
+ *    move. The particles are those the surface was made of (host work).
+ *  - decimation (nbmc_params.decimate_fraction < 1): Garland and Heckbert's
+ *    quadric-error edge collapses, cheapest first (ties by vertex index),
+ *    until the mesh has at most that fraction of its triangles; each collapse
+ *    checked as in the clean-up (link condition, each vertex keeps three
+ *    neighbours, no triangle turns by 60 degrees or more, none becomes
+ *    degenerate, no good triangle becomes a sliver), so the mesh stays
+ *    closed, manifold and oriented and its genus is kept; where every
+ *    remaining collapse is refused, it stops above the target. Normals are
+ *    recomputed from the faces (area-weighted).
  * The time goes to stage NBMC_STAGE_POSTPROCESS of nbmc_stats, and the vertex
- * and triangle counts there are those of the returned mesh. */
+ * and triangle counts there are those of the returned mesh. Particle
+ * attributes are interpolated afterwards, onto the final vertices. */
 #define NBMC_STAGE_POSTPROCESS 7  /* mesh clean-up and smoothing (host) */
 
 /* Topology and quality of a mesh (nbmc_mesh_check). Definitions:
@@ -598,11 +635,15 @@ NBMC_API uint64_t nbmc_mesh_global_vertex_count(const nbmc_mesh* mesh);
  *   a(x) = sum_j k_j a_j / sum_j k_j,  k_j = max(0, (1 - |x - x_j|^2/R^2)^3),
  * the weights of the scalar field; a vertex with no particle closer than R
  * takes the value of its nearest particle (lowest index on ties). The sums
- * run in double precision in a fixed order, on the host, for every backend:
- * the values are the same on every backend, thread count and subdomain split
- * (a split frame is interpolated on the stitched mesh from all particles).
- * Contexts bound to several processes (nbmc_mpi) do not support attributes
- * yet: the setters return NBMC_ERROR_INVALID_ARGUMENT there.
+ * run in double precision in a fixed order on the context's backend (the GPU
+ * for a CUDA context): the values are the same for any thread count,
+ * subdomain split and MPI rank count, and on every backend for the same
+ * vertices (a split frame is interpolated on the stitched mesh from all
+ * particles). On contexts bound to several processes (nbmc_mpi) each rank
+ * sets the attributes of its own particles; every rank with particles must
+ * set the same names and components (else nbmc_mpi_reconstruct fails with
+ * NBMC_ERROR_INVALID_ARGUMENT on every rank), and the values come on the
+ * root's gathered mesh or on each rank's piece.
  * ---------------------------------------------------------------------- */
 
 /* Sets (copies) the attribute called name: components (1, a scalar, or 3, a
@@ -653,6 +694,23 @@ NBMC_API const char* nbmc_mesh_attribute_name(const nbmc_mesh* mesh, uint32_t i)
  * HDF5; OBJ drops them). Read-only: may be called concurrently on one mesh
  * (the message is thread-local). */
 NBMC_API const float* nbmc_mesh_attribute(const nbmc_mesh* mesh, const char* name, uint32_t* components);
+
+/* ------------------------------------------------------------------------
+ * Isolated particles as spheres (nbmc_params.isolated = NBMC_ISOLATED_SPHERE):
+ * the particles of the clusters of fewer than min_cluster particles make no
+ * surface, and the mesh returns them as spheres, for renderers that draw
+ * spheres (splashes, spray): one per particle, in the particles' order, of
+ * radius iso_radius (absolute; NBMC_METHOD_SPH and NBMC_METHOD_YT10: half
+ * the spacing), the size of the surface one particle alone makes.
+ * nbmc_stats counts them
+ * (dropped_particle_count, dropped_cluster_count).
+ * ---------------------------------------------------------------------- */
+/* Spheres of the mesh; 0 for NULL or a mesh made without NBMC_ISOLATED_SPHERE. */
+NBMC_API uint64_t nbmc_mesh_sphere_count(const nbmc_mesh* mesh);
+/* 4 * sphere_count floats, x, y, z, radius per sphere, in HOST memory for
+ * every mesh, valid until nbmc_mesh_destroy; NULL when there are none.
+ * Read-only: may be called concurrently on one mesh. */
+NBMC_API const float* nbmc_mesh_spheres(const nbmc_mesh* mesh);
 
 #ifdef __cplusplus
 } /* extern "C" */

@@ -299,8 +299,10 @@ Params resolve_params(const nbmc_params& in) {
   require(std::isfinite(in.iso_threshold) && in.iso_threshold > 0 && in.iso_threshold < 1,
           "iso_threshold must lie strictly between 0 and 1, a fraction of the rest density (got " +
               num(in.iso_threshold) + ")");
-  require(in.isolated == NBMC_ISOLATED_KEEP || in.isolated == NBMC_ISOLATED_DROP,
-          "isolated must be NBMC_ISOLATED_KEEP or NBMC_ISOLATED_DROP (got " + std::to_string(in.isolated) + ")");
+  require(in.isolated == NBMC_ISOLATED_KEEP || in.isolated == NBMC_ISOLATED_DROP ||
+              in.isolated == NBMC_ISOLATED_SPHERE,
+          "isolated must be NBMC_ISOLATED_KEEP, NBMC_ISOLATED_DROP or NBMC_ISOLATED_SPHERE (got " +
+              std::to_string(in.isolated) + ")");
   require(in.min_cluster >= 1, "min_cluster must be at least 1 (got " + std::to_string(in.min_cluster) + ")");
   // Yu & Turk's anisotropy: checked whatever the method, like iso_threshold
   // (a caller built against an older header gets the defaults).
@@ -340,7 +342,7 @@ Params resolve_params(const nbmc_params& in) {
   p.aniso_kn = in.aniso_kn;
   p.aniso_lambda = in.aniso_lambda;
   p.aniso_neighbours = in.aniso_neighbours;
-  p.drop_isolated = in.isolated == NBMC_ISOLATED_DROP;
+  p.drop_isolated = in.isolated == NBMC_ISOLATED_DROP || in.isolated == NBMC_ISOLATED_SPHERE;
   p.min_cluster = std::uint32_t(in.min_cluster);
   p.color_threshold = in.color_threshold;
   p.neighbour_threshold = in.neighbour_threshold;
@@ -400,25 +402,26 @@ void run_on_kokkos_thread(nbmc_context& ctx, const std::function<void()>& fn) {
 }
 
 namespace {
-// One reconstruction (a frame, or a subdomain of one) on the context's
-// backend; the caller holds the backend's lock on nbmc's Kokkos thread.
-void dispatch(nbmc_context& ctx, const ParticleInput& in, const Params& p, const Progress& progress,
-            bool mesh_on_device, HostMesh& mesh, RunStats& st) {
+// Runs run(backend) on the context's backend, the OpenMP one with the
+// context's thread count; the caller holds the backend's lock on nbmc's
+// Kokkos thread.
+template <class F>
+void on_backend(nbmc_context& ctx, F&& run) {
   switch (ctx.backend) {
-    case NBMC_BACKEND_SERIAL: reconstruct_serial(in, p, ctx.memory, progress, mesh, st); break;
+    case NBMC_BACKEND_SERIAL: run(NBMC_BACKEND_SERIAL); break;
     case NBMC_BACKEND_OPENMP: {
 #if defined(KOKKOS_ENABLE_OPENMP)
       const int pool = pool_threads();
       const int hw = int(std::max(1u, std::thread::hardware_concurrency()));
       const int threads = std::min(pool, ctx.num_threads > 0 ? ctx.num_threads : hw);
       if (threads >= pool) {
-        reconstruct_openmp(in, p, ctx.memory, progress, mesh, st);
+        run(NBMC_BACKEND_OPENMP);
       } else {
         std::exception_ptr err;
         Kokkos::OpenMP::partition_master(
             [&](int, int) {
               try {
-                reconstruct_openmp(in, p, ctx.memory, progress, mesh, st);
+                run(NBMC_BACKEND_OPENMP);
               } catch (...) {
                 err = std::current_exception();
               }
@@ -429,19 +432,47 @@ void dispatch(nbmc_context& ctx, const ParticleInput& in, const Params& p, const
 #endif
       break;
     }
-    case NBMC_BACKEND_CUDA: reconstruct_cuda(in, p, ctx.memory, progress, mesh_on_device, mesh, st, ctx.device_id); break;
+    case NBMC_BACKEND_CUDA: run(NBMC_BACKEND_CUDA); break;
     default: throw Error(NBMC_ERROR_BACKEND_UNAVAILABLE, "backend not available");
   }
 }
 
+// One reconstruction (a frame, or a subdomain of one) on the context's
+// backend; the caller holds the backend's lock on nbmc's Kokkos thread.
+void dispatch(nbmc_context& ctx, const ParticleInput& in, const Params& p, const Progress& progress,
+            bool mesh_on_device, HostMesh& mesh, RunStats& st) {
+  on_backend(ctx, [&](int32_t backend) {
+    switch (backend) {
+      case NBMC_BACKEND_SERIAL: reconstruct_serial(in, p, ctx.memory, progress, mesh, st); break;
+      case NBMC_BACKEND_OPENMP: reconstruct_openmp(in, p, ctx.memory, progress, mesh, st); break;
+      default: reconstruct_cuda(in, p, ctx.memory, progress, mesh_on_device, mesh, st, ctx.device_id); break;
+    }
+  });
+}
+
 }  // namespace
+
+bool interpolate_attributes_on_backend(nbmc_context& ctx, const AttributeJob& job) {
+  bool done = false;
+  run_on_kokkos_thread(ctx, [&] {
+    on_backend(ctx, [&](int32_t backend) {
+      switch (backend) {
+        case NBMC_BACKEND_SERIAL: done = interpolate_attributes_serial(job, ctx.memory); break;
+        case NBMC_BACKEND_OPENMP: done = interpolate_attributes_openmp(job, ctx.memory); break;
+        default: done = interpolate_attributes_cuda(job, ctx.memory); break;
+      }
+    });
+  });
+  return done;
+}
 
 void run_region(nbmc_context& ctx, const ParticleInput& in, const Params& p, const Progress& progress, HostMesh& mesh,
                 RunStats& st) {
   run_on_kokkos_thread(ctx, [&] { dispatch(ctx, in, p, progress, false, mesh, st); });
 }
 
-void run_backend(nbmc_context& ctx, const Params& p, HostMesh& mesh, RunStats& st) {
+void run_backend(nbmc_context& ctx, const Params& p, HostMesh& mesh, RunStats& st,
+                 std::vector<std::uint32_t>* kept_out) {
   Progress progress;
   if (ctx.progress_fn) {
     nbmc_progress_fn fn = ctx.progress_fn;
@@ -526,6 +557,7 @@ void run_backend(nbmc_context& ctx, const Params& p, HostMesh& mesh, RunStats& s
   kokkos_thread().run(job);
   st.dropped_particles = clusters.dropped_particles;
   st.dropped_clusters = clusters.dropped_clusters;
+  if (kept_out) kept_out->swap(clusters.kept);
   ctx.peak_memory = ctx.memory.peak.load();
 }
 

@@ -8,6 +8,8 @@
 
 #include <functional>
 
+struct nbmc_mesh;
+
 namespace nbmc {
 
 const char* version_string();
@@ -28,13 +30,18 @@ Params resolve_params(const nbmc_params& in);
 // Rejects parameter/particle combinations whose grid could not be indexed.
 void check_domain(const Params& p);
 
-void run_backend(nbmc_context& ctx, const Params& p, HostMesh& mesh, RunStats& st);
+// kept_out (may be null): with p.drop_isolated, the indices of the particles
+// the isolated-particle filter kept (ascending); else left empty.
+void run_backend(nbmc_context& ctx, const Params& p, HostMesh& mesh, RunStats& st,
+                 std::vector<std::uint32_t>* kept_out = nullptr);
 // One subdomain (in.region) or frame on the context's backend, from any thread.
 void run_region(nbmc_context& ctx, const ParticleInput& in, const Params& p, const Progress& progress, HostMesh& mesh,
                 RunStats& st);
-// The frame over the processes of a collective (src/distributed.cpp).
+// The frame over the processes of a collective (src/distributed.cpp): the
+// reconstruction, the root's clean-up and smoothing (gather output), and the
+// particle attributes onto the final vertices.
 void reconstruct_collective(nbmc_context& ctx, const nbmc_params& params, const nbmc__collective& hooks,
-                            int32_t output, int32_t root, HostMesh& mesh);
+                            int32_t output, int32_t root, nbmc_mesh& mesh);
 // Runs fn where the context's backend runs its work (nbmc's Kokkos thread,
 // serialised with the reconstructions of that backend).
 void run_on_kokkos_thread(nbmc_context& ctx, const std::function<void()>& fn);
@@ -46,6 +53,30 @@ void reconstruct_openmp(const ParticleInput& in, const Params& p, MemoryTracker&
                         RunStats& st);
 void reconstruct_cuda(const ParticleInput& in, const Params& p, MemoryTracker& t, const Progress& pr,
                       bool mesh_on_device, HostMesh& m, RunStats& st, int device);
+
+// Particle attributes interpolated onto mesh vertices on a backend
+// (backends/kokkos/attributes.hpp). Host arrays except xyz with on_device.
+struct AttributeJob {
+  const double* xyz = nullptr;      // 3 per particle, absolute
+  bool on_device = false;           // xyz in CUDA memory
+  std::size_t count = 0;
+  const double* values = nullptr;   // count * width, particle-major
+  std::size_t width = 0;            // components of all attributes together
+  const float* vertices = nullptr;  // 3 per vertex (or vertices64)
+  const double* vertices64 = nullptr;
+  std::size_t vertex_count = 0;
+  double radius = 0;
+  bool use_bounds = false;          // bounds (lo[3], hi[3]) fix the cell grid in place of the particles' own
+  double bounds[6] = {0, 0, 0, 0, 0, 0};
+  double* out = nullptr;            // vertex_count * width
+  std::uint8_t* empty = nullptr;    // vertex_count: 1 where no particle is closer than radius
+};
+// Runs job on the context's backend (from any thread); false if the
+// particles' box is too large for its cell grid (use the host path then).
+bool interpolate_attributes_on_backend(nbmc_context& ctx, const AttributeJob& job);
+bool interpolate_attributes_serial(const AttributeJob& job, MemoryTracker& t);
+bool interpolate_attributes_openmp(const AttributeJob& job, MemoryTracker& t);
+bool interpolate_attributes_cuda(const AttributeJob& job, MemoryTracker& t);
 
 // CUDA helpers (pipeline_cuda.cpp; without CUDA they throw
 // NBMC_ERROR_BACKEND_UNAVAILABLE). Copies count positions of type float

@@ -402,6 +402,8 @@ void nbmc_params_init(nbmc_params* p) {
   p->iso_threshold = 0.6;
   p->isolated = NBMC_ISOLATED_KEEP;
   p->min_cluster = 10;
+  p->decimate_fraction = 1;
+  p->smooth_weighting = NBMC_SMOOTH_UNIFORM;
   p->aniso_kr = 4;
   p->aniso_ks = 1;
   p->aniso_kn = 0.5;
@@ -434,8 +436,52 @@ int32_t nbmc_context_reconstruct(nbmc_context* ctx, const nbmc_params* params, n
   nbmc::check_domain(p);
   auto m = std::make_unique<nbmc_mesh>();
   nbmc::RunStats st;
-  nbmc::run_backend(*ctx, p, m->mesh, st);
-  ctx->postprocess = nbmc::postprocess_mesh(full, m->mesh, st);
+  std::vector<std::uint32_t> kept;  // isolated drop/sphere: the particles kept
+  nbmc::run_backend(*ctx, p, m->mesh, st, &kept);
+  // The particles on the host, for feature weights and isolated spheres.
+  const bool feature = full.smooth_weighting == NBMC_SMOOTH_FEATURE && full.smooth_iterations > 0;
+  const bool spheres = full.isolated == NBMC_ISOLATED_SPHERE;
+  nbmc::ParticleVector downloaded;
+  const double* all_xyz = ctx->particles.data();
+  std::size_t all_n = ctx->particles.size() / 3;
+  if ((feature || spheres) && ctx->device_particles.count) {
+    all_n = ctx->device_particles.count;
+    downloaded.resize(3 * all_n);
+    nbmc::run_on_kokkos_thread(*ctx, [&] {
+      nbmc::download_particles(ctx->device_particles.data.get(), all_n, downloaded.data());
+    });
+    all_xyz = downloaded.data();
+  }
+  nbmc::FeatureParticles fp;
+  std::vector<double> kept_xyz;
+  if (feature) {
+    fp.xyz = all_xyz;
+    fp.count = all_n;
+    if (p.drop_isolated && kept.size() < all_n) {  // only those the surface was made of
+      kept_xyz.resize(3 * kept.size());
+      for (std::size_t i = 0; i < kept.size(); ++i)
+        for (int a = 0; a < 3; ++a) kept_xyz[3 * i + a] = all_xyz[3 * std::size_t(kept[i]) + a];
+      fp.xyz = kept_xyz.data();
+      fp.count = kept.size();
+    }
+    fp.radius = p.influence_radius;
+    fp.spacing = p.spacing;
+  }
+  if (spheres && kept.size() < all_n) {
+    // (the density fields, SPH and YT10, have no iso_radius)
+    const float radius = float(has_particle_pass(p.method) ? 0.5 * p.spacing : p.iso_radius);
+    m->spheres.reserve(4 * (all_n - kept.size()));
+    std::size_t k = 0;
+    for (std::size_t i = 0; i < all_n; ++i) {
+      if (k < kept.size() && kept[k] == i) {
+        ++k;
+        continue;
+      }
+      for (int a = 0; a < 3; ++a) m->spheres.push_back(float(all_xyz[3 * i + a]));
+      m->spheres.push_back(radius);
+    }
+  }
+  ctx->postprocess = nbmc::postprocess_mesh(full, m->mesh, st, feature ? &fp : nullptr);
   // On the final vertices, after the clean-up and smoothing.
   nbmc::interpolate_mesh_attributes(*ctx, p, *m, st);
   ctx->stats = st;
@@ -490,6 +536,7 @@ int32_t nbmc_context_stats(const nbmc_context* ctx, nbmc_stats* s) {
   s->smoothing_volume_change = ctx->postprocess.volume_change;
   s->dropped_particle_count = st.dropped_particles;
   s->dropped_cluster_count = st.dropped_clusters;
+  s->pre_decimation_triangle_count = ctx->postprocess.pre_decimation_triangles;
   std::memcpy(caller, &full, caller_size);
   caller->struct_size = uint32_t(caller_size);
   return NBMC_OK;
@@ -540,6 +587,8 @@ int32_t nbmc_mesh_copy_to_host(const nbmc_mesh* m, float* positions, float* norm
   }
 }
 void nbmc_mesh_destroy(nbmc_mesh* m) { delete m; }
+uint64_t nbmc_mesh_sphere_count(const nbmc_mesh* m) { return m ? m->spheres.size() / 4 : 0; }
+const float* nbmc_mesh_spheres(const nbmc_mesh* m) { return m && !m->spheres.empty() ? m->spheres.data() : nullptr; }
 
 int32_t nbmc_kokkos_finalize(void) {
   try {
@@ -651,7 +700,6 @@ extern "C" {
 int32_t nbmc__context_bind_collective(nbmc_context* ctx, int32_t bound) {
   if (!ctx) return NBMC_ERROR_INVALID_ARGUMENT;
   ctx->collective = bound != 0;
-  if (ctx->collective) ctx->attributes.clear();  // not supported over MPI yet
   ctx->pending_status = 0;
   ctx->pending_error.clear();
   ctx->last_error.clear();
@@ -690,17 +738,7 @@ int32_t nbmc__reconstruct_collective(nbmc_context* ctx, const nbmc_params* param
   check_double_positions(*ctx, full, "nbmc_mpi_reconstruct");
   auto m = std::make_unique<nbmc_mesh>();
   ctx->has_stats = false;
-  nbmc::reconstruct_collective(*ctx, full, *c, output, root, m->mesh);
-  // Clean-up and smoothing work on whole meshes: on the root's stitched
-  // mesh; pieces stay as marching cubes made them (their shared vertices
-  // must stay shared).
-  ctx->postprocess = nbmc::mesh::PostprocessStats();
-  if (output == NBMC__OUTPUT_GATHER && c->rank == root) {
-    nbmc::RunStats& st = ctx->stats;
-    ctx->postprocess = nbmc::postprocess_mesh(full, m->mesh, st);
-  } else if (output == NBMC__OUTPUT_PIECES) {
-    ctx->postprocess.raw_triangles = m->mesh.triangle_count();
-  }
+  nbmc::reconstruct_collective(*ctx, full, *c, output, root, *m);
   ctx->has_stats = true;
   *mesh = m.release();
   return NBMC_OK;

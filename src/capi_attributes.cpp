@@ -1,11 +1,13 @@
 // SPDX-License-Identifier: MIT
 // The particle-attribute section of include/nbmc.h: per-particle values set
-// on a context, interpolated on the host onto the final vertices of each
-// reconstructed mesh (io/attributes.cpp, the one implementation the CLI uses
-// too), and read back from the mesh.
+// on a context, interpolated onto the final vertices of each reconstructed
+// mesh on the context's backend (backends/kokkos/attributes.hpp; the host's
+// io/attributes.cpp for vertices with no particle within R), and read back
+// from the mesh.
 #include "capi_attributes.hpp"
 
 #include "backends.hpp"
+#include "core/parallel.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -95,9 +97,6 @@ std::uint64_t check_set(nbmc_context& ctx, const char* name, const T* data, std:
                         std::uint64_t& byte_stride, const char* fn) {
   check_name(name, fn);
   if (!data) return 0;
-  if (ctx.collective)
-    throw Error(NBMC_ERROR_INVALID_ARGUMENT,
-                std::string(fn) + ": attributes are not supported on contexts bound to several processes (MPI) yet");
   const std::uint64_t count = particle_count(ctx);
   if (count == 0)
     throw Error(NBMC_ERROR_NO_PARTICLES,
@@ -115,13 +114,125 @@ std::uint64_t check_set(nbmc_context& ctx, const char* name, const T* data, std:
 
 }  // namespace
 
+std::vector<double, NoInitAllocator<double>> interpolate_at_vertices(nbmc_context& ctx, const double* xyz,
+                                                                      bool on_device, std::size_t n,
+                                                                      const std::vector<io::Attribute>& attributes,
+                                                                      const float* vertices, const double* vertices64,
+                                                                      std::size_t nv, double radius,
+                                                                      const double* bounds) {
+  std::size_t width = 0;
+  for (const io::Attribute& a : attributes) {
+    if (a.count() != n)
+      throw Error(NBMC_ERROR_INTERNAL, "attribute '" + a.name + "' has " + std::to_string(a.count()) + " items for " +
+                                           std::to_string(n) + " particles");
+    width += std::size_t(a.components);
+  }
+  std::vector<double, NoInitAllocator<double>> result(nv * width);
+  if (nv == 0 || width == 0) return result;
+  if (n == 0) throw Error(NBMC_ERROR_NO_PARTICLES, "attribute interpolation: there are no particles");
+  // All attributes side by side, particle-major.
+  // (Host copies on the host's threads: one for a serial context.)
+  const auto chunks = [&](std::size_t items) {
+    return ctx.backend == NBMC_BACKEND_SERIAL ? std::size_t(1) : chunk_count(items, 1 << 16);
+  };
+  std::vector<double, NoInitAllocator<double>> packed(n * width);
+  for_chunks(n, chunks(n), [&](std::size_t, std::size_t b, std::size_t e) {
+    std::size_t off = 0;
+    for (const io::Attribute& a : attributes) {
+      const std::size_t c = std::size_t(a.components);
+      for (std::size_t i = b; i < e; ++i)
+        for (std::size_t k = 0; k < c; ++k) packed[i * width + off + k] = a.values[i * c + k];
+      off += c;
+    }
+  });
+  // The weighted means on the context's backend (the GPU too).
+  std::vector<std::uint8_t> empty(nv, 0);
+  AttributeJob job;
+  job.xyz = xyz;
+  job.on_device = on_device;
+  job.count = n;
+  job.values = packed.data();
+  job.width = width;
+  job.vertices = vertices64 ? nullptr : vertices;
+  job.vertices64 = vertices64;
+  job.vertex_count = nv;
+  job.radius = radius;
+  if (bounds) {
+    job.use_bounds = true;
+    for (int a = 0; a < 6; ++a) job.bounds[a] = bounds[a];
+  }
+  job.out = result.data();
+  job.empty = empty.data();
+  const bool all_host = !interpolate_attributes_on_backend(ctx, job);
+  packed = {};
+  // Vertices with no particle closer than R (and all of them where the
+  // particles' box was too large for the backend's cell grid): the host's
+  // implementation, which gives them the value of their nearest particle.
+  std::vector<std::size_t> rest;
+  for (std::size_t v = 0; v < nv; ++v)
+    if (all_host || empty[v]) rest.push_back(v);
+  if (rest.empty()) return result;
+  ParticleVector pcopy;
+  const double* hxyz = xyz;
+  if (on_device) {
+    pcopy.resize(3 * n);
+    download_particles(xyz, n, pcopy.data());
+    hxyz = pcopy.data();
+  }
+  const int threads = ctx.backend == NBMC_BACKEND_SERIAL ? 1 : std::max(0, int(ctx.num_threads));
+  std::vector<io::Attribute> values;
+  try {
+    if (vertices64) {
+      std::vector<double> sub(3 * rest.size());
+      for (std::size_t i = 0; i < rest.size(); ++i)
+        for (int a = 0; a < 3; ++a) sub[3 * i + a] = vertices64[3 * rest[i] + a];
+      values = io::interpolate_attributes(hxyz, n, attributes, {}, sub.data(), rest.size(), radius, threads);
+    } else {
+      std::vector<float> sub(3 * rest.size());
+      for (std::size_t i = 0; i < rest.size(); ++i)
+        for (int a = 0; a < 3; ++a) sub[3 * i + a] = vertices[3 * rest[i] + a];
+      values = io::interpolate_attributes(hxyz, n, attributes, {}, sub.data(), rest.size(), radius, threads);
+    }
+  } catch (const io::Error& e) {
+    throw Error(NBMC_ERROR_INVALID_PARAMETER, std::string("attribute interpolation: ") + e.what());
+  }
+  std::size_t off = 0;
+  for (const io::Attribute& a : values) {
+    const std::size_t c = std::size_t(a.components);
+    for (std::size_t i = 0; i < rest.size(); ++i)
+      for (std::size_t k = 0; k < c; ++k) result[rest[i] * width + off + k] = a.values[i * c + k];
+    off += c;
+  }
+  return result;
+}
+
+void store_mesh_attributes(const std::vector<io::Attribute>& layout, const double* result, nbmc_mesh& out) {
+  std::size_t width = 0;
+  for (const io::Attribute& a : layout) width += std::size_t(a.components);
+  const std::size_t nv = std::size_t(out.mesh.vertex_count());
+  out.attributes.resize(layout.size());
+  std::size_t off = 0;
+  for (std::size_t i = 0; i < layout.size(); ++i) {
+    MeshAttribute& d = out.attributes[i];
+    d.name = layout[i].name;
+    d.components = std::uint32_t(layout[i].components);
+    d.values.resize(nv * d.components);
+    for_chunks(nv, chunk_count(nv, 1 << 16), [&](std::size_t, std::size_t b, std::size_t e) {
+      for (std::size_t v = b; v < e; ++v)
+        for (std::size_t k = 0; k < d.components; ++k)
+          d.values[v * d.components + k] = float(result[v * width + off + k]);
+    });
+    off += d.components;
+  }
+}
+
 void interpolate_mesh_attributes(nbmc_context& ctx, const Params& p, nbmc_mesh& out, RunStats& st) {
   out.attributes.clear();
   if (ctx.attributes.empty()) return;
   const auto t0 = std::chrono::steady_clock::now();
   const HostMesh& m = out.mesh;
   const std::uint64_t nv = m.vertex_count();
-  // Positions of the vertices and particles, on the host.
+  // Positions of the vertices, on the host.
   std::vector<float, NoInitAllocator<float>> vcopy;
   const float* vertices = m.positions.empty() ? nullptr : m.positions.data();
   if (m.on_device && nv) {
@@ -129,36 +240,14 @@ void interpolate_mesh_attributes(nbmc_context& ctx, const Params& p, nbmc_mesh& 
     download_mesh(m, vcopy.data(), nullptr, nullptr);
     vertices = vcopy.data();
   }
-  ParticleVector pcopy;
-  const double* xyz = ctx.particles.data();
-  std::size_t n = ctx.particles.size() / 3;
-  if (ctx.device_particles.count) {
-    n = ctx.device_particles.count;
-    pcopy.resize(3 * n);
-    download_particles(ctx.device_particles.data.get(), n, pcopy.data());
-    xyz = pcopy.data();
-  }
-  for (const io::Attribute& a : ctx.attributes)
-    if (a.count() != n)
-      throw Error(NBMC_ERROR_INTERNAL, "attribute '" + a.name + "' has " + std::to_string(a.count()) + " items for " +
-                                           std::to_string(n) + " particles");
-  const int threads = ctx.backend == NBMC_BACKEND_SERIAL ? 1 : std::max(0, int(ctx.num_threads));
-  std::vector<io::Attribute> values;
-  try {
-    values = m.f64 ? io::interpolate_attributes(xyz, n, ctx.attributes, {}, m.positions64.data(), nv,
-                                                p.influence_radius, threads)
-                   : io::interpolate_attributes(xyz, n, ctx.attributes, {}, vertices, nv, p.influence_radius, threads);
-  } catch (const io::Error& e) {
-    throw Error(NBMC_ERROR_INVALID_PARAMETER, std::string("attribute interpolation: ") + e.what());
-  }
-  out.attributes.resize(values.size());
-  for (std::size_t i = 0; i < values.size(); ++i) {
-    MeshAttribute& d = out.attributes[i];
-    d.name = values[i].name;
-    d.components = std::uint32_t(values[i].components);
-    d.values.resize(values[i].values.size());
-    for (std::size_t k = 0; k < d.values.size(); ++k) d.values[k] = float(values[i].values[k]);
-  }
+  const bool device_particles = ctx.device_particles.count != 0;
+  const std::size_t n = device_particles ? ctx.device_particles.count : ctx.particles.size() / 3;
+  const double* xyz =
+      device_particles ? static_cast<const double*>(ctx.device_particles.data.get()) : ctx.particles.data();
+  const auto result = interpolate_at_vertices(ctx, xyz, device_particles, n, ctx.attributes, vertices,
+                                              m.f64 ? m.positions64.data() : nullptr, std::size_t(nv),
+                                              p.influence_radius, nullptr);
+  store_mesh_attributes(ctx.attributes, result.data(), out);
   const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   st.stage[NBMC_STAGE_ATTRIBUTES] += s;
   st.total += s;

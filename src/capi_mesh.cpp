@@ -8,6 +8,7 @@
 #include "backends.hpp"
 #include "core/mesh_check.hpp"
 #include "core/mesh_cleanup.hpp"
+#include "core/mesh_decimate.hpp"
 #include "core/mesh_smooth.hpp"
 
 #if defined(KOKKOS_ENABLE_CUDA)
@@ -15,6 +16,7 @@
 #endif
 
 #include <chrono>
+#include <cmath>
 #include <cstring>
 #include <new>
 #include <stdexcept>
@@ -26,6 +28,13 @@ void check_postprocess_params(const nbmc_params& params) {
   if (params.smooth_iterations < 0 || params.smooth_iterations > 100000)
     throw Error(NBMC_ERROR_INVALID_PARAMETER, "smooth_iterations must be in [0, 100000] (got " +
                                                   std::to_string(params.smooth_iterations) + ")");
+  if (params.smooth_weighting != NBMC_SMOOTH_UNIFORM && params.smooth_weighting != NBMC_SMOOTH_FEATURE)
+    throw Error(NBMC_ERROR_INVALID_PARAMETER,
+                "smooth_weighting must be NBMC_SMOOTH_UNIFORM or NBMC_SMOOTH_FEATURE (got " +
+                    std::to_string(params.smooth_weighting) + ")");
+  if (!(params.decimate_fraction > 0 && params.decimate_fraction <= 1))
+    throw Error(NBMC_ERROR_INVALID_PARAMETER, "decimate_fraction must be in (0, 1] (got " +
+                                                  std::to_string(params.decimate_fraction) + "; 1 = no decimation)");
 }
 
 namespace {
@@ -33,7 +42,8 @@ namespace {
 // The post-processing of a mesh in host memory, on its float or double
 // positions (PosVec).
 template <class PosVec>
-void postprocess_positions(const nbmc_params& params, PosVec& positions, HostMesh& m, mesh::PostprocessStats& ps) {
+void postprocess_positions(const nbmc_params& params, PosVec& positions, HostMesh& m, mesh::PostprocessStats& ps,
+                           const FeatureParticles* fp) {
   if (params.cleanup) {
     const mesh::CleanupResult c = mesh::cleanup_mesh(positions, m.normals, m.triangles);
     ps.collapses = c.collapses;
@@ -42,7 +52,17 @@ void postprocess_positions(const nbmc_params& params, PosVec& positions, HostMes
     ps.bad_after = c.bad_after;
   }
   if (params.smooth_iterations > 0) {
-    const mesh::SmoothResult s = mesh::smooth_mesh(positions, m.normals, m.triangles, params.smooth_iterations);
+    std::vector<double> weights;
+    if (params.smooth_weighting == NBMC_SMOOTH_FEATURE) {
+      if (!fp || !fp->xyz)
+        throw Error(NBMC_ERROR_INTERNAL, "feature-weighted smoothing without the particles");
+      const std::size_t nv = positions.size() / 3;
+      weights = mesh::particle_density_ratio(positions.data(), nv, fp->xyz, fp->count, fp->radius, fp->spacing);
+      for (double& w : weights) w = mesh::feature_weight(w);
+    }
+    const mesh::SmoothResult s =
+        mesh::smooth_mesh(positions, m.normals, m.triangles, params.smooth_iterations, mesh::kTaubinLambda,
+                          mesh::kTaubinMu, weights.empty() ? nullptr : &weights);
     ps.volume_before_smoothing = s.volume_before;
     ps.volume_after_smoothing = s.volume_after;
     ps.volume_change = s.volume_before != 0 ? s.volume_after / s.volume_before - 1 : 0;
@@ -55,23 +75,29 @@ void postprocess_positions(const nbmc_params& params, PosVec& positions, HostMes
       ps.bad_after = c.bad_after;
     }
   }
+  ps.pre_decimation_triangles = m.triangles.size() / 3;
+  if (params.decimate_fraction < 1) {
+    const mesh::DecimateResult d = mesh::decimate_mesh(positions, m.normals, m.triangles, params.decimate_fraction);
+    ps.decimate_collapses = d.collapses;
+  }
 }
 
-void postprocess_host(const nbmc_params& params, HostMesh& m, mesh::PostprocessStats& ps) {
-  if (m.f64) postprocess_positions(params, m.positions64, m, ps);
-  else postprocess_positions(params, m.positions, m, ps);
+void postprocess_host(const nbmc_params& params, HostMesh& m, mesh::PostprocessStats& ps, const FeatureParticles* fp) {
+  if (m.f64) postprocess_positions(params, m.positions64, m, ps, fp);
+  else postprocess_positions(params, m.positions, m, ps, fp);
 }
 
 // A mesh left in GPU memory: copied to the host, post-processed there, and
 // copied back into its own device arrays (the counts only shrink).
-void postprocess_device(const nbmc_params& params, HostMesh& m, mesh::PostprocessStats& ps) {
+void postprocess_device(const nbmc_params& params, HostMesh& m, mesh::PostprocessStats& ps,
+                        const FeatureParticles* fp) {
   if (m.triangle_count() == 0) return;
   HostMesh h;
   h.positions.resize(3 * m.vertex_count());
   h.normals.resize(m.d_normals ? h.positions.size() : 0);
   h.triangles.resize(3 * m.triangle_count());
   download_mesh(m, h.positions.data(), h.normals.empty() ? nullptr : h.normals.data(), h.triangles.data());
-  postprocess_host(params, h, ps);
+  postprocess_host(params, h, ps, fp);
 #if defined(KOKKOS_ENABLE_CUDA)
   auto put = [](void* dst, const void* src, std::size_t bytes, const char* what) {
     if (bytes && cudaMemcpy(dst, src, bytes, cudaMemcpyHostToDevice) != cudaSuccess) {
@@ -91,13 +117,14 @@ void postprocess_device(const nbmc_params& params, HostMesh& m, mesh::Postproces
 
 }  // namespace
 
-mesh::PostprocessStats postprocess_mesh(const nbmc_params& params, HostMesh& m, RunStats& st) {
+mesh::PostprocessStats postprocess_mesh(const nbmc_params& params, HostMesh& m, RunStats& st,
+                                        const FeatureParticles* fp) {
   mesh::PostprocessStats ps;
-  ps.raw_triangles = m.triangle_count();
-  if (!params.cleanup && params.smooth_iterations <= 0) return ps;
+  ps.raw_triangles = ps.pre_decimation_triangles = m.triangle_count();
+  if (!params.cleanup && params.smooth_iterations <= 0 && !(params.decimate_fraction < 1)) return ps;
   const auto t0 = std::chrono::steady_clock::now();
-  if (m.on_device) postprocess_device(params, m, ps);
-  else postprocess_host(params, m, ps);
+  if (m.on_device) postprocess_device(params, m, ps, fp);
+  else postprocess_host(params, m, ps, fp);
   const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   st.vertices = m.vertex_count();
   st.triangles = m.triangle_count();

@@ -14,10 +14,23 @@ namespace nbmc {
 // out of range (before the reconstruction runs).
 void check_postprocess_params(const nbmc_params& params);
 
-// Cleans (params.cleanup) and smooths (params.smooth_iterations) the mesh on
-// the host, serially (the result depends only on the mesh), and updates the
-// counts and the NBMC_STAGE_POSTPROCESS time in st. A mesh left in device
-// memory is copied to the host for it and back into its device arrays.
-mesh::PostprocessStats postprocess_mesh(const nbmc_params& params, HostMesh& mesh, RunStats& st);
+// The particles that feature-weighted smoothing counts around each vertex
+// (host memory, 3 doubles each) and the lengths it uses (absolute).
+struct FeatureParticles {
+  const double* xyz = nullptr;
+  std::size_t count = 0;
+  double radius = 0;   // the influence radius R
+  double spacing = 0;  // r
+};
+
+// Cleans (params.cleanup), smooths (params.smooth_iterations, weighted by
+// params.smooth_weighting) and decimates (params.decimate_fraction) the mesh
+// on the host (the result depends only on the mesh, and for feature weights
+// on the particles), and updates the counts and the NBMC_STAGE_POSTPROCESS
+// time in st. A mesh left in device memory is copied to the host for it and
+// back into its device arrays. particles: needed (non-null) for
+// NBMC_SMOOTH_FEATURE with smoothing on, else unused.
+mesh::PostprocessStats postprocess_mesh(const nbmc_params& params, HostMesh& mesh, RunStats& st,
+                                        const FeatureParticles* particles = nullptr);
 
 }  // namespace nbmc

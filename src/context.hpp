@@ -71,6 +71,8 @@ struct MeshAttribute {
 struct nbmc_mesh {
   nbmc::HostMesh mesh;
   std::vector<nbmc::MeshAttribute> attributes;
+  // NBMC_ISOLATED_SPHERE: x, y, z, radius per dropped particle (host memory).
+  std::vector<float> spheres;
   // A mesh with double positions (mesh.f64): its float positions, rounded
   // once on first request (nbmc_mesh_positions may be called concurrently).
   mutable std::once_flag rounded;

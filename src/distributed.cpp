@@ -13,6 +13,7 @@
 #include "collective.h"
 
 #include "backends.hpp"
+#include "capi_attributes.hpp"
 #include "capi_mesh.hpp"
 #include "context.hpp"
 #include "subdomains.hpp"
@@ -308,11 +309,250 @@ void global_ids(const Coll& c, const Decomposition& d, const std::vector<int>& o
       throw Error(NBMC_ERROR_INTERNAL, "MPI: a shared vertex got no global id from its owner");
 }
 
+
+// ------------------------------------------------------- particle attributes
+// The attributes of every rank's particles interpolated onto the vertices
+// that `out` holds on this rank (the root's gathered, post-processed mesh, or
+// each rank's piece), with the values a single process gives, bit for bit:
+// each vertex goes to the rank that runs the subdomain owning the cell it
+// lies in; every rank sends that rank its particles within R + 2 cells of the
+// subdomain's cells, with their values; the owner sums them as one process
+// would (the same cell grid, from the frame's bounds, and the same sorted
+// order: backends/kokkos/attributes.hpp) and sends the values back. The
+// only difference: a vertex with no particle within R takes the value of
+// the nearest particle among those sent (within R + 2 cells), not the
+// nearest in the frame.
+void collective_attributes(nbmc_context& ctx, const Coll& c, const Params& p, const Decomposition& d,
+                           const std::vector<int>& owner, const double box[6], const double* xyz, std::size_t count,
+                           nbmc_mesh& out, RunStats& frame) {
+  // Collective calls stay outside step(): a rank that fails between them
+  // carries its error to the next agreement, so none waits alone.
+  const double t0 = seconds_now();
+  // Which attributes: every rank with particles must have set the same
+  // names and components (ranks without particles set none).
+  std::vector<char> sig;
+  put(sig, std::uint64_t(count));
+  for (const io::Attribute& a : ctx.attributes) {
+    sig.insert(sig.end(), a.name.begin(), a.name.end());
+    sig.push_back('\0');
+    put(sig, std::int32_t(a.components));
+  }
+  const std::vector<std::vector<char>> sigs = c.alltoall(std::vector<std::vector<char>>(std::size_t(c.size()), sig));
+  std::vector<io::Attribute> layout;
+  step(c, [&] {
+    // Every rank has the same lists, so every rank decides alike.
+    auto body = [](const std::vector<char>& b) {
+      return std::vector<char>(b.begin() + std::ptrdiff_t(std::min(b.size(), sizeof(std::uint64_t))), b.end());
+    };
+    auto describe_sig = [&](const std::vector<char>& b) {
+      const std::vector<char> x = body(b);
+      std::string text;
+      for (std::size_t i = 0; i < x.size();) {
+        const std::size_t z = std::size_t(std::find(x.begin() + std::ptrdiff_t(i), x.end(), '\0') - x.begin());
+        std::int32_t comps = 0;
+        if (z + 1 + sizeof comps <= x.size()) std::memcpy(&comps, x.data() + z + 1, sizeof comps);
+        text += (text.empty() ? "'" : ", '") + std::string(x.begin() + std::ptrdiff_t(i), x.begin() + std::ptrdiff_t(z)) +
+                "' (" + std::to_string(comps) + " components)";
+        i = z + 1 + sizeof comps;
+      }
+      return text.empty() ? std::string("none") : text;
+    };
+    int first = -1;
+    for (int r = 0; r < c.size(); ++r) {
+      const std::vector<char>& b = sigs[std::size_t(r)];
+      std::uint64_t n = 0;
+      if (b.size() >= sizeof n) std::memcpy(&n, b.data(), sizeof n);
+      if (n == 0) continue;  // no particles: nothing to match
+      if (first < 0) {
+        first = r;
+        continue;
+      }
+      if (body(b) != body(sigs[std::size_t(first)]))
+        throw Error(NBMC_ERROR_INVALID_ARGUMENT,
+                    "the ranks with particles must set the same attributes (rank " + std::to_string(first) + ": " +
+                        describe_sig(sigs[std::size_t(first)]) + "; rank " + std::to_string(r) + ": " +
+                        describe_sig(b) + ")");
+    }
+    if (first < 0) return;
+    const std::vector<char> x = body(sigs[std::size_t(first)]);
+    for (std::size_t i = 0; i < x.size();) {
+      const std::size_t z = std::size_t(std::find(x.begin() + std::ptrdiff_t(i), x.end(), '\0') - x.begin());
+      io::Attribute a;
+      a.name.assign(x.begin() + std::ptrdiff_t(i), x.begin() + std::ptrdiff_t(z));
+      std::int32_t comps = 0;
+      if (z + 1 + sizeof comps > x.size()) throw Error(NBMC_ERROR_INTERNAL, "MPI: a short attribute list");
+      std::memcpy(&comps, x.data() + z + 1, sizeof comps);
+      a.components = comps;
+      layout.push_back(a);
+      i = z + 1 + sizeof comps;
+    }
+  });
+  if (layout.empty()) return;  // the same on every rank
+  std::size_t width = 0;
+  for (const io::Attribute& a : layout) width += std::size_t(a.components);
+
+  const Grid& g = d.grid;
+  const double R = p.influence_radius, margin = R + 2 * g.cell;
+  std::int64_t cells[3];
+  std::vector<std::int64_t> bounds[3];  // subdomain coordinate i owns cells [bounds[i], bounds[i + 1])
+  for (int a = 0; a < 3; ++a) {
+    cells[a] = std::max<std::int64_t>(1, g.dims[a] - 1);
+    for (int i = 0; i <= d.parts[a]; ++i) bounds[a].push_back(split_point(cells[a], d.parts[a], i));
+  }
+  auto cell_of = [&](double x, int a) {
+    const double f = std::floor((x - g.origin[a]) / g.cell);
+    return std::int64_t(f < 0 ? 0.0 : (f > double(cells[a] - 1) ? double(cells[a] - 1) : f));
+  };
+  auto coord_of = [&](std::int64_t cell, int a) {
+    return int(std::upper_bound(bounds[a].begin() + 1, bounds[a].end() - 1, cell) - (bounds[a].begin() + 1));
+  };
+  auto index_of = [&](const int k[3]) { return std::size_t(k[0] + d.parts[0] * (k[1] + d.parts[1] * k[2])); };
+
+  // a. This rank's vertices to the owners of their subdomains.
+  const HostMesh& m = out.mesh;
+  const std::size_t nv = std::size_t(m.vertex_count());
+  std::vector<std::vector<char>> vout(std::size_t(c.size()));
+  step(c, [&] {
+    std::vector<float, NoInitAllocator<float>> vcopy;
+    const float* v32 = m.positions.empty() ? nullptr : m.positions.data();
+    if (m.on_device && nv) {
+      vcopy.resize(3 * nv);
+      run_on_kokkos_thread(ctx, [&] { download_mesh(m, vcopy.data(), nullptr, nullptr); });
+      v32 = vcopy.data();
+    }
+    for (std::size_t v = 0; v < nv; ++v) {
+      double x[3];
+      for (int a = 0; a < 3; ++a) x[a] = m.f64 ? m.positions64[3 * v + std::size_t(a)] : double(v32[3 * v + std::size_t(a)]);
+      int k[3];
+      for (int a = 0; a < 3; ++a) k[a] = coord_of(cell_of(x[a], a), a);
+      const std::size_t s = index_of(k);
+      std::vector<char>& b = vout[std::size_t(owner[s])];
+      put(b, std::uint64_t(s));
+      put(b, std::uint64_t(v));
+      for (int a = 0; a < 3; ++a) put(b, x[a]);
+    }
+  });
+  const std::vector<std::vector<char>> vin = c.alltoall(vout);
+  vout.clear();
+  // b. Particles with their values to the owners of the subdomains near them.
+  std::vector<std::vector<char>> pout(std::size_t(c.size()));
+  step(c, [&] {
+    std::vector<double> packed(count * width);
+    std::size_t off = 0;
+    for (const io::Attribute& a : ctx.attributes) {
+      const std::size_t comps = std::size_t(a.components);
+      for (std::size_t i = 0; i < count; ++i)
+        for (std::size_t q = 0; q < comps; ++q) packed[i * width + off + q] = a.values[i * comps + q];
+      off += comps;
+    }
+    for (std::size_t i = 0; i < count; ++i) {
+      int lo[3], hi[3];
+      for (int a = 0; a < 3; ++a) {
+        lo[a] = coord_of(cell_of(xyz[3 * i + std::size_t(a)] - margin, a), a);
+        hi[a] = coord_of(cell_of(xyz[3 * i + std::size_t(a)] + margin, a), a);
+      }
+      int k[3];
+      for (k[2] = lo[2]; k[2] <= hi[2]; ++k[2])
+        for (k[1] = lo[1]; k[1] <= hi[1]; ++k[1])
+          for (k[0] = lo[0]; k[0] <= hi[0]; ++k[0]) {
+            const std::size_t s = index_of(k);
+            std::vector<char>& b = pout[std::size_t(owner[s])];
+            put(b, std::uint64_t(s));
+            for (int a = 0; a < 3; ++a) put(b, xyz[3 * i + std::size_t(a)]);
+            const char* vp = reinterpret_cast<const char*>(packed.data() + i * width);
+            b.insert(b.end(), vp, vp + width * sizeof(double));
+          }
+    }
+  });
+  const std::vector<std::vector<char>> pin = c.alltoall(pout);
+  pout.clear();
+  // c. Per subdomain of this rank: its particles and vertices, the sums,
+  //    and the values back to the vertices' ranks.
+  std::vector<std::vector<char>> rout(std::size_t(c.size()));
+  step(c, [&] {
+    struct Work {
+      std::vector<double> xyz;
+      std::vector<io::Attribute> attrs;
+      std::vector<double> verts;
+      std::vector<std::pair<int, std::uint64_t>> from;  // (rank, vertex index there)
+    };
+    std::map<std::uint64_t, Work> work;
+    for (int r = 0; r < c.size(); ++r) {
+      Reader rd{vin[std::size_t(r)]};
+      while (!rd.done()) {
+        const std::uint64_t s = rd.get<std::uint64_t>(), v = rd.get<std::uint64_t>();
+        Work& w = work[s];
+        for (int a = 0; a < 3; ++a) w.verts.push_back(rd.get<double>());
+        w.from.push_back({r, v});
+      }
+    }
+    for (auto& entry : work) {
+      entry.second.attrs = layout;
+      for (io::Attribute& a : entry.second.attrs) a.values.clear();
+    }
+    for (int r = 0; r < c.size(); ++r) {
+      Reader rd{pin[std::size_t(r)]};
+      while (!rd.done()) {
+        const std::uint64_t s = rd.get<std::uint64_t>();
+        double x[3];
+        for (int a = 0; a < 3; ++a) x[a] = rd.get<double>();
+        const auto it = work.find(s);
+        if (it != work.end()) {  // a subdomain without vertices needs no particles
+          Work& w = it->second;
+          w.xyz.insert(w.xyz.end(), x, x + 3);
+          for (io::Attribute& a : w.attrs)
+            for (int q = 0; q < a.components; ++q) a.values.push_back(rd.get<double>());
+        } else {
+          if (rd.at + width * sizeof(double) > rd.b.size()) throw Error(NBMC_ERROR_INTERNAL, "MPI: short attribute message");
+          rd.at += width * sizeof(double);
+        }
+      }
+    }
+    for (auto& entry : work) {
+      Work& w = entry.second;
+      const std::size_t n = w.xyz.size() / 3, k = w.verts.size() / 3;
+      if (n == 0)  // a vertex lies within a cell of the particles that made it
+        throw Error(NBMC_ERROR_INTERNAL, "MPI: no particles near the vertices of subdomain " + std::to_string(entry.first));
+      const auto res = interpolate_at_vertices(ctx, w.xyz.data(), false, n, w.attrs, nullptr, w.verts.data(), k, R, box);
+      for (std::size_t i = 0; i < k; ++i) {
+        std::vector<char>& b = rout[std::size_t(w.from[i].first)];
+        put(b, w.from[i].second);
+        const char* vp = reinterpret_cast<const char*>(res.data() + i * width);
+        b.insert(b.end(), vp, vp + width * sizeof(double));
+      }
+    }
+  });
+  const std::vector<std::vector<char>> rin = c.alltoall(rout);
+  rout.clear();
+  // d. The values of this rank's vertices.
+  step(c, [&] {
+    std::vector<double> result(nv * width, 0.0);
+    std::size_t got = 0;
+    for (int r = 0; r < c.size(); ++r) {
+      Reader rd{rin[std::size_t(r)]};
+      while (!rd.done()) {
+        const std::uint64_t v = rd.get<std::uint64_t>();
+        if (v >= nv || rd.at + width * sizeof(double) > rd.b.size())
+          throw Error(NBMC_ERROR_INTERNAL, "MPI: a bad attribute reply");
+        std::memcpy(result.data() + v * width, rd.b.data() + rd.at, width * sizeof(double));
+        rd.at += width * sizeof(double);
+        ++got;
+      }
+    }
+    if (got != nv)
+      throw Error(NBMC_ERROR_INTERNAL, "MPI: attribute values for " + std::to_string(got) + " of " +
+                                           std::to_string(nv) + " vertices came back");
+    store_mesh_attributes(layout, result.data(), out);
+  });
+  frame.stage[NBMC_STAGE_ATTRIBUTES] += seconds_now() - t0;
+}
+
 }  // namespace
 
 // The collective reconstruction (see collective.h).
 void reconstruct_collective(nbmc_context& ctx, const nbmc_params& full, const nbmc__collective& hooks,
-                            int32_t output, int32_t root, HostMesh& mesh) {
+                            int32_t output, int32_t root, nbmc_mesh& out) {
+  HostMesh& mesh = out.mesh;
   const Coll c{hooks};
   const double t_start = seconds_now();
   Params p;
@@ -327,7 +567,10 @@ void reconstruct_collective(nbmc_context& ctx, const nbmc_params& full, const nb
       throw Error(NBMC_ERROR_INVALID_PARAMETER, "MPI reconstruction needs the narrow-band field");
     if (p.drop_isolated)
       throw Error(NBMC_ERROR_INVALID_PARAMETER,
-                  "isolated = drop is not available over MPI (clusters may span the ranks)");
+                  "isolated = drop or sphere is not available over MPI (clusters may span the ranks)");
+    if (full.smooth_weighting == NBMC_SMOOTH_FEATURE)
+      throw Error(NBMC_ERROR_INVALID_PARAMETER,
+                  "smooth_weighting = feature is not available over MPI (the root has no particles)");
     if (output != NBMC__OUTPUT_GATHER && output != NBMC__OUTPUT_PIECES)
       throw Error(NBMC_ERROR_INVALID_ARGUMENT, "unknown MPI output mode " + std::to_string(output));
     if (root < 0 || root >= c.size())
@@ -585,6 +828,19 @@ void reconstruct_collective(nbmc_context& ctx, const nbmc_params& full, const nb
       if (ctx.mesh_memory == NBMC_MEMORY_DEVICE) run_on_kokkos_thread(ctx, [&] { move_mesh_to_device(mesh); });
     });
   }
+  // 9. Clean-up and smoothing work on whole meshes: on the root's stitched
+  //    mesh; pieces stay as marching cubes made them (their shared vertices
+  //    must stay shared). Agreed, as the attributes need every rank next.
+  ctx.postprocess = nbmc::mesh::PostprocessStats();
+  step(c, [&] {
+    if (output == NBMC__OUTPUT_GATHER && c.rank() == root)
+      ctx.postprocess = postprocess_mesh(full, mesh, frame);
+    else if (output == NBMC__OUTPUT_PIECES)
+      ctx.postprocess.raw_triangles = ctx.postprocess.pre_decimation_triangles = mesh.triangle_count();
+  });
+  // 10. Particle attributes onto the final vertices.
+  out.attributes.clear();
+  collective_attributes(ctx, c, p, d, owner, box, xyz, count, out, frame);
   frame.total = seconds_now() - t_start;
   ctx.stats = frame;
   ctx.peak_memory = ctx.memory.peak.load();

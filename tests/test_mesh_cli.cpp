@@ -1,7 +1,9 @@
 // SPDX-License-Identifier: MIT
 // The command line's mesh post-processing options: --check (text and JSON
-// reports), --no-cleanup, --smooth.
+// reports), --no-cleanup, --smooth, --smooth-weights, --decimate, and
+// --isolated sphere's point set.
 #include "cli_fixture.hpp"
+#include "io/mesh.hpp"
 
 #include <gtest/gtest.h>
 
@@ -107,6 +109,69 @@ TEST_F(MeshCliTest, DoublePositions) {
   r = run(base + " -o " + quote(path("d.vtu")) + " --double-positions -q");
   ASSERT_EQ(r.exit_code, 0) << r.err;
   EXPECT_TRUE(contains(slurp(path("d.vtu")), "<DataArray type=\"Float64\" Name=\"Points\""));
+}
+
+// --decimate: the mesh written has at most that fraction of the triangles,
+// still closed, manifold and oriented; the text and JSON reports give the
+// counts before and after; --smooth-weights feature is reported; bad
+// fractions are usage errors.
+TEST_F(MeshCliTest, DecimateAndFeatureSmoothing) {
+  if (!fs::exists(kFrame)) GTEST_SKIP() << kFrame << " not found";
+  const std::string base = "reconstruct " + quote(kFrame) + " --spacing 0.05 --progress never --check";
+  nbmc_test::CliResult r = run(base + " -o " + quote(path("d.ply")) + " --smooth 3 --smooth-weights feature" +
+                               " --decimate 0.25 --json " + quote(path("d.json")));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  const std::string j = slurp(path("d.json"));
+  const long long before = std::stoll(json_value(j, "triangles_before", "decimation"));
+  const long long after = std::stoll(json_value(j, "triangles_after", "decimation"));
+  EXPECT_GT(before, 80000) << j;
+  EXPECT_LE(after, (before + 3) / 4) << j;
+  EXPECT_GE(after, before / 5) << j;
+  EXPECT_EQ(json_value(j, "pre_decimation_triangle_count", "counts"), std::to_string(before));
+  EXPECT_EQ(json_value(j, "triangle_count", "counts"), std::to_string(after));
+  EXPECT_EQ(json_value(j, "decimate"), "0.25");
+  EXPECT_EQ(json_value(j, "smooth_weights"), "\"feature\"");
+  EXPECT_EQ(json_value(j, "closed", "mesh_check"), "true");
+  EXPECT_EQ(json_value(j, "manifold", "mesh_check"), "true");
+  EXPECT_EQ(json_value(j, "oriented", "mesh_check"), "true");
+  EXPECT_EQ(json_value(j, "euler_characteristic", "mesh_check"), "74");  // the same topology as undecimated
+  EXPECT_EQ(nbmc::io::read_mesh_ply(path("d.ply")).triangle_count(), std::uint64_t(after));
+  r = run(base + " -o " + quote(path("t.ply")) + " --smooth 3 --smooth-weights feature --decimate 0.25");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(contains(r.out, "3 feature-weighted smoothing iterations")) << r.out;
+  EXPECT_TRUE(contains(r.out, "decimated to 0.25 (")) << r.out;
+  for (const char* bad : {"0", "1.5", "-1", "x"})
+    EXPECT_EQ(run(base + " -o " + quote(path("x.ply")) + " --decimate " + bad).exit_code, 2) << bad;
+  EXPECT_EQ(run(base + " -o " + quote(path("x.ply")) + " --smooth-weights sometimes").exit_code, 2);
+}
+
+// --isolated sphere: the mesh is --isolated drop's, and the dropped particles
+// go to <output>_spheres.ply (x y z radius, no faces); the report names it.
+TEST_F(MeshCliTest, IsolatedSpheres) {
+  const std::string frame = std::string(NBMC_SOURCE_DIR) + "/examples/data/double_dam_break_4732.xyz";
+  const std::string base = "reconstruct " + quote(frame) + " --particle-radius 0.025 --progress never";
+  nbmc_test::CliResult r = run(base + " -o " + quote(path("s.obj")) + " --isolated sphere --min-cluster 20 --json " +
+                               quote(path("s.json")));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  r = run(base + " -o " + quote(path("drop.obj")) + " --isolated drop --min-cluster 20 -q");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_EQ(slurp(path("s.obj")), slurp(path("drop.obj")));
+  EXPECT_FALSE(fs::exists(path("drop_spheres.ply")));
+  const std::string j = slurp(path("s.json"));
+  const long long n = std::stoll(json_value(j, "count", "spheres"));
+  EXPECT_GT(n, 0) << j;
+  EXPECT_EQ(json_value(j, "dropped_particle_count", "counts"), std::to_string(n));
+  EXPECT_TRUE(contains(j, "s_spheres.ply")) << j;
+  const std::string ply = slurp(path("s_spheres.ply"));
+  EXPECT_TRUE(contains(ply, "element vertex " + std::to_string(n) + "\n")) << ply.substr(0, 300);
+  EXPECT_TRUE(contains(ply, "property float radius\n")) << ply.substr(0, 300);
+  EXPECT_TRUE(contains(ply, "element face 0\n")) << ply.substr(0, 300);
+  const nbmc::io::Mesh m = nbmc::io::read_mesh_ply(path("s_spheres.ply"));
+  EXPECT_EQ(m.vertex_count(), std::uint64_t(n));
+  EXPECT_EQ(m.triangle_count(), 0u);
+  r = run(base + " -o " + quote(path("t.ply")) + " --isolated sphere --min-cluster 20");
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(contains(r.out, "written as spheres to " + path("t_spheres.ply"))) << r.out;
 }
 
 }  // namespace

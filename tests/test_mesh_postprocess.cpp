@@ -5,6 +5,7 @@
 // clean-up on randomly pinched spheres (never opens or breaks the mesh).
 #include "../src/core/mesh_check.hpp"
 #include "../src/core/mesh_cleanup.hpp"
+#include "../src/core/mesh_decimate.hpp"
 #include "../src/core/mesh_smooth.hpp"
 
 #include <gtest/gtest.h>
@@ -369,6 +370,151 @@ TEST(MeshSmooth, SphereAndDroplet) {
   nbmc::mesh::smooth_mesh(z.p, z.n, z.t, 0);
   EXPECT_EQ(z.p, zp);
   EXPECT_GT(z.n[0] * z.p[0] + z.n[1] * z.p[1] + z.n[2] * z.p[2], 0.9f);
+}
+
+// A torus (genus 1) of n x m quads split into triangles, counter-clockwise
+// seen from outside.
+TestMesh torus_mesh(int n, int m, double R = 2, double a = 0.7) {
+  TestMesh t;
+  for (int i = 0; i < n; ++i)
+    for (int j = 0; j < m; ++j) {
+      const double u = 2 * M_PI * i / n, v = 2 * M_PI * j / m;
+      t.p.push_back(float((R + a * std::cos(v)) * std::cos(u)));
+      t.p.push_back(float((R + a * std::cos(v)) * std::sin(u)));
+      t.p.push_back(float(a * std::sin(v)));
+    }
+  auto id = [&](int i, int j) { return std::uint32_t(((i + n) % n) * m + (j + m) % m); };
+  for (int i = 0; i < n; ++i)
+    for (int j = 0; j < m; ++j) {
+      const std::uint32_t a0 = id(i, j), a1 = id(i + 1, j), a2 = id(i + 1, j + 1), a3 = id(i, j + 1);
+      t.t.insert(t.t.end(), {a0, a1, a2, a0, a2, a3});
+    }
+  t.n.assign(t.p.size(), 0.0f);
+  return t;
+}
+
+double max_radius_error(const TestMesh& m) {
+  double e = 0;
+  for (std::size_t v = 0; v < m.p.size() / 3; ++v) {
+    const double l = std::sqrt(double(m.p[3 * v]) * m.p[3 * v] + double(m.p[3 * v + 1]) * m.p[3 * v + 1] +
+                               double(m.p[3 * v + 2]) * m.p[3 * v + 2]);
+    e = std::max(e, std::fabs(l - 1));
+  }
+  return e;
+}
+
+// Decimation of a unit sphere to a quarter and a tenth: closed, manifold,
+// oriented, a sphere still (Euler 2), no bad triangle, the triangle count
+// met, every vertex near the sphere, the volume kept, unit outward normals,
+// and the same result when run again.
+TEST(MeshDecimate, SphereStaysClosedAndRound) {
+  const TestMesh sphere = icosphere(4);  // 5120 triangles
+  const std::size_t nt = sphere.t.size() / 3;
+  const CheckResult c0 = sphere.check();
+  for (double f : {0.25, 0.1}) {
+    TestMesh m = sphere;
+    const auto r = nbmc::mesh::decimate_mesh(m.p, m.n, m.t, f);
+    const CheckResult c = m.check();
+    const std::size_t target = std::size_t(std::ceil(f * double(nt)));
+    EXPECT_TRUE(c.closed && c.manifold && c.oriented) << f;
+    EXPECT_EQ(c.euler_characteristic, 2) << f;
+    EXPECT_EQ(c.degenerate_triangles + c.sliver_triangles + c.unreferenced_vertices, 0u) << f;
+    EXPECT_LE(c.triangles, target) << f;
+    EXPECT_GE(c.triangles + 2, target) << f;
+    EXPECT_EQ(r.triangles_before, nt);
+    EXPECT_EQ(r.triangles_after, c.triangles);
+    EXPECT_EQ(r.collapses, (nt - c.triangles) / 2);
+    // Edges of about 0.1 (f = 0.25) to 0.16 (f = 0.1) on a unit sphere.
+    EXPECT_LT(max_radius_error(m), f > 0.2 ? 0.01 : 0.02) << f;
+    EXPECT_NEAR(c.volume, c0.volume, 0.02 * c0.volume) << f;
+    EXPECT_GT(c.min_angle_degrees, 10) << f;
+    ASSERT_EQ(m.n.size(), m.p.size());
+    for (std::size_t v = 0; v < m.p.size() / 3; ++v) {
+      const double d = m.n[3 * v] * m.p[3 * v] + m.n[3 * v + 1] * m.p[3 * v + 1] + m.n[3 * v + 2] * m.p[3 * v + 2];
+      ASSERT_GT(d, 0.95) << v;
+    }
+    TestMesh again = sphere;
+    nbmc::mesh::decimate_mesh(again.p, again.n, again.t, f);
+    EXPECT_EQ(again.p, m.p);
+    EXPECT_EQ(again.t, m.t);
+    std::printf("sphere to %.2f: %zu -> %llu triangles, %llu refused, max error %.2g, min angle %.1f deg\n", f, nt,
+                (unsigned long long)c.triangles, (unsigned long long)r.refused, r.max_error, c.min_angle_degrees);
+  }
+  // 1 (and above) leaves the mesh alone.
+  TestMesh same = sphere;
+  const auto r = nbmc::mesh::decimate_mesh(same.p, same.n, same.t, 1.0);
+  EXPECT_EQ(r.collapses, 0u);
+  EXPECT_EQ(same.p, sphere.p);
+  EXPECT_EQ(same.t, sphere.t);
+}
+
+// Genus is kept (a torus stays a torus, Euler 0), and so is a mesh of
+// several components, down to what the link condition allows (each one
+// stops at a tetrahedron).
+TEST(MeshDecimate, KeepsTopology) {
+  TestMesh m = torus_mesh(48, 24);
+  const std::size_t nt = m.t.size() / 3;
+  nbmc::mesh::decimate_mesh(m.p, m.n, m.t, 0.1);
+  CheckResult c = m.check();
+  EXPECT_TRUE(c.closed && c.manifold && c.oriented);
+  EXPECT_EQ(c.euler_characteristic, 0);
+  EXPECT_EQ(c.components, 1u);
+  EXPECT_LE(c.triangles, nt / 10 + 1);
+  EXPECT_EQ(c.degenerate_triangles + c.sliver_triangles, 0u);
+
+  TestMesh two = icosphere(2);
+  const TestMesh small = icosphere(1);
+  const std::uint32_t base = std::uint32_t(two.p.size() / 3);
+  for (std::size_t i = 0; i < small.p.size(); ++i) two.p.push_back(small.p[i] * 0.2f + (i % 3 == 0 ? 3.0f : 0.0f));
+  for (std::uint32_t v : small.t) two.t.push_back(base + v);
+  two.n.assign(two.p.size(), 0.0f);
+  nbmc::mesh::decimate_mesh(two.p, two.n, two.t, 0.001);
+  c = two.check();
+  EXPECT_TRUE(c.closed && c.manifold && c.oriented);
+  EXPECT_EQ(c.components, 2u);
+  EXPECT_EQ(c.euler_characteristic, 4);
+  EXPECT_EQ(c.triangles, 8u);  // two tetrahedra
+}
+
+// Pinched spheres (with slivers the clean-up would repair) and positions far
+// from the origin in double: the mesh stays closed, manifold and oriented.
+TEST(MeshDecimate, RandomPinchesAndFarPositions) {
+  const TestMesh sphere = icosphere(3);
+  for (unsigned seed = 1; seed <= 200; ++seed) {
+    TestMesh m = sphere;
+    std::mt19937 rng(seed);
+    std::uniform_int_distribution<std::size_t> pick(0, m.t.size() / 3 - 1);
+    std::uniform_real_distribution<float> u(0, 1);
+    for (int i = 0; i < 1 + int(rng() % 8); ++i) {
+      const std::size_t t = pick(rng);
+      const std::uint32_t a = m.t[3 * t], b = m.t[3 * t + 1];
+      const float s = std::pow(10.0f, -1 - 5 * u(rng));
+      for (int x = 0; x < 3; ++x) m.p[3 * a + x] = m.p[3 * b + x] + s * (m.p[3 * a + x] - m.p[3 * b + x]);
+    }
+    const CheckResult before = m.check();
+    nbmc::mesh::decimate_mesh(m.p, m.n, m.t, seed % 2 ? 0.25 : 0.1);
+    const CheckResult after = m.check();
+    ASSERT_TRUE(after.closed && after.manifold && after.oriented) << seed;
+    ASSERT_EQ(after.euler_characteristic, 2) << seed;
+    ASSERT_EQ(after.degenerate_triangles, 0u) << seed;
+    ASSERT_LE(after.sliver_triangles, before.sliver_triangles + before.degenerate_triangles) << seed;
+  }
+  // The same sphere 5e6 away from the origin, in double: the same shape.
+  TestMesh near = icosphere(3);
+  std::vector<double> far(near.p.begin(), near.p.end());
+  std::vector<float> n;
+  std::vector<std::uint32_t> t = near.t;
+  for (std::size_t i = 0; i < far.size(); i += 3) far[i] += 5e6;
+  nbmc::mesh::decimate_mesh(near.p, near.n, near.t, 0.25);
+  nbmc::mesh::decimate_mesh(far, n, t, 0.25);
+  const CheckResult c = check_mesh(far.data(), far.size() / 3, t.data(), t.size() / 3);
+  EXPECT_TRUE(c.closed && c.manifold && c.oriented);
+  EXPECT_EQ(c.triangles, near.t.size() / 3);
+  double e = 0;
+  for (std::size_t v = 0; v < far.size() / 3; ++v)
+    e = std::max(e, std::fabs(std::sqrt((far[3 * v] - 5e6) * (far[3 * v] - 5e6) + far[3 * v + 1] * far[3 * v + 1] +
+                                        far[3 * v + 2] * far[3 * v + 2]) - 1));
+  EXPECT_LT(e, 0.01);
 }
 
 }  // namespace

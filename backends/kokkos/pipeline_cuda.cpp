@@ -3,6 +3,7 @@
 // CUDA build has: the device radix sort (CUB, shipped with the CUDA toolkit),
 // uploads from device pointers, meshes left in device memory.
 #include "../../src/backends.hpp"
+#include "attributes.hpp"
 #include "pipeline.hpp"
 
 #if defined(KOKKOS_ENABLE_CUDA)
@@ -109,6 +110,15 @@ void reconstruct_cuda(const ParticleInput& in, const Params& p, MemoryTracker& t
   Details::reconstruct(Kokkos::Cuda(), in, p, t, pr, mesh_on_device, m, st);
 #else
   (void)in; (void)p; (void)t; (void)pr; (void)mesh_on_device; (void)m; (void)st; (void)device;
+  throw Error(7, "the CUDA backend is not compiled in");
+#endif
+}
+
+bool interpolate_attributes_cuda(const AttributeJob& job, MemoryTracker& t) {
+#if defined(KOKKOS_ENABLE_CUDA)
+  return Details::interpolate_attributes(Kokkos::Cuda(), t, job);
+#else
+  (void)job; (void)t;
   throw Error(7, "the CUDA backend is not compiled in");
 #endif
 }

@@ -171,6 +171,21 @@ program example
   if (maxval(abs(real(nbmc_mesh_positions_f64(mesh), c_float) - nbmc_mesh_positions(mesh))) > 0) &
        error stop 'the float positions are not the doubles rounded'
   params%double_positions = 0
+  ! Decimation to a quarter of the triangles (the mesh stays closed), and
+  ! isolated particles (clusters of fewer than min_cluster) as spheres
+  ! s(4, n): x, y, z, radius; here every particle is in the block, so none.
+  params%decimate_fraction = 0.25d0
+  params%isolated = NBMC_ISOLATED_SPHERE
+  status = nbmc_context_reconstruct(ctx, params, mesh)
+  call check(status, 'nbmc_context_reconstruct (decimate_fraction, NBMC_ISOLATED_SPHERE)')
+  status = nbmc_context_stats(ctx, stats)
+  call check(status, 'nbmc_context_stats')
+  if (nbmc_mesh_triangle_count(mesh) /= stats%triangle_count .or. &
+      4 * stats%triangle_count > stats%pre_decimation_triangle_count + 3) error stop 'decimation: counts'
+  if (nbmc_mesh_sphere_count(mesh) /= stats%dropped_particle_count) error stop 'spheres: count'
+  if (nbmc_mesh_sphere_count(mesh) == 0 .and. associated(nbmc_mesh_spheres(mesh))) error stop 'spheres: none expected'
+  params%decimate_fraction = 1
+  params%isolated = NBMC_ISOLATED_KEEP
   ! Device memory needs the CUDA backend; elsewhere the call fails cleanly.
   if (backend /= NBMC_BACKEND_CUDA) then
     status = nbmc_context_set_mesh_memory(ctx, NBMC_MEMORY_DEVICE)

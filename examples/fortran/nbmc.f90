@@ -100,6 +100,10 @@ module nbmc
 
   integer(c_int32_t), parameter, public :: NBMC_ISOLATED_KEEP = 0
   integer(c_int32_t), parameter, public :: NBMC_ISOLATED_DROP = 1
+  integer(c_int32_t), parameter, public :: NBMC_ISOLATED_SPHERE = 2
+
+  integer(c_int32_t), parameter, public :: NBMC_SMOOTH_UNIFORM = 0
+  integer(c_int32_t), parameter, public :: NBMC_SMOOTH_FEATURE = 1
 
   integer(c_int32_t), parameter, public :: NBMC_FIELD_NARROW_BAND = 0
   integer(c_int32_t), parameter, public :: NBMC_FIELD_DENSE       = 1
@@ -176,12 +180,15 @@ module nbmc
     integer(c_int32_t) :: isolated = 0            ! appended (isolated-particle filter)
     integer(c_int32_t) :: min_cluster = 0
     integer(c_int32_t) :: double_positions = 0    ! appended (double-precision positions)
+    real(c_double)     :: decimate_fraction = 0   ! appended (decimation, feature-weighted smoothing)
+    integer(c_int32_t) :: smooth_weighting = 0
+    integer(c_int32_t) :: reserved1 = 0
     real(c_double)     :: aniso_kr = 0            ! appended (NBMC_METHOD_YT10)
     real(c_double)     :: aniso_ks = 0
     real(c_double)     :: aniso_kn = 0
     real(c_double)     :: aniso_lambda = 0
     integer(c_int32_t) :: aniso_neighbours = 0
-    integer(c_int32_t) :: reserved1 = 0
+    integer(c_int32_t) :: reserved2 = 0
   end type nbmc_params
 
   type, bind(c), public :: nbmc_stats
@@ -207,6 +214,7 @@ module nbmc
     real(c_double)     :: smoothing_volume_change = 0
     integer(c_int64_t) :: dropped_particle_count = 0  ! appended (isolated-particle filter)
     integer(c_int64_t) :: dropped_cluster_count = 0
+    integer(c_int64_t) :: pre_decimation_triangle_count = 0  ! appended (decimation)
   end type nbmc_stats
 
   ! Signature of a progress callback (nbmc_progress_fn); pass c_funloc(f).
@@ -237,6 +245,7 @@ module nbmc
   public :: nbmc_mesh_vertex_count, nbmc_mesh_triangle_count
   public :: nbmc_mesh_positions, nbmc_mesh_normals, nbmc_mesh_triangles, nbmc_mesh_close
   public :: nbmc_mesh_positions_f64
+  public :: nbmc_mesh_sphere_count, nbmc_mesh_spheres
   public :: nbmc_mesh_memory, nbmc_mesh_copy_to_host, nbmc_mesh_c_arrays
   public :: nbmc_context_load_particles, nbmc_mesh_write, nbmc_last_error
   public :: nbmc_kokkos_finalize
@@ -449,6 +458,18 @@ module nbmc
       type(c_ptr), value :: mesh
       type(c_ptr) :: p
     end function c_mesh_positions_f64
+
+    function c_mesh_sphere_count(mesh) bind(c, name="nbmc_mesh_sphere_count") result(n)
+      import :: c_ptr, c_int64_t
+      type(c_ptr), value :: mesh
+      integer(c_int64_t) :: n
+    end function c_mesh_sphere_count
+
+    function c_mesh_spheres(mesh) bind(c, name="nbmc_mesh_spheres") result(p)
+      import :: c_ptr
+      type(c_ptr), value :: mesh
+      type(c_ptr) :: p
+    end function c_mesh_spheres
 
     function c_mesh_normals(mesh) bind(c, name="nbmc_mesh_normals") result(p)
       import :: c_ptr
@@ -855,6 +876,25 @@ contains
     p = c_mesh_positions_f64(mesh%ptr)
     if (c_associated(p)) call c_f_pointer(p, pos, [3_c_int64_t, c_mesh_vertex_count(mesh%ptr)])
   end function nbmc_mesh_positions_f64
+
+  !> params%isolated = NBMC_ISOLATED_SPHERE: the particles of the dropped
+  !> clusters as spheres.
+  function nbmc_mesh_sphere_count(mesh) result(n)
+    type(nbmc_mesh), intent(in) :: mesh
+    integer(c_int64_t) :: n
+    n = c_mesh_sphere_count(mesh%ptr)
+  end function nbmc_mesh_sphere_count
+
+  !> The spheres s(4, n): x, y, z, radius each, pointing into the mesh (no
+  !> copy, host memory); not associated when there are none.
+  function nbmc_mesh_spheres(mesh) result(s)
+    type(nbmc_mesh), intent(in) :: mesh
+    real(c_float), pointer :: s(:, :)
+    type(c_ptr) :: p
+    nullify(s)
+    p = c_mesh_spheres(mesh%ptr)
+    if (c_associated(p)) call c_f_pointer(p, s, [4_c_int64_t, c_mesh_sphere_count(mesh%ptr)])
+  end function nbmc_mesh_spheres
 
   !> Unit normals nrm(3, nv) pointing out of the fluid; not associated when
   !> the reconstruction had compute_normals = 0, and for a device mesh.

@@ -44,6 +44,10 @@ METHOD_YT10 = 3
 
 ISOLATED_KEEP = 0
 ISOLATED_DROP = 1
+ISOLATED_SPHERE = 2
+
+SMOOTH_UNIFORM = 0
+SMOOTH_FEATURE = 1
 
 FIELD_NARROW_BAND = 0
 FIELD_DENSE = 1
@@ -114,13 +118,17 @@ class Params(Structure):
         ("min_cluster", c_int32),
         # appended with double-precision positions
         ("double_positions", c_int32),
+        # appended with decimation and feature-weighted smoothing
+        ("decimate_fraction", c_double),
+        ("smooth_weighting", c_int32),
+        ("reserved1", c_int32),
         # appended with METHOD_YT10
         ("aniso_kr", c_double),
         ("aniso_ks", c_double),
         ("aniso_kn", c_double),
         ("aniso_lambda", c_double),
         ("aniso_neighbours", c_int32),
-        ("reserved1", c_int32),
+        ("reserved2", c_int32),
     ]
 
 
@@ -150,6 +158,8 @@ class Stats(Structure):
         # appended with the isolated-particle filter
         ("dropped_particle_count", c_uint64),
         ("dropped_cluster_count", c_uint64),
+        # appended with decimation
+        ("pre_decimation_triangle_count", c_uint64),
     ]
 
 
@@ -242,6 +252,8 @@ _SIGNATURES = {
     "nbmc_mesh_triangle_count": (c_uint64, [_mesh_p]),
     "nbmc_mesh_positions": (c_void_p, [_mesh_p]),
     "nbmc_mesh_positions_f64": (c_void_p, [_mesh_p]),
+    "nbmc_mesh_sphere_count": (c_uint64, [_mesh_p]),
+    "nbmc_mesh_spheres": (c_void_p, [_mesh_p]),
     "nbmc_mesh_normals": (c_void_p, [_mesh_p]),
     "nbmc_mesh_triangles": (c_void_p, [_mesh_p]),
     "nbmc_mesh_destroy": (None, [_mesh_p]),

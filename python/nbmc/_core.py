@@ -29,7 +29,8 @@ BACKENDS = {"auto": C.BACKEND_AUTO, "serial": C.BACKEND_SERIAL, "openmp": C.BACK
 METHODS = {"ssp07": C.METHOD_SSP07, "zb05": C.METHOD_ZB05, "sph": C.METHOD_SPH, "yt10": C.METHOD_YT10}
 FIELDS = {"narrow-band": C.FIELD_NARROW_BAND, "dense": C.FIELD_DENSE, "scatter": C.FIELD_SCATTER}
 UNITS = {"spacing": C.UNIT_SPACING, "absolute": C.UNIT_ABSOLUTE}
-ISOLATED = {"keep": C.ISOLATED_KEEP, "drop": C.ISOLATED_DROP}
+ISOLATED = {"keep": C.ISOLATED_KEEP, "drop": C.ISOLATED_DROP, "sphere": C.ISOLATED_SPHERE}
+SMOOTH_WEIGHTS = {"uniform": C.SMOOTH_UNIFORM, "feature": C.SMOOTH_FEATURE}
 MEMORIES = {"host": C.MEMORY_HOST, "device": C.MEMORY_DEVICE}
 
 
@@ -66,7 +67,8 @@ _LENGTHS = ("cell_size", "influence_radius", "band_width", "surface_radius", "is
 _ANISO = ("aniso_kr", "aniso_ks", "aniso_kn", "aniso_lambda")
 _PARAM_KEYS = _LENGTHS + ("method", "field", "t_low", "t_high", "iso_threshold", "color_threshold",
                           "neighbour_threshold", "normals", "length_unit", "isolated", "min_cluster",
-                          "double_positions") + _ANISO + ("aniso_neighbours",)
+                          "double_positions", "cleanup", "smooth", "smooth_weights", "decimate") + _ANISO + (
+                              "aniso_neighbours",)
 
 
 def defaults() -> Dict[str, Any]:
@@ -82,7 +84,9 @@ def defaults() -> Dict[str, Any]:
              neighbour_threshold=p.neighbour_threshold, normals=bool(p.compute_normals),
              length_unit=_name_of(UNITS, p.length_unit),
              isolated=_name_of(ISOLATED, p.isolated), min_cluster=p.min_cluster,
-             double_positions=bool(p.double_positions), aniso_neighbours=p.aniso_neighbours)
+             double_positions=bool(p.double_positions), cleanup=bool(p.cleanup),
+             smooth=p.smooth_iterations, smooth_weights=_name_of(SMOOTH_WEIGHTS, p.smooth_weighting),
+             decimate=p.decimate_fraction, aniso_neighbours=p.aniso_neighbours)
     d.update({k: p.__getattribute__(k) for k in _ANISO})
     return d
 
@@ -130,6 +134,14 @@ def make_params(spacing: Optional[float] = None, particle_radius: Optional[float
         p.compute_normals = 1 if kw["normals"] else 0
     if kw.get("double_positions") is not None:
         p.double_positions = 1 if kw["double_positions"] else 0
+    if kw.get("cleanup") is not None:
+        p.cleanup = 1 if kw["cleanup"] else 0
+    if kw.get("smooth") is not None:
+        p.smooth_iterations = int(kw["smooth"])
+    if kw.get("smooth_weights") is not None:
+        p.smooth_weighting = _enum(SMOOTH_WEIGHTS, kw["smooth_weights"], "smooth_weights")
+    if kw.get("decimate") is not None:
+        p.decimate_fraction = float(kw["decimate"])
     if bbox is not None:
         lo, hi = _bbox(bbox)
         p.use_bbox = 1
@@ -179,6 +191,8 @@ class Stats:
     #: particles left out by ``isolated="drop"``, and the clusters they formed
     dropped_particle_count: int = 0
     dropped_cluster_count: int = 0
+    #: triangles before ``decimate`` (``triangle_count`` without it)
+    pre_decimation_triangle_count: int = 0
 
     @classmethod
     def _from_c(cls, s: C.Stats) -> "Stats":
@@ -192,7 +206,8 @@ class Stats:
             stage_seconds={STAGES[i]: s.stage_seconds[i] for i in range(C.STAGE_COUNT)},
             total_seconds=s.total_seconds, grid_origin=tuple(s.grid_origin),  # type: ignore[arg-type]
             cell_size=s.cell_size, dropped_particle_count=s.dropped_particle_count,
-            dropped_cluster_count=s.dropped_cluster_count)
+            dropped_cluster_count=s.dropped_cluster_count,
+            pre_decimation_triangle_count=s.pre_decimation_triangle_count)
 
 
 # ---------------------------------------------------------------------- mesh
@@ -284,6 +299,17 @@ class Mesh:
         if self.double_positions:
             return self._array("vertices", lib.nbmc_mesh_positions_f64, self.vertex_count, np.float64)
         return self._array("vertices", lib.nbmc_mesh_positions, self.vertex_count, np.float32)
+
+    @property
+    def spheres(self) -> np.ndarray:
+        """``isolated="sphere"``: the particles of the dropped clusters as
+        spheres, (S, 4) float32 x, y, z, radius (a read-only view in host
+        memory, in the particles' order); (0, 4) otherwise."""
+        if "spheres" not in self._cache:
+            n = int(lib.nbmc_mesh_sphere_count(self._h.ptr))
+            self._cache["spheres"] = A.host_view(lib.nbmc_mesh_spheres(self._h.ptr) or 0, (n, 4), np.float32,
+                                                 self._h)
+        return self._cache["spheres"]
 
     @property
     def normals(self) -> Union[np.ndarray, A.DeviceArray, None]:
@@ -842,7 +868,9 @@ def reconstruct(points: Any, spacing: Optional[float] = None, *,
                 neighbour_threshold: Optional[int] = None, normals: Optional[bool] = None,
                 length_unit: Optional[str] = None, bbox: Any = None,
                 isolated: Optional[str] = None, min_cluster: Optional[int] = None,
-                double_positions: Optional[bool] = None,
+                double_positions: Optional[bool] = None, cleanup: Optional[bool] = None,
+                smooth: Optional[int] = None, smooth_weights: Optional[str] = None,
+                decimate: Optional[float] = None,
                 aniso_kr: Optional[float] = None, aniso_ks: Optional[float] = None,
                 aniso_kn: Optional[float] = None, aniso_neighbours: Optional[int] = None,
                 aniso_lambda: Optional[float] = None,
@@ -900,6 +928,21 @@ def reconstruct(points: Any, spacing: Optional[float] = None, *,
         float64 (for coordinates far from the origin, e.g. UTM metres, where
         float32 resolves only 0.5 m); host meshes only. Default
         {double_positions}.
+    isolated="sphere"
+        As "drop", and the dropped particles come back as spheres
+        (:attr:`Mesh.spheres`, radius ``iso_radius``; "sph", "yt10": half the spacing).
+    cleanup
+        Remove degenerate and sliver triangles (default {cleanup}).
+    smooth, smooth_weights
+        Taubin smoothing iterations after the clean-up (default {smooth}),
+        "uniform" or "feature" (each vertex's step scaled by the particles
+        near it, so thin sheets, filaments and droplets are not eroded;
+        default {smooth_weights!r}).
+    decimate
+        Keep this fraction of the triangles, 0 < f <= 1, by quadric-error
+        edge collapses that keep the mesh closed and manifold (default
+        {decimate}: off). ``Mesh.stats.pre_decimation_triangle_count`` has
+        the count before.
     bbox
         Only reconstruct near this box (absolute): (xmin, ymin, zmin, xmax,
         ymax, zmax) or ((xmin, ymin, zmin), (xmax, ymax, zmax)).
@@ -929,7 +972,8 @@ def reconstruct(points: Any, spacing: Optional[float] = None, *,
                                neighbour_threshold=neighbour_threshold, normals=normals,
                                length_unit=length_unit, isolated=isolated,
                                min_cluster=min_cluster, double_positions=double_positions,
-                               aniso_kr=aniso_kr, aniso_ks=aniso_ks, aniso_kn=aniso_kn,
+                               cleanup=cleanup, smooth=smooth, smooth_weights=smooth_weights,
+                               decimate=decimate, aniso_kr=aniso_kr, aniso_ks=aniso_ks, aniso_kn=aniso_kn,
                                aniso_neighbours=aniso_neighbours, aniso_lambda=aniso_lambda)
 
 

@@ -42,6 +42,8 @@ def test_equals_cli_bit_for_bit(mesh, cli_ply, tmp_path):
      dict(method="yt10", aniso_kr=3, aniso_ks=0.9, aniso_kn=0.6, aniso_neighbours=20,
           aniso_lambda=0.5, iso_threshold=0.5)),
     (["--isolated", "drop", "--min-cluster", "20"], dict(isolated="drop", min_cluster=20)),
+    (["--smooth", "5", "--smooth-weights", "feature", "--decimate", "0.3"],
+     dict(smooth=5, smooth_weights="feature", decimate=0.3)),
     (["--cell-size", "0.75", "--influence-radius", "3", "--surface-radius", "1.5",
       "--t-low", "0.5", "--neighbour-threshold", "20", "--bbox", "-1", "0", "-1", "0", "0.6", "0"],
      dict(cell_size=0.75, influence_radius=3, surface_radius=1.5, t_low=0.5,
@@ -215,6 +217,24 @@ def test_one_particle_is_a_sphere():
     assert m.triangle_count > 0
     r = np.linalg.norm(m.vertices - np.array([1, 2, 3], np.float32), axis=1)
     assert r.max() < 1.5
+
+
+def test_decimate_and_spheres():
+    g = np.arange(-6, 7, dtype=np.float64)
+    ball = np.stack(np.meshgrid(g, g, g), -1).reshape(-1, 3)
+    ball = ball[np.linalg.norm(ball, axis=1) <= 6]
+    lone = np.array([[20.0, 0, 0], [0, 20.0, 0]])
+    pts = np.concatenate([ball, lone])
+    full = nbmc.reconstruct(pts, spacing=1)
+    m = nbmc.reconstruct(pts, spacing=1, decimate=0.25, isolated="sphere")
+    assert m.stats.pre_decimation_triangle_count < full.triangle_count  # the lone particles made none
+    assert m.triangle_count <= 0.25 * m.stats.pre_decimation_triangle_count + 1
+    assert m.spheres.shape == (2, 4) and m.spheres.dtype == np.float32
+    assert np.array_equal(m.spheres[:, :3], lone.astype(np.float32))
+    assert np.allclose(m.spheres[:, 3], 1.0)
+    assert full.spheres.shape == (0, 4)
+    with pytest.raises(nbmc.Error):
+        nbmc.reconstruct(pts, spacing=1, decimate=0)
 
 
 def test_defaults_and_signature():

@@ -10,6 +10,7 @@
 #include "io/attributes.hpp"
 #include "io/error.hpp"
 #include "io/mesh.hpp"
+#include "io/mesh_xdmf.hpp"
 #include "io/particles.hpp"
 #include "progress.hpp"
 #include "report.hpp"
@@ -53,7 +54,9 @@ struct Named {
 };
 const Named kMethods[] = {
     {"ssp07", NBMC_METHOD_SSP07}, {"zb05", NBMC_METHOD_ZB05}, {"sph", NBMC_METHOD_SPH}, {"yt10", NBMC_METHOD_YT10}};
-const Named kIsolated[] = {{"keep", NBMC_ISOLATED_KEEP}, {"drop", NBMC_ISOLATED_DROP}};
+const Named kIsolated[] = {
+    {"keep", NBMC_ISOLATED_KEEP}, {"drop", NBMC_ISOLATED_DROP}, {"sphere", NBMC_ISOLATED_SPHERE}};
+const Named kSmoothWeights[] = {{"uniform", NBMC_SMOOTH_UNIFORM}, {"feature", NBMC_SMOOTH_FEATURE}};
 const Named kFields[] = {
     {"narrow-band", NBMC_FIELD_NARROW_BAND}, {"dense", NBMC_FIELD_DENSE}, {"scatter", NBMC_FIELD_SCATTER}};
 const Named kBackends[] = {{"auto", NBMC_BACKEND_AUTO},
@@ -90,7 +93,7 @@ struct Options {
   double particle_radius = 0;
   nbmc_params params{};
   nbmc_context_desc desc{};
-  std::string method, field, backend, isolated;
+  std::string method, field, backend, isolated, smooth_weights;
   std::vector<double> bbox;
   bool no_normals = false;
   bool double_positions = false;
@@ -249,6 +252,39 @@ std::int32_t set_attributes(nbmc_context* ctx, const nbmc::io::Particles& p, con
   return NBMC_OK;
 }
 
+// --isolated sphere: where the spheres of the mesh written to output go,
+// <output without its extension>_spheres.ply ("file.h5:/group": beside the file).
+std::string spheres_path(const std::string& output) {
+  const std::string file = nbmc::io::mesh_output_file(output);
+  const std::size_t slash = file.find_last_of('/');
+  const std::size_t dot = file.rfind('.');
+  const std::string stem = dot != std::string::npos && (slash == std::string::npos || dot > slash) ? file.substr(0, dot)
+                                                                                                   : file;
+  return stem + "_spheres.ply";
+}
+
+// Writes the mesh's spheres (NBMC_ISOLATED_SPHERE) as a PLY point set: vertex
+// x y z and a float property radius, no faces. Throws io::Error.
+void write_spheres(const std::string& path, const nbmc_mesh* mesh) {
+  const std::uint64_t n = nbmc_mesh_sphere_count(mesh);
+  const float* s = nbmc_mesh_spheres(mesh);
+  std::vector<float> xyz(3 * n);
+  nbmc::io::Attribute radius;
+  radius.name = "radius";
+  radius.components = 1;
+  radius.values.resize(n);
+  for (std::uint64_t i = 0; i < n; ++i) {
+    for (int a = 0; a < 3; ++a) xyz[3 * i + a] = s[4 * i + a];
+    radius.values[i] = s[4 * i + 3];
+  }
+  nbmc::io::MeshView view;
+  view.positions = xyz.empty() ? nullptr : xyz.data();
+  view.vertex_count = n;
+  view.attributes = &radius;
+  view.attribute_count = 1;
+  nbmc::io::write_mesh(path, view, "ply", [] { return nbmc::cli::interrupted(); });
+}
+
 // The attributes the library interpolated onto mesh, for the writers.
 std::vector<nbmc::io::Attribute> mesh_attributes(const nbmc_mesh* mesh) {
   std::vector<nbmc::io::Attribute> out(nbmc_mesh_attribute_count(mesh));
@@ -324,6 +360,7 @@ nbmc::cli::FrameResult run_frame(const Options& o, nbmc_context* ctx, const nbmc
       view.attribute_count = attrs.size();
       cli::make_parent_folders(f.output);
       io::write_mesh(f.output, view, "", [] { return cli::interrupted(); });
+      if (o.params.isolated == NBMC_ISOLATED_SPHERE) write_spheres(spheres_path(f.output), mesh.get());
       r.vertices = view.vertex_count;
       r.triangles = view.triangle_count;
       r.status = "written";
@@ -493,6 +530,10 @@ int reconstruct(Options& o) {
     }
     const auto t0 = Clock::now();
     io::write_mesh(o.output, view, report.output_format, [] { return cli::interrupted(); });
+    if (o.params.isolated == NBMC_ISOLATED_SPHERE) {
+      report.spheres_path = spheres_path(o.output);
+      write_spheres(report.spheres_path, mesh.get());
+    }
     report.write_seconds = seconds_since(t0);
   } catch (const io::Cancelled&) {
     return cancelled(progress);
@@ -587,7 +628,6 @@ int reconstruct_mpi(Options& o, int rank, int size, bool pieces) {
     if (root) std::fprintf(stderr, "nbmc: error: %s\n", msg.c_str());
     return code;
   };
-  if (!o.attributes.empty()) return fail("--attributes is not supported under MPI yet (run one process)", 2);
   std::string piece_ext;
   if (pieces) {
     const std::string lower_out = lower(o.output);
@@ -611,9 +651,12 @@ int reconstruct_mpi(Options& o, int rank, int size, bool pieces) {
   } catch (const std::exception& e) {
     error = e.what();
   }
-  const bool parallel_read = !o.read_on_root && (format == "h5part" || format == "hdf5" || format == "pysph" ||
-                                                 format == "gadget");
+  // (--attributes: rank 0 reads them with the positions and scatters both;
+  // the per-rank hyperslab reads take positions only.)
+  const bool parallel_read = !o.read_on_root && o.attributes.empty() &&
+                             (format == "h5part" || format == "hdf5" || format == "pysph" || format == "gadget");
   std::vector<double> mine;
+  io::Particles mine_attributes;  // this rank's share of the --attributes (names as in the file)
   if (parallel_read && error.empty()) {
     const auto t0 = Clock::now();
     try {
@@ -648,7 +691,10 @@ int reconstruct_mpi(Options& o, int rank, int size, bool pieces) {
       io::ReadOptions ro;
       ro.format = o.input_format;
       ro.frame = o.step;
+      ro.attributes = !o.attributes.empty();
+      ro.only = o.attributes;
       particles = io::read_particles(o.input, ro);
+      check_attributes(o.input, particles, o.attributes, ro);
       report.read_seconds = seconds_since(t0);
     } catch (const std::exception& e) {
       error = e.what();
@@ -673,6 +719,28 @@ int reconstruct_mpi(Options& o, int rank, int size, bool pieces) {
   mine.resize(static_cast<std::size_t>(counts[static_cast<std::size_t>(rank)]));
   MPI_Scatterv(root ? particles.xyz.data() : nullptr, counts.data(), displs.data(), MPI_DOUBLE, mine.data(),
                counts[std::size_t(rank)], MPI_DOUBLE, 0, MPI_COMM_WORLD);
+  // The attributes asked for, the same shares (each name is in the file:
+  // check_attributes on rank 0 agreed above).
+  for (const std::string& name : o.attributes) {
+    const io::Attribute* a = root ? particles.attribute(name) : nullptr;
+    int comps = a ? a->components : 0;
+    MPI_Bcast(&comps, 1, MPI_INT, 0, MPI_COMM_WORLD);
+    std::vector<int> c(counts), d(displs);
+    for (int r = 0; r < size; ++r) {
+      if (std::int64_t(c[std::size_t(r)] / 3) * comps > std::int64_t(INT32_MAX) ||
+          std::int64_t(d[std::size_t(r)] / 3) * comps > std::int64_t(INT32_MAX))
+        return fail("the attribute '" + name + "' is too large to scatter from rank 0; use more ranks", 1);
+      c[std::size_t(r)] = c[std::size_t(r)] / 3 * comps;
+      d[std::size_t(r)] = d[std::size_t(r)] / 3 * comps;
+    }
+    io::Attribute part;
+    part.name = a ? a->name : name;
+    part.components = comps;
+    part.values.resize(std::size_t(c[std::size_t(rank)]));
+    MPI_Scatterv(a ? a->values.data() : nullptr, c.data(), d.data(), MPI_DOUBLE, part.values.data(),
+                 c[std::size_t(rank)], MPI_DOUBLE, 0, MPI_COMM_WORLD);
+    mine_attributes.attributes.push_back(std::move(part));
+  }
   particles = io::Particles();
   }
 
@@ -686,7 +754,18 @@ int reconstruct_mpi(Options& o, int rank, int size, bool pieces) {
   std::int32_t st = nbmc_mpi_context_set_comm(ctx.get(), MPI_COMM_WORLD);
   if (st != NBMC_OK) return fail(nbmc_context_last_error(ctx.get()), 1);
   nbmc_context_set_particles_f64(ctx.get(), mine.empty() ? nullptr : mine.data(), mine.size() / 3, 0);
+  {
+    std::string attr_error;
+    if (!mine.empty()) {
+      std::vector<std::string> names;
+      for (const io::Attribute& a : mine_attributes.attributes) names.push_back(a.name);
+      if (set_attributes(ctx.get(), mine_attributes, names) != NBMC_OK) attr_error = nbmc_context_last_error(ctx.get());
+    }
+    attr_error = agree_error(attr_error, rank, size);
+    if (!attr_error.empty()) return fail(attr_error, 1);
+  }
   std::vector<double>().swap(mine);
+  mine_attributes = io::Particles();
 
   nbmc_mesh* raw_mesh = nullptr;
   st = nbmc_mpi_reconstruct(ctx.get(), &o.params, pieces ? NBMC_MPI_PIECES : NBMC_MPI_GATHER, 0, &raw_mesh);
@@ -718,15 +797,29 @@ int reconstruct_mpi(Options& o, int rank, int size, bool pieces) {
           nbmc_mesh_check_result_init(&report.check);
           report.has_check = nbmc_mesh_check(mesh.get(), &report.check) == NBMC_OK;
         }
-        io::write_mesh(o.output, mesh_view(mesh.get()), report.output_format, [] { return cli::interrupted(); });
+        io::MeshView view = mesh_view(mesh.get());
+        const std::vector<io::Attribute> attrs = mesh_attributes(mesh.get());
+        view.attributes = attrs.empty() ? nullptr : attrs.data();
+        view.attribute_count = attrs.size();
+        for (const io::Attribute& a : attrs) report.attributes.push_back(a.name);
+        report.interpolate_seconds = report.stats.stage_seconds[NBMC_STAGE_ATTRIBUTES];
+        io::write_mesh(o.output, view, report.output_format, [] { return cli::interrupted(); });
       } catch (const std::exception& e) {
         write_error = e.what();
       }
     }
   } else {
     const std::string mine_path = piece_path(o.output, rank, piece_ext);
+    const std::vector<io::Attribute> attrs = mesh_attributes(mesh.get());
+    if (root) {
+      for (const io::Attribute& a : attrs) report.attributes.push_back(a.name);
+      report.interpolate_seconds = report.stats.stage_seconds[NBMC_STAGE_ATTRIBUTES];
+    }
     try {
-      io::write_mesh(mine_path, mesh_view(mesh.get()), piece_ext, [] { return cli::interrupted(); });
+      io::MeshView view = mesh_view(mesh.get());
+      view.attributes = attrs.empty() ? nullptr : attrs.data();
+      view.attribute_count = attrs.size();
+      io::write_mesh(mine_path, view, piece_ext, [] { return cli::interrupted(); });
     } catch (const std::exception& e) {
       write_error = e.what();
     }
@@ -740,9 +833,16 @@ int reconstruct_mpi(Options& o, int rank, int size, bool pieces) {
       std::string x = "<?xml version=\"1.0\"?>\n<VTKFile type=\"" + type +
                       "\" version=\"0.1\" byte_order=\"LittleEndian\" header_type=\"UInt64\">\n  <" + type +
                       " GhostLevel=\"0\">\n";
-      if (o.params.compute_normals)
-        x += "    <PPointData Normals=\"Normals\">\n      <PDataArray type=\"Float32\" Name=\"Normals\" "
-             "NumberOfComponents=\"3\"/>\n    </PPointData>\n";
+      if (o.params.compute_normals || !attrs.empty()) {
+        x += o.params.compute_normals ? "    <PPointData Normals=\"Normals\">\n" : "    <PPointData>\n";
+        if (o.params.compute_normals)
+          x += "      <PDataArray type=\"Float32\" Name=\"Normals\" NumberOfComponents=\"3\"/>\n";
+        for (const io::Attribute& a : attrs)
+          x += "      <PDataArray type=\"Float32\" Name=\"" + io::detail::xml_escape(a.name) + "\"" +
+               (a.components != 1 ? " NumberOfComponents=\"" + std::to_string(a.components) + "\"" : std::string()) +
+               "/>\n";
+        x += "    </PPointData>\n";
+      }
       x += std::string("    <PPoints>\n      <PDataArray type=\"") +
            (o.params.double_positions ? "Float64" : "Float32") + "\" NumberOfComponents=\"3\"/>\n    </PPoints>\n";
       if (!vtp)
@@ -929,6 +1029,7 @@ int main(int argc, char** argv) {
   o.method = name_of(kMethods, p.method);
   o.field = name_of(kFields, p.field);
   o.isolated = name_of(kIsolated, p.isolated);
+  o.smooth_weights = name_of(kSmoothWeights, p.smooth_weighting);
   o.backend = name_of(kBackends, o.desc.backend);
 
   CLI::App app{"nbmc: narrow-band marching cubes surface reconstruction of particle-based fluids"};
@@ -1004,7 +1105,8 @@ int main(int argc, char** argv) {
       ->capture_default_str();
   rec->add_option("--isolated", o.isolated,
                   "keep: every particle makes surface; drop: clusters (particles linked closer than "
-                  "--surface-radius) of fewer than --min-cluster particles make none")
+                  "--surface-radius) of fewer than --min-cluster particles make none; sphere: as drop, and "
+                  "their particles are written to <output>_spheres.ply (x y z radius, no faces)")
       ->check(CLI::IsMember(names(kIsolated), CLI::ignore_case))
       ->capture_default_str();
   rec->add_option("--min-cluster", p.min_cluster, "--isolated drop: smallest cluster kept (particles)")
@@ -1026,6 +1128,25 @@ int main(int argc, char** argv) {
   rec->add_option("--smooth", p.smooth_iterations,
                   "Taubin smoothing iterations after the clean-up (lambda 0.5, mu -0.53)")
       ->check(CLI::Range(0, 100000))
+      ->capture_default_str();
+  rec->add_option("--smooth-weights", o.smooth_weights,
+                  "uniform: every vertex smoothed alike; feature: each vertex's step scaled by the particles "
+                  "near it (thin sheets, filaments and droplets are not eroded; Loeschner et al. 2023)")
+      ->check(CLI::IsMember(names(kSmoothWeights), CLI::ignore_case))
+      ->capture_default_str();
+  rec->add_option("--decimate", p.decimate_fraction,
+                  "Keep this fraction of the triangles (0 < f <= 1; 1 = off): quadric-error edge collapses "
+                  "that keep the mesh closed and manifold, after the clean-up and smoothing")
+      ->check(CLI::Validator(
+          [](std::string& s) {
+            double v = 0;
+            try {
+              v = std::stod(s);
+            } catch (...) {
+            }
+            return v > 0 && v <= 1 ? std::string() : std::string("must be in (0, 1]");
+          },
+          "FRACTION in (0, 1]"))
       ->capture_default_str();
   rec->add_flag("--check", o.check,
                 "Check the mesh (closed, manifold, oriented, bad triangles, components, volume) and report it");
@@ -1099,6 +1220,7 @@ int main(int argc, char** argv) {
   p.method = value_of(kMethods, o.method);
   p.field = value_of(kFields, o.field);
   p.isolated = value_of(kIsolated, o.isolated);
+  p.smooth_weighting = value_of(kSmoothWeights, o.smooth_weights);
   o.desc.backend = value_of(kBackends, o.backend);
   if (o.no_normals) p.compute_normals = 0;
   if (o.double_positions) p.double_positions = 1;

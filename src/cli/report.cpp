@@ -73,6 +73,7 @@ std::vector<std::pair<const char*, std::uint64_t>> counts(const nbmc_stats& s) {
           {"vertex_count", s.vertex_count},
           {"triangle_count", s.triangle_count},
           {"raw_triangle_count", s.raw_triangle_count},
+          {"pre_decimation_triangle_count", s.pre_decimation_triangle_count},
           {"dropped_particle_count", s.dropped_particle_count},
           {"dropped_cluster_count", s.dropped_cluster_count},
           {"neighbour_evaluations", s.neighbour_evaluations}};
@@ -204,14 +205,23 @@ std::string format_report(const Report& r) {
   line("mesh", (r.params.cleanup ? "cleaned up (" + grouped(s.raw_triangle_count) + " triangles before)"
                                   : std::string("raw (no clean-up)")) +
                    (r.params.smooth_iterations > 0
-                        ? ", " + std::to_string(r.params.smooth_iterations) + " smoothing iterations (volume " +
+                        ? ", " + std::to_string(r.params.smooth_iterations) +
+                              (r.params.smooth_weighting == NBMC_SMOOTH_FEATURE ? " feature-weighted" : "") +
+                              " smoothing iterations (volume " +
                               printf_string("%+.3f%%", 100.0 * s.smoothing_volume_change) + ")"
                         : std::string()) +
+                   (r.params.decimate_fraction < 1
+                        ? ", decimated to " + printf_string("%g", r.params.decimate_fraction) + " (" +
+                              grouped(s.pre_decimation_triangle_count) + " -> " + grouped(s.triangle_count) +
+                              " triangles)"
+                        : std::string()) +
                    (r.params.double_positions ? ", double-precision positions" : ""));
-  if (r.params.isolated == NBMC_ISOLATED_DROP)
+  if (r.params.isolated == NBMC_ISOLATED_DROP || r.params.isolated == NBMC_ISOLATED_SPHERE)
     line("isolated", "dropped " + grouped(s.dropped_particle_count) + " particles in " +
                          grouped(s.dropped_cluster_count) + " clusters of fewer than " +
-                         std::to_string(r.params.min_cluster) + " particles");
+                         std::to_string(r.params.min_cluster) + " particles" +
+                         (r.params.isolated == NBMC_ISOLATED_SPHERE ? ", written as spheres to " + r.spheres_path
+                                                                    : std::string()));
   line("spacing", printf_string("%g", r.params.spacing) + " (cell size " + printf_string("%g", s.cell_size) + ")");
   line("grid", grouped(s.grid_dims[0]) + " x " + grouped(s.grid_dims[1]) + " x " + grouped(s.grid_dims[2]) +
                    " vertices, origin (" + printf_string("%g", s.grid_origin[0]) + ", " +
@@ -323,12 +333,16 @@ std::string format_json(const Report& r) {
   o += ", \"field\": " + json_string(field_name(p.field));
   o += ", \"neighbour_threshold\": " + std::to_string(p.neighbour_threshold);
   o += ", \"aniso_neighbours\": " + std::to_string(p.aniso_neighbours);
-  o += ", \"isolated\": " + json_string(p.isolated == NBMC_ISOLATED_DROP ? "drop" : "keep");
+  o += ", \"isolated\": " + json_string(p.isolated == NBMC_ISOLATED_SPHERE ? "sphere"
+                                         : p.isolated == NBMC_ISOLATED_DROP ? "drop"
+                                                                            : "keep");
   o += ", \"min_cluster\": " + std::to_string(p.min_cluster);
   o += std::string(", \"compute_normals\": ") + (p.compute_normals ? "true" : "false");
   o += std::string(", \"double_positions\": ") + (p.double_positions ? "true" : "false");
   o += std::string(", \"cleanup\": ") + (p.cleanup ? "true" : "false");
   o += ", \"smooth_iterations\": " + std::to_string(p.smooth_iterations);
+  o += ", \"smooth_weights\": " + json_string(p.smooth_weighting == NBMC_SMOOTH_FEATURE ? "feature" : "uniform");
+  o += ", \"decimate\": " + json_number(p.decimate_fraction);
   if (p.use_bbox) {
     o += ", \"bbox\": [";
     for (int i = 0; i < 6; ++i) o += (i ? ", " : "") + json_number(i < 3 ? p.bbox_min[i] : p.bbox_max[i - 3]);
@@ -362,6 +376,13 @@ std::string format_json(const Report& r) {
   if (p.smooth_iterations > 0)
     o += "  \"smoothing\": {\"iterations\": " + std::to_string(p.smooth_iterations) +
          ", \"volume_change\": " + json_number(s.smoothing_volume_change) + "},\n";
+  if (p.decimate_fraction < 1)
+    o += "  \"decimation\": {\"fraction\": " + json_number(p.decimate_fraction) +
+         ", \"triangles_before\": " + std::to_string(s.pre_decimation_triangle_count) +
+         ", \"triangles_after\": " + std::to_string(s.triangle_count) + "},\n";
+  if (p.isolated == NBMC_ISOLATED_SPHERE)
+    o += "  \"spheres\": {\"path\": " + json_string(r.spheres_path) +
+         ", \"count\": " + std::to_string(s.dropped_particle_count) + "},\n";
   if (r.has_check) {
     const nbmc_mesh_check_result& c = r.check;
     o += std::string("  \"mesh_check\": {\"closed\": ") + (c.closed ? "true" : "false") +

@@ -26,6 +26,7 @@ struct Report {
   int ranks = 0;  // MPI ranks that shared the frame (0: none)
   bool normals = false;  // the mesh has normals
   std::vector<std::string> attributes; // interpolated onto the vertices
+  std::string spheres_path;            // --isolated sphere: the file the spheres went to
   double interpolate_seconds = 0;
   bool has_check = false;             // --check
   nbmc_mesh_check_result check{};     // of the written mesh

@@ -14,6 +14,8 @@ struct PostprocessStats {
   std::uint64_t bad_before = 0, bad_after = 0;  // degenerate + sliver triangles
   double volume_before_smoothing = 0, volume_after_smoothing = 0;
   double volume_change = 0;            // after / before - 1 (0 without smoothing)
+  std::uint64_t pre_decimation_triangles = 0;  // triangles before the decimation
+  std::uint64_t decimate_collapses = 0;
 };
 
 }  // namespace mesh

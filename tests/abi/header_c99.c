@@ -25,7 +25,7 @@ NBMC_ABI_STATIC_ASSERT(offsetof(nbmc_stats, struct_size) == 0, stats_size_first)
    sizeof, tail padding included): a caller built against that header passes
    struct_size = that sizeof, and none of its bytes reach the new fields. */
 NBMC_ABI_STATIC_ASSERT(offsetof(nbmc_params, aniso_kr) ==
-                           (offsetof(nbmc_params, double_positions) + 4 + sizeof(double) - 1) / sizeof(double) *
+                           (offsetof(nbmc_params, reserved1) + 4 + sizeof(double) - 1) / sizeof(double) *
                                sizeof(double),
                        params_yt10_after_old_size);
 /* The structs are made of fixed-width members with no hidden padding
@@ -99,8 +99,10 @@ int main(void) {
   CHECK(params.cleanup == 1 && params.smooth_iterations == 0 && params.iso_threshold == 0.6);
   CHECK(NBMC_METHOD_SPH == 2);
   CHECK(params.isolated == NBMC_ISOLATED_KEEP && params.min_cluster == 10 && NBMC_ISOLATED_DROP == 1);
+  CHECK(params.decimate_fraction == 1.0 && params.smooth_weighting == NBMC_SMOOTH_UNIFORM && params.reserved1 == 0);
+  CHECK(NBMC_ISOLATED_SPHERE == 2 && NBMC_SMOOTH_FEATURE == 1);
   CHECK(NBMC_METHOD_YT10 == 3 && params.aniso_kr == 4.0 && params.aniso_ks == 1.0 && params.aniso_kn == 0.5);
-  CHECK(params.aniso_lambda == 0.3 && params.aniso_neighbours == 25 && params.reserved1 == 0);
+  CHECK(params.aniso_lambda == 0.3 && params.aniso_neighbours == 25 && params.reserved2 == 0);
   memset(&stats, 0xff, sizeof stats);
   nbmc_stats_init(&stats);
   CHECK(stats.struct_size == sizeof(nbmc_stats) && stats.triangle_count == 0);
@@ -114,6 +116,7 @@ int main(void) {
   CHECK(nbmc_mesh_vertex_count(NULL) == 0 && nbmc_mesh_triangle_count(NULL) == 0);
   CHECK(nbmc_mesh_positions(NULL) == NULL && nbmc_mesh_normals(NULL) == NULL && nbmc_mesh_triangles(NULL) == NULL);
   CHECK(nbmc_mesh_positions_f64(NULL) == NULL);
+  CHECK(nbmc_mesh_sphere_count(NULL) == 0 && nbmc_mesh_spheres(NULL) == NULL);
   CHECK(nbmc_context_backend(NULL, &backend) == NBMC_ERROR_INVALID_ARGUMENT);
   CHECK(nbmc_context_set_particles_f32(NULL, one, 1, 0) == NBMC_ERROR_INVALID_ARGUMENT);
   CHECK(nbmc_context_set_particles_f64(NULL, NULL, 1, 0) == NBMC_ERROR_INVALID_ARGUMENT);

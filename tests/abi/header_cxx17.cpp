@@ -45,6 +45,12 @@ static_assert(std::is_same_v<decltype(&nbmc_mesh_attribute_count), uint32_t (*)(
 static_assert(std::is_same_v<decltype(&nbmc_mesh_attribute_name), const char* (*)(const nbmc_mesh*, uint32_t)>);
 static_assert(std::is_same_v<decltype(&nbmc_mesh_attribute), const float* (*)(const nbmc_mesh*, const char*, uint32_t*)>);
 static_assert(NBMC_STAGE_ATTRIBUTES == 8 && NBMC_STAGE_ATTRIBUTES < NBMC_STAGE_SLOTS);
+static_assert(std::is_same_v<decltype(&nbmc_mesh_sphere_count), uint64_t (*)(const nbmc_mesh*)>);
+static_assert(std::is_same_v<decltype(&nbmc_mesh_spheres), const float* (*)(const nbmc_mesh*)>);
+static_assert(std::is_same_v<decltype(nbmc_params::decimate_fraction), double>);
+static_assert(std::is_same_v<decltype(nbmc_params::smooth_weighting), int32_t>);
+static_assert(std::is_same_v<decltype(nbmc_stats::pre_decimation_triangle_count), uint64_t>);
+static_assert(NBMC_ISOLATED_SPHERE == 2 && NBMC_SMOOTH_UNIFORM == 0 && NBMC_SMOOTH_FEATURE == 1);
 
 namespace {
 struct ContextDeleter {

@@ -2,7 +2,7 @@
 # SPDX-License-Identifier: MIT
 # The nbmc command under mpirun: one frame split over 3 ranks gives the same
 # file as one process; --pieces writes one piece per rank and a ParaView
-# index (also with --double-positions); a sequence is shared by 2 ranks, a failed frame is reported and the
+# index (also with --double-positions); --attributes gathered and in pieces; a sequence is shared by 2 ranks, a failed frame is reported and the
 # rest written, --resume skips them; a bad input fails on every rank with no
 # output left. Usage: cli_mpi.sh NBMC MPIEXEC [MPIEXEC FLAGS...]
 set -u
@@ -37,6 +37,19 @@ H5=$SRC/tests/data/h5part_steps.h5part
 check "HDF5 read by every rank (hyperslabs): the same file" "cmp -s h5-whole.ply h5-par.ply"
 "${MPIRUN[@]}" -n 2 "$NBMC" reconstruct "$H5" --spacing 0.1 -o h5-root.ply -q --read-on-root
 check "HDF5 read on rank 0 and scattered: the same file" "cmp -s h5-whole.ply h5-root.ply"
+
+"$NBMC" reconstruct "$H5" --spacing 0.1 -o h5-attr-whole.ply --attributes rho,v -q
+"${MPIRUN[@]}" -n 3 "$NBMC" reconstruct "$H5" --spacing 0.1 -o h5-attr-mpi.ply --attributes rho,v --json attr.json -q
+check "--attributes under MPI: the same file as one process (rho, v), byte for byte" \
+  "cmp -s h5-attr-whole.ply h5-attr-mpi.ply && grep -aq 'property float rho' h5-attr-mpi.ply"
+check "--attributes under MPI: listed in the report" "grep -q '\"rho\"' attr.json"
+"${MPIRUN[@]}" -n 2 "$NBMC" reconstruct "$H5" --spacing 0.1 -o attr.pvtp --pieces --attributes rho,v -q
+check "--attributes --pieces: the arrays in the pieces and the index" \
+  "grep -aq 'Name=\"rho\"' attr_0.vtp && grep -aq 'Name=\"v\"' attr_1.vtp && grep -q 'Name=\"rho\"' attr.pvtp && grep -q 'Name=\"v\" NumberOfComponents=\"3\"' attr.pvtp"
+"${MPIRUN[@]}" -n 2 "$NBMC" reconstruct "$H5" --spacing 0.1 -o bad-attr.ply --attributes nosuch -q 2>bad-attr.err
+rc=$?
+check "--attributes under MPI: a missing name fails on every rank, no output" \
+  "[ $rc -ne 0 ] && grep -q \"no particle attribute 'nosuch'\" bad-attr.err && [ ! -e bad-attr.ply ]"
 
 "${MPIRUN[@]}" -n 3 "$NBMC" reconstruct "$FRAME" --particle-radius 0.025 -o surf.pvtp --pieces -q
 check "--pieces: three pieces and an index" \

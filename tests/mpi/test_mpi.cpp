@@ -310,6 +310,134 @@ void check_f64(const std::vector<double>& near, nbmc_params prm, const std::stri
   if (g_rank == 0) std::printf("ok  %-10s %-7s (%zu particles)\n", "f64", rule.c_str(), all.size() / 3);
 }
 
+// Particle attributes over MPI: values that are a function of the position
+// (so each rank computes its own share's), interpolated on the root's
+// gathered mesh and on the pieces, equal a single process's bit for bit
+// (the pieces: at the same positions of the raw whole mesh). Then the
+// errors: ranks that set different attributes fail together.
+std::vector<double> attr_vel(const std::vector<double>& p) {
+  std::vector<double> v(p.size());
+  for (std::size_t i = 0; i < p.size(); i += 3) {
+    v[i] = std::sin(7 * p[i + 1]);
+    v[i + 1] = p[i] * p[i + 2];
+    v[i + 2] = 1 + p[i + 2];
+  }
+  return v;
+}
+std::vector<double> attr_h(const std::vector<double>& p) {
+  std::vector<double> h(p.size() / 3);
+  for (std::size_t i = 0; i < h.size(); ++i) h[i] = 2.5 + p[3 * i] - p[3 * i + 1];
+  return h;
+}
+std::vector<float> attribute_of(const nbmc_mesh* m, const char* name, uint32_t comps) {
+  uint32_t c = 0;
+  const float* a = nbmc_mesh_attribute(m, name, &c);
+  if (!a || c != comps) return {};
+  return std::vector<float>(a, a + comps * nbmc_mesh_vertex_count(m));
+}
+struct Attributed {
+  std::vector<float> pos, vel, h;
+};
+Attributed attributed(nbmc_context* ctx, const std::vector<double>& mine, const nbmc_params& prm, int output,
+                      int root, int32_t& st) {
+  Attributed out;
+  nbmc_context_set_particles_f64(ctx, mine.empty() ? nullptr : mine.data(), mine.size() / 3, 0);
+  if (!mine.empty()) {
+    const std::vector<double> vel = attr_vel(mine), h = attr_h(mine);
+    CHECK(nbmc_context_set_attribute_f64(ctx, "vel", vel.data(), 3, 0) == NBMC_OK, "%s", nbmc_context_last_error(ctx));
+    CHECK(nbmc_context_set_attribute_f64(ctx, "h", h.data(), 1, 0) == NBMC_OK, "%s", nbmc_context_last_error(ctx));
+  }
+  nbmc_mesh* m = nullptr;
+  st = output < 0 ? nbmc_context_reconstruct(ctx, &prm, &m) : nbmc_mpi_reconstruct(ctx, &prm, output, root, &m);
+  if (st != NBMC_OK) return out;
+  const std::size_t nv = nbmc_mesh_vertex_count(m);
+  if (nv) out.pos.assign(nbmc_mesh_positions(m), nbmc_mesh_positions(m) + 3 * nv);
+  out.vel = attribute_of(m, "vel", 3);
+  out.h = attribute_of(m, "h", 1);
+  nbmc_mesh_destroy(m);
+  return out;
+}
+
+void check_attributes(const char* name, const std::vector<double>& all, const nbmc_params& prm,
+                      const std::string& rule, int nx, int ny, int nz) {
+  const std::vector<double> mine = share(all, rule);
+  int32_t st = 0;
+  nbmc_context* one = context(false);
+  const Attributed ref = attributed(one, all, prm, -1, 0, st);
+  CHECK(st == NBMC_OK && !ref.vel.empty() && ref.h.size() == ref.pos.size() / 3, "whole frame with attributes");
+  nbmc_params raw = prm;
+  raw.cleanup = 0;
+  raw.smooth_iterations = 0;
+  const Attributed ref_raw = attributed(one, all, raw, -1, 0, st);
+  nbmc_context_destroy(one);
+  // Gathered on the last rank.
+  {
+    nbmc_context* ctx = context(true);
+    if (nx > 0) nbmc_context_set_subdomains(ctx, nx, ny, nz);
+    const int root = g_size - 1;
+    const Attributed got = attributed(ctx, mine, prm, NBMC_MPI_GATHER, root, st);
+    CHECK(st == NBMC_OK, "%s %s attributes gather: %s", name, rule.c_str(), nbmc_context_last_error(ctx));
+    if (st == NBMC_OK && g_rank == root) {
+      CHECK(got.pos == ref.pos, "%s %s attributes gather: mesh differs", name, rule.c_str());
+      std::size_t diff = 0;
+      for (std::size_t i = 0; i < got.h.size() && i < ref.h.size(); ++i) diff += got.h[i] != ref.h[i];
+      CHECK(got.vel == ref.vel && got.h == ref.h, "%s %s gather: attributes differ (%zu of %zu scalar values)", name,
+            rule.c_str(), diff, ref.h.size());
+    } else if (st == NBMC_OK) {
+      CHECK(got.pos.empty() && got.h.empty(), "non-root got attributes");
+    }
+    nbmc_context_destroy(ctx);
+  }
+  // Pieces: every piece vertex has the raw whole mesh's values at its position.
+  {
+    std::map<std::array<float, 3>, std::array<float, 4>> at;
+    for (std::size_t v = 0; v < ref_raw.h.size(); ++v)
+      at[{ref_raw.pos[3 * v], ref_raw.pos[3 * v + 1], ref_raw.pos[3 * v + 2]}] = {
+          ref_raw.vel[3 * v], ref_raw.vel[3 * v + 1], ref_raw.vel[3 * v + 2], ref_raw.h[v]};
+    nbmc_context* ctx = context(true);
+    if (nx > 0) nbmc_context_set_subdomains(ctx, nx, ny, nz);
+    const Attributed got = attributed(ctx, mine, prm, NBMC_MPI_PIECES, 0, st);
+    CHECK(st == NBMC_OK, "%s %s attributes pieces: %s", name, rule.c_str(), nbmc_context_last_error(ctx));
+    std::size_t bad = 0, missing = 0;
+    CHECK(got.h.size() == got.pos.size() / 3, "%s %s pieces: %zu values for %zu vertices", name, rule.c_str(),
+          got.h.size(), got.pos.size() / 3);
+    for (std::size_t v = 0; v < got.h.size(); ++v) {
+      const auto it = at.find({got.pos[3 * v], got.pos[3 * v + 1], got.pos[3 * v + 2]});
+      if (it == at.end()) {
+        ++missing;
+        continue;
+      }
+      const std::array<float, 4> want = it->second;
+      if (want[0] != got.vel[3 * v] || want[1] != got.vel[3 * v + 1] || want[2] != got.vel[3 * v + 2] ||
+          want[3] != got.h[v])
+        ++bad;
+    }
+    CHECK(bad == 0 && missing == 0, "%s %s pieces: %zu vertices with other values, %zu not in the whole mesh", name,
+          rule.c_str(), bad, missing);
+    nbmc_context_destroy(ctx);
+  }
+  // Different attributes on two ranks: all fail, with both lists named.
+  if (g_size > 1) {
+    nbmc_context* ctx = context(true);
+    nbmc_context_set_particles_f64(ctx, all.data(), all.size() / 3, 0);
+    const std::vector<double> h = attr_h(all);
+    nbmc_context_set_attribute_f64(ctx, g_rank == 1 ? "rho" : "h", h.data(), 1, 0);
+    nbmc_mesh* m = nullptr;
+    st = nbmc_mpi_reconstruct(ctx, &prm, NBMC_MPI_GATHER, 0, &m);
+    const std::string msg = nbmc_context_last_error(ctx);
+    CHECK(st == NBMC_ERROR_INVALID_ARGUMENT && m == nullptr && msg.find("'rho'") != std::string::npos &&
+              msg.find("'h'") != std::string::npos,
+          "different attributes: status %d (%s)", st, msg.c_str());
+    nbmc_mesh_destroy(m);
+    // And the context stays usable.
+    nbmc_context_set_attribute_f64(ctx, g_rank == 1 ? "rho" : "h", nullptr, 1, 0);
+    CHECK(nbmc_mpi_reconstruct(ctx, &prm, NBMC_MPI_GATHER, 0, &m) == NBMC_OK, "after: %s", nbmc_context_last_error(ctx));
+    nbmc_mesh_destroy(m);
+    nbmc_context_destroy(ctx);
+  }
+  if (g_rank == 0) std::printf("ok  attributes %-10s %-7s\n", name, rule.c_str());
+}
+
 void check_errors(const std::vector<double>& all, const nbmc_params& prm) {
   std::vector<double> mine = share(all, "slabs");
   // Bad particles on the last rank: every rank fails with its status.
@@ -367,11 +495,6 @@ void check_errors(const std::vector<double>& all, const nbmc_params& prm) {
     CHECK(nbmc_mpi_reconstruct(ctx, &bad, NBMC_MPI_GATHER, 0, &m) == NBMC_ERROR_INVALID_PARAMETER, "bad parameter");
     CHECK(nbmc_mpi_reconstruct(ctx, &prm, 5, 0, &m) == NBMC_ERROR_INVALID_ARGUMENT, "bad output");
     CHECK(nbmc_mpi_reconstruct(ctx, &prm, NBMC_MPI_GATHER, g_size, &m) == NBMC_ERROR_INVALID_ARGUMENT, "bad root");
-    // Attributes are not supported over MPI yet: refused before anything is read.
-    const double one = 1;
-    CHECK(nbmc_context_set_attribute_f64(ctx, "a", &one, 1, 0) == NBMC_ERROR_INVALID_ARGUMENT, "attribute on MPI");
-    CHECK(std::string(nbmc_context_last_error(ctx)).find("MPI") != std::string::npos, "%s",
-          nbmc_context_last_error(ctx));
     nbmc_context_destroy(ctx);
     nbmc_context* plain = context(false);
     CHECK(nbmc_mpi_reconstruct(plain, &prm, NBMC_MPI_GATHER, 0, &m) == NBMC_ERROR_INVALID_ARGUMENT, "unbound");
@@ -422,6 +545,8 @@ int main(int argc, char** argv) {
     if (!f.empty()) check_case("dambreak", f, prm, "slabs", 0, 0, 0);
   }
   check_f64(b, prm, "random");
+  check_attributes("blob", b, prm, "random", 0, 0, 0);
+  check_attributes("blob-3x2x1", b, prm, "slabs", 3, 2, 1);
   check_errors(b, prm);
   int failures = g_failures;
   MPI_Allreduce(MPI_IN_PLACE, &failures, 1, MPI_INT, MPI_SUM, MPI_COMM_WORLD);

@@ -48,6 +48,10 @@ pub const NBMC_METHOD_YT10: i32 = 3;
 
 pub const NBMC_ISOLATED_KEEP: i32 = 0;
 pub const NBMC_ISOLATED_DROP: i32 = 1;
+pub const NBMC_ISOLATED_SPHERE: i32 = 2;
+
+pub const NBMC_SMOOTH_UNIFORM: i32 = 0;
+pub const NBMC_SMOOTH_FEATURE: i32 = 1;
 
 pub const NBMC_FIELD_NARROW_BAND: i32 = 0;
 pub const NBMC_FIELD_DENSE: i32 = 1;
@@ -137,13 +141,17 @@ pub struct nbmc_params {
     pub min_cluster: i32,
     // appended with double-precision positions
     pub double_positions: i32,
+    // appended with decimation and feature-weighted smoothing
+    pub decimate_fraction: f64,
+    pub smooth_weighting: i32,
+    pub reserved1: i32,
     // appended with NBMC_METHOD_YT10
     pub aniso_kr: f64,
     pub aniso_ks: f64,
     pub aniso_kn: f64,
     pub aniso_lambda: f64,
     pub aniso_neighbours: i32,
-    pub reserved1: i32,
+    pub reserved2: i32,
 }
 
 #[repr(C)]
@@ -173,6 +181,8 @@ pub struct nbmc_stats {
     // appended with the isolated-particle filter
     pub dropped_particle_count: u64,
     pub dropped_cluster_count: u64,
+    // appended with decimation
+    pub pre_decimation_triangle_count: u64,
 }
 
 #[repr(C)]
@@ -362,6 +372,11 @@ extern "C" {
     pub fn nbmc_mesh_attribute_name(mesh: *const nbmc_mesh, i: u32) -> *const c_char;
     // Host memory for every mesh (also one in device memory).
     pub fn nbmc_mesh_attribute(mesh: *const nbmc_mesh, name: *const c_char, components: *mut u32) -> *const f32;
+
+    // isolated particles as spheres (NBMC_ISOLATED_SPHERE): 4 floats each
+    // (x, y, z, radius), host memory; null when there are none.
+    pub fn nbmc_mesh_sphere_count(mesh: *const nbmc_mesh) -> u64;
+    pub fn nbmc_mesh_spheres(mesh: *const nbmc_mesh) -> *const f32;
 }
 
 /// include/nbmc_mpi.h (feature `mpi`, links libnbmc_mpi): one frame over the

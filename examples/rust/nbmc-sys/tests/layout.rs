@@ -59,6 +59,9 @@ fn rust_constants() -> BTreeMap<&'static str, i128> {
         NBMC_METHOD_YT10,
         NBMC_ISOLATED_KEEP,
         NBMC_ISOLATED_DROP,
+        NBMC_ISOLATED_SPHERE,
+        NBMC_SMOOTH_UNIFORM,
+        NBMC_SMOOTH_FEATURE,
         NBMC_FIELD_NARROW_BAND,
         NBMC_FIELD_DENSE,
         NBMC_FIELD_SCATTER,
@@ -144,12 +147,15 @@ fn rust_layouts() -> Vec<Layout> {
             isolated,
             min_cluster,
             double_positions,
+            decimate_fraction,
+            smooth_weighting,
+            reserved1,
             aniso_kr,
             aniso_ks,
             aniso_kn,
             aniso_lambda,
             aniso_neighbours,
-            reserved1
+            reserved2
         }),
         layout!(nbmc_stats {
             struct_size,
@@ -173,7 +179,8 @@ fn rust_layouts() -> Vec<Layout> {
             raw_triangle_count,
             smoothing_volume_change,
             dropped_particle_count,
-            dropped_cluster_count
+            dropped_cluster_count,
+            pre_decimation_triangle_count
         }),
         layout!(nbmc_mesh_check_result {
             struct_size,

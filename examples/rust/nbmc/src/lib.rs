@@ -223,6 +223,20 @@ int_enum!(
         /// Clusters (particles linked when closer than the surface radius)
         /// of fewer than `min_cluster` particles make none.
         Drop = sys::NBMC_ISOLATED_DROP,
+        /// As `Drop`, and their particles come back as spheres
+        /// ([`Mesh::spheres`]).
+        Sphere = sys::NBMC_ISOLATED_SPHERE,
+    }
+);
+
+int_enum!(
+    /// How the smoothing step is weighted per vertex.
+    SmoothWeighting {
+        /// Every vertex alike (default).
+        Uniform = sys::NBMC_SMOOTH_UNIFORM,
+        /// By the particles near each vertex: thin sheets, filaments and
+        /// droplets are not eroded (Loeschner et al. 2023).
+        Feature = sys::NBMC_SMOOTH_FEATURE,
     }
 );
 
@@ -343,6 +357,13 @@ pub struct Params {
     /// Keep the vertex positions in double precision ([`Mesh::positions_f64`]),
     /// for coordinates far from the origin; host meshes only (default false).
     pub double_positions: bool,
+    /// Taubin smoothing iterations after the clean-up (default 0).
+    pub smooth_iterations: i32,
+    /// How the smoothing step is weighted (default uniform).
+    pub smooth_weighting: SmoothWeighting,
+    /// Keep this fraction of the triangles, 0 < f <= 1, by quadric-error
+    /// edge collapses that keep the mesh closed and manifold (default 1: off).
+    pub decimate_fraction: f64,
     /// Only reconstruct inside this box (absolute units), if set.
     pub bbox: Option<([f64; 3], [f64; 3])>,
 }
@@ -376,6 +397,9 @@ impl Params {
             isolated: Isolated::from_raw(p.isolated).unwrap_or(Isolated::Keep),
             min_cluster: p.min_cluster,
             double_positions: p.double_positions != 0,
+            smooth_iterations: p.smooth_iterations,
+            smooth_weighting: SmoothWeighting::from_raw(p.smooth_weighting).unwrap_or(SmoothWeighting::Uniform),
+            decimate_fraction: p.decimate_fraction,
             bbox: None,
         }
     }
@@ -407,6 +431,9 @@ impl Params {
         p.isolated = self.isolated.raw();
         p.min_cluster = self.min_cluster;
         p.double_positions = i32::from(self.double_positions);
+        p.smooth_iterations = self.smooth_iterations;
+        p.smooth_weighting = self.smooth_weighting.raw();
+        p.decimate_fraction = self.decimate_fraction;
         if let Some((lo, hi)) = self.bbox {
             p.use_bbox = 1;
             p.bbox_min = lo;
@@ -439,6 +466,11 @@ pub struct Stats {
     pub grid_origin: [f64; 3],
     /// Absolute marching-cubes cell size.
     pub cell_size: f64,
+    /// Particles left out as isolated, and the clusters they formed.
+    pub dropped_particle_count: u64,
+    pub dropped_cluster_count: u64,
+    /// Triangles before the decimation (`triangle_count` without it).
+    pub pre_decimation_triangle_count: u64,
 }
 
 impl Stats {
@@ -904,6 +936,9 @@ impl Context {
             total_seconds: s.total_seconds,
             grid_origin: s.grid_origin,
             cell_size: s.cell_size,
+            dropped_particle_count: s.dropped_particle_count,
+            dropped_cluster_count: s.dropped_cluster_count,
+            pre_decimation_triangle_count: s.pre_decimation_triangle_count,
         })
     }
 }
@@ -1176,6 +1211,19 @@ impl Mesh {
         // SAFETY: host memory of components * vertex_count floats, alive
         // until nbmc_mesh_destroy (drop).
         Some((unsafe { std::slice::from_raw_parts(p, len) }, comps as usize))
+    }
+
+    /// `Isolated::Sphere`: the dropped particles as spheres, `[x, y, z,
+    /// radius]` each, in the particles' order (host memory); empty otherwise.
+    pub fn spheres(&self) -> &[[f32; 4]] {
+        let n = unsafe { sys::nbmc_mesh_sphere_count(self.raw.as_ptr()) } as usize;
+        let p = unsafe { sys::nbmc_mesh_spheres(self.raw.as_ptr()) };
+        if p.is_null() || n == 0 {
+            return &[];
+        }
+        // SAFETY: host memory of 4 * n floats, alive until nbmc_mesh_destroy
+        // (drop); [f32; 4] has the layout of 4 floats.
+        unsafe { std::slice::from_raw_parts(p as *const [f32; 4], n) }
     }
 
     /// The raw handle; it stays owned by the mesh.

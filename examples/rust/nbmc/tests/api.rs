@@ -8,7 +8,9 @@
 //! runs each test on a thread of its own.
 //!
 //!   cargo test --test api [-- FILTER]
-use nbmc::{Backend, Context, ContextOptions, Error, LengthUnit, Memory, Mesh, Params, Stage};
+use nbmc::{
+    Backend, Context, ContextOptions, Error, Isolated, LengthUnit, Memory, Mesh, Params, SmoothWeighting, Stage,
+};
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Arc;
@@ -475,6 +477,39 @@ fn double_positions_far_from_the_origin() {
     }
 }
 
+/// Params::decimate_fraction, smooth_weighting and Isolated::Sphere: a
+/// quarter of the triangles, still closed; lone particles come back as
+/// spheres of radius iso_radius (absolute).
+fn decimation_and_spheres() {
+    let mut particles = sample();
+    particles.push([5.0, 5.0, 5.0]);
+    particles.push([-5.0, 5.0, 5.0]);
+    let mut ctx = Context::new().unwrap();
+    ctx.set_particles_f32(&particles).unwrap();
+    let mut params = Params::new(SPACING);
+    assert_eq!(params.decimate_fraction, 1.0);
+    assert_eq!(params.smooth_weighting, SmoothWeighting::Uniform);
+    params.smooth_iterations = 3;
+    params.smooth_weighting = SmoothWeighting::Feature;
+    params.decimate_fraction = 0.25;
+    params.isolated = Isolated::Sphere;
+    let mesh = ctx.reconstruct(&params).unwrap();
+    assert_closed(&mesh);
+    let stats = ctx.stats().unwrap();
+    assert_eq!(stats.triangle_count as usize, mesh.triangle_count());
+    assert!(4 * stats.triangle_count <= stats.pre_decimation_triangle_count + 3, "{stats:?}");
+    let spheres = mesh.spheres();
+    assert_eq!(spheres.len() as u64, stats.dropped_particle_count);
+    assert!(spheres.len() >= 2);
+    let last = spheres[spheres.len() - 1];
+    assert_eq!([last[0], last[1], last[2]], [-5.0, 5.0, 5.0]);
+    assert!((last[3] as f64 - params.iso_radius * SPACING).abs() < 1e-6);
+    params.isolated = Isolated::Keep;
+    assert!(ctx.reconstruct(&params).unwrap().spheres().is_empty());
+    params.decimate_fraction = 0.0;
+    assert_eq!(ctx.reconstruct(&params).unwrap_err().code, Error::INVALID_PARAMETER);
+}
+
 // ------------------------------------------------------------------ runner
 
 fn main() -> std::process::ExitCode {
@@ -498,6 +533,7 @@ fn main() -> std::process::ExitCode {
         ("auto_traits", auto_traits),
         ("attributes_follow_the_particles_onto_the_mesh", attributes_follow_the_particles_onto_the_mesh),
         ("double_positions_far_from_the_origin", double_positions_far_from_the_origin),
+        ("decimation_and_spheres", decimation_and_spheres),
     ];
     // libtest-like arguments: options are ignored, the first free word filters.
     let filter = std::env::args().skip(1).find(|a| !a.starts_with('-')).unwrap_or_default();
