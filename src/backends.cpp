@@ -327,7 +327,7 @@ Params resolve_params(const nbmc_params& in) {
   p.surface_radius = length(in, in.surface_radius, r);
   p.iso_radius = length(in, in.iso_radius, r);
   // (the SPH density and YT10 do not use iso_radius)
-  require(in.method == NBMC_METHOD_SPH || in.method == NBMC_METHOD_YT10 || p.iso_radius < p.influence_radius,
+  require(is_density_field(Method(in.method)) || p.iso_radius < p.influence_radius,
           "iso_radius must be smaller than influence_radius");
   require(p.surface_radius <= 2 * p.influence_radius,
           "surface_radius may be at most twice the influence radius (got " + num(p.surface_radius) + " and " +

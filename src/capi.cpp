@@ -468,8 +468,7 @@ int32_t nbmc_context_reconstruct(nbmc_context* ctx, const nbmc_params* params, n
     fp.spacing = p.spacing;
   }
   if (spheres && kept.size() < all_n) {
-    // (the density fields, SPH and YT10, have no iso_radius)
-    const float radius = float(has_particle_pass(p.method) ? 0.5 * p.spacing : p.iso_radius);
+    const float radius = float(is_density_field(p.method) ? 0.5 * p.spacing : p.iso_radius);
     m->spheres.reserve(4 * (all_n - kept.size()));
     std::size_t k = 0;
     for (std::size_t i = 0; i < all_n; ++i) {

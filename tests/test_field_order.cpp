@@ -179,20 +179,6 @@ std::size_t reference_surface(const NeighbourView<Host>& nb, const std::vector<s
   return surface;
 }
 
-// One particle's contribution: Method::add, or, for the per-particle
-// moments (which have accumulate only), accumulate over that one particle.
-template <class Method>
-void add_reference(float* acc, float dx, float dy, float dz, float k, const float* pd, float inv_R2) {
-  if constexpr (std::is_same<Method, Yt10Moments>::value) {
-    (void)k;
-    (void)pd;
-    const float X[1] = {dx}, Y[1] = {dy}, Z[1] = {dz};
-    Method::accumulate(acc, X, Y, Z, nullptr, 0, 1, 0.f, 0.f, 0.f, inv_R2);  // d - 0 is d
-  } else {
-    Method::add(acc, dx, dy, dz, k, pd);
-  }
-}
-
 // The sums at x in the GPU's order (gather_words_direct / eval_vertex_direct).
 template <class Method>
 void reference_sums(const NeighbourView<Host>& nb, const float x[3], float S, const FieldConstants& fc, float* acc,
@@ -226,8 +212,8 @@ void reference_sums(const NeighbourView<Host>& nb, const float x[3], float S, co
           const float dx = X[j] - x[0], dy = Y[j] - x[1], dz = Z[j] - x[2];
           const float s2 = (dx * dx + dy * dy + dz * dz) * fc.inv_R2;
           evals += s2 < 1.f ? 1 : 0;
-          add_reference<Method>(acc, dx, dy, dz, s2 < 1.f ? 1.f - s2 : 0.f,
-                                Method::P ? nb.pdata.data() + std::size_t(Method::P) * j : nullptr, fc.inv_R2);
+          Method::add(acc, dx, dy, dz, s2 < 1.f ? 1.f - s2 : 0.f,
+                      Method::P ? nb.pdata.data() + std::size_t(Method::P) * j : nullptr);
         }
       }
 }
@@ -272,16 +258,16 @@ Outcome run(const Exec& space, const Points& xyz, const Params& p, bool dense) {
   const NeighbourView<Host> nb = view_of(nbh, g);
   if (std::is_same<Method, FieldSPH>::value) {
     // Each particle's weight: 1 / (its density summed in the serial order).
-    const FieldConstants fc0 = field_constants(p.influence_radius, p.iso_radius, p.t_low, p.t_high, p.iso_threshold);
     std::uint64_t unused = 0;
     for (std::size_t j = 0; j < n; ++j) {
       const float x[3] = {nb.pos(j), nb.pos(n + j), nb.pos(2 * n + j)};
-      const float ref = 1.f / reference_field<SphDensity>(nb, x, float(g.nb_cell), fc0, unused);
+      const float ref = 1.f / reference_field<SphDensity>(nb, x, float(g.nb_cell), fc, unused);
       out.weight_mismatches += bits(nb.pdata(j)) != bits(ref);
     }
   }
   if (std::is_same<Method, FieldYT10>::value) {
-    // Each particle's kernel from its moments summed in the serial order.
+    // Each particle's kernel from its moments summed in the serial order
+    // (over R: fc's radius is now the field's).
     const FieldConstants fc0 = field_constants(p.influence_radius, p.iso_radius, p.t_low, p.t_high, p.iso_threshold);
     const Yt10Constants k = yt10_constants(p);
     for (std::size_t j = 0; j < n; ++j) {

@@ -36,6 +36,13 @@
 namespace nbmc {
 namespace Details {
 
+// v in every lane of T (a float, or a host SIMD vector of floats); v - (+0)
+// is v for every v, -0 included.
+template <class T>
+KOKKOS_INLINE_FUNCTION T lanes_of(float v) {
+  return v - T{};
+}
+
 #if !defined(__CUDA_ARCH__)
 // Host SIMD vectors (GCC/Clang vector extensions), one lane per vertex or
 // particle; lane-wise IEEE operations, so every lane computes exactly what the
@@ -76,11 +83,6 @@ struct HostSimd<8> {
   typedef float F __attribute__((vector_size(32)));
   typedef std::int32_t I __attribute__((vector_size(32)));
 };
-// v in every lane (v - (+0) is v, -0 included).
-template <class V>
-inline V host_splat_of(float v) {
-  return v - V{};
-}
 template <class M>
 inline bool host_any_of(M m) {
   std::uint64_t u[sizeof(M) / 8];
@@ -93,13 +95,6 @@ inline bool host_any_of(M m) {
 #pragma GCC diagnostic pop
 #endif
 #endif
-
-// v in every lane of T (a float, or a host SIMD vector of floats); v - (+0)
-// is v for every v, -0 included.
-template <class T>
-KOKKOS_INLINE_FUNCTION T lanes_of(float v) {
-  return v - T{};
-}
 
 struct FieldConstants {
   float R = 0;           // influence radius

@@ -31,20 +31,25 @@
 namespace nbmc {
 namespace Details {
 
-// W / sigma as a function of k = 1 - q^2 (what the drivers pass; k = 0 gives
-// exactly 0). One expression for the device, the scalar host code and, lane
-// by lane, the host SIMD vectors.
-KOKKOS_INLINE_FUNCTION float sph_kernel(float k) {
-  const float q2 = 1.f - k;
-  const float q = Kokkos::Experimental::sqrt(q2);
+// The IEEE square root, of a float or lane by lane of a host SIMD vector.
+KOKKOS_INLINE_FUNCTION float sqrt_lanes(float x) { return Kokkos::Experimental::sqrt(x); }
+
+// W / sigma at q = |d| / h from q and q^2, 0 <= q <= 1 (exactly 0 at q = 1):
+// 1 - 6 q^2 + 6 q^3 up to 1/2, 2 (1 - q)^3 beyond. One expression for the
+// device, the scalar host code and, lane by lane, the host SIMD vectors.
+KOKKOS_INLINE_FUNCTION float cubic_spline(float q, float q2) {
   const float inner = (1.f - 6.f * q2) + (6.f * q2) * q;
   const float u = 1.f - q;
   const float outer = 2.f * (u * u * u);
   return q <= 0.5f ? inner : outer;
 }
 
-// The IEEE square root, of a float or lane by lane of a host SIMD vector.
-KOKKOS_INLINE_FUNCTION float sqrt_lanes(float x) { return Kokkos::Experimental::sqrt(x); }
+// W / sigma as a function of k = 1 - q^2 (what the drivers pass; k = 0 gives
+// exactly 0).
+KOKKOS_INLINE_FUNCTION float sph_kernel(float k) {
+  const float q2 = 1.f - k;
+  return cubic_spline(sqrt_lanes(q2), q2);
+}
 
 #if !defined(__CUDA_ARCH__)
 #if defined(NBMC_HOST_AVX_SQRT)
@@ -85,16 +90,19 @@ inline V sqrt_lanes(V x) {
   return q;
 }
 template <class V>
-inline V sph_kernel_lanes(V k) {
-  const V one = host_splat_of<V>(1.f), six = host_splat_of<V>(6.f);
-  const V q2 = one - k;
-  const V q = sqrt_lanes(q2);
+inline V cubic_spline(V q, V q2) {
+  const V one = lanes_of<V>(1.f), six = lanes_of<V>(6.f);
   const V inner = (one - six * q2) + (six * q2) * q;
   const V u = one - q;
-  const V outer = host_splat_of<V>(2.f) * (u * u * u);
-  const auto m = q <= host_splat_of<V>(0.5f);
+  const V outer = lanes_of<V>(2.f) * (u * u * u);
+  const auto m = q <= lanes_of<V>(0.5f);
   using I = decltype(m);
   return (V)(((I)inner & m) | ((I)outer & ~m));
+}
+template <class V>
+inline V sph_kernel_lanes(V k) {
+  const V q2 = lanes_of<V>(1.f) - k;
+  return cubic_spline(sqrt_lanes(q2), q2);
 }
 inline HostVecF sph_kernel(HostVecF k) { return sph_kernel_lanes(k); }
 inline HostSimd<8>::F sph_kernel(HostSimd<8>::F k) { return sph_kernel_lanes(k); }

@@ -59,28 +59,20 @@ constexpr float kYt10ReachMargin = 1.002f;
 // in 4 or 5; a fixed count keeps every backend in step.
 constexpr int kYt10JacobiSweeps = 6;
 
-// The cubic spline over its factor (field_sph.hpp's W~) at q, given q and
-// q^2: 1 - 6 q^2 + 6 q^3 up to 1/2, 2 (1 - q)^3 up to 1; exactly +0 from
-// q = 1 on and where k = 0 (a particle beyond the visited radius: the
-// drivers need +0 from a particle that does not contribute). One square
-// root fewer than sph_kernel(1 - q^2), which takes it again.
+// The cubic spline over its factor (field_sph.hpp's cubic_spline) at q,
+// given q and q^2, and exactly +0 from q = 1 on and where k = 0 (a particle
+// beyond the visited radius: the drivers need +0 from a particle that does
+// not contribute). The callers have q at hand: no square root of 1 - k as in
+// sph_kernel.
 KOKKOS_INLINE_FUNCTION float yt10_spline(float q, float q2, float k) {
-  const float inner = (1.f - 6.f * q2) + (6.f * q2) * q;
-  const float u = 1.f - q;
-  const float outer = 2.f * (u * u * u);
-  return q < 1.f && k > 0.f ? (q <= 0.5f ? inner : outer) : 0.f;
+  return q < 1.f && k > 0.f ? cubic_spline(q, q2) : 0.f;
 }
 #if !defined(__CUDA_ARCH__)
 template <class V>
 inline V yt10_spline(V q, V q2, V k) {
-  const V one = host_splat_of<V>(1.f), six = host_splat_of<V>(6.f);
-  const V inner = (one - six * q2) + (six * q2) * q;
-  const V u = one - q;
-  const V outer = host_splat_of<V>(2.f) * (u * u * u);
-  const auto near = q <= host_splat_of<V>(0.5f);
-  const auto in = (q < one) & (k > host_splat_of<V>(0.f));
-  using I = decltype(near);
-  return (V)((((I)inner & near) | ((I)outer & ~near)) & in);
+  const auto in = (q < lanes_of<V>(1.f)) & (k > lanes_of<V>(0.f));
+  using I = decltype(in);
+  return (V)((I)cubic_spline(q, q2) & in);
 }
 #endif
 
@@ -91,7 +83,7 @@ KOKKOS_INLINE_FUNCTION bool yt10_within(float dx, float dy, float dz, float reac
 #if !defined(__CUDA_ARCH__)
 template <class V>
 inline bool yt10_within(V dx, V dy, V dz, float reach2) {
-  return host_any_of((dx * dx + dy * dy) + dz * dz < host_splat_of<V>(reach2));
+  return host_any_of((dx * dx + dy * dy) + dz * dz < lanes_of<V>(reach2));
 }
 #endif
 

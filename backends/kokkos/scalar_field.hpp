@@ -131,8 +131,8 @@ inline bool eval_points_host_lanes(const NeighbourView<MemSpace>& nb, const std:
   const int base[3] = {0, int(span[0]), int(span[0] + span[1])};
   const float R2 = fc.R * fc.R;
   const float inf = std::numeric_limits<float>::infinity();
-  const HostVecF one = host_splat_of<HostVecF>(1.f), inv_R2 = host_splat_of<HostVecF>(fc.inv_R2), R2v = host_splat_of<HostVecF>(R2);
-  const HostVecF zero = host_splat_of<HostVecF>(0.f);
+  const HostVecF one = lanes_of<HostVecF>(1.f), inv_R2 = lanes_of<HostVecF>(fc.inv_R2), R2v = lanes_of<HostVecF>(R2);
+  const HostVecF zero = lanes_of<HostVecF>(0.f);
   const HostVecI izero = (HostVecI)zero;
   const float* X = nb.pos.data();
   const float* Y = X + nb.n;
@@ -187,9 +187,9 @@ inline bool eval_points_host_lanes(const NeighbourView<MemSpace>& nb, const std:
       while (pb < pe && X[pb] < xmin && beyond(X[pb] - xmin)) ++pb;
       while (pe > pb && X[pe - 1] > xmax && beyond(X[pe - 1] - xmax)) --pe;
       for (std::uint32_t p = pb; p < pe; ++p) {
-        const HostVecF dx = host_splat_of<HostVecF>(X[p]) - vx;
-        const HostVecF dy = host_splat_of<HostVecF>(Y[p]) - vy;
-        const HostVecF dz = host_splat_of<HostVecF>(Z[p]) - vz;
+        const HostVecF dx = lanes_of<HostVecF>(X[p]) - vx;
+        const HostVecF dy = lanes_of<HostVecF>(Y[p]) - vy;
+        const HostVecF dz = lanes_of<HostVecF>(Z[p]) - vz;
         const HostVecF s2 = (dx * dx + dy * dy + dz * dz) * inv_R2;
         const HostVecI inside = (s2 < one) & visit;  // -1 where the particle contributes
         const HostVecF k = (HostVecF)((HostVecI)(one - s2) & inside);

@@ -96,10 +96,11 @@ struct Params {
 constexpr double kYt10MaxAxis = 1.5;
 constexpr double kYt10MaxShift = 0.2;
 
-// The methods with a pass over the particles before the field, whose
-// per-particle values (SPH: the density; YT10: the density, the smoothed
-// centre and the anisotropy) are sums over the particles within R.
-inline bool has_particle_pass(Method m) { return m == Method::SPH || m == Method::YT10; }
+// The normalised-density fields (SPH, YT10): a pass over the particles
+// before the field, whose per-particle values (SPH: the density; YT10: the
+// density, the smoothed centre and the anisotropy) are sums over the
+// particles within R; they have no iso_radius.
+inline bool is_density_field(Method m) { return m == Method::SPH || m == Method::YT10; }
 
 // How far from a point the particles that change its field value can lie:
 // R, or 2R for the SPH density and YT10, whose value at a point also depends
@@ -107,7 +108,7 @@ inline bool has_particle_pass(Method m) { return m == Method::SPH || m == Method
 // around that particle). Ghost layers and the particles kept around a
 // clipping box are this wide.
 inline double particle_reach(const Params& p) {
-  return has_particle_pass(p.method) ? 2 * p.influence_radius : p.influence_radius;
+  return is_density_field(p.method) ? 2 * p.influence_radius : p.influence_radius;
 }
 
 // How far beyond the particles the iso-surface can lie: iso_radius for the
@@ -115,7 +116,7 @@ inline double particle_reach(const Params& p) {
 // and YT10 (a kernel's support, plus its centre's displacement, is at most
 // 0.95 R: field_yt10.hpp).
 inline double surface_reach(const Params& p) {
-  return has_particle_pass(p.method) ? p.influence_radius : p.iso_radius;
+  return is_density_field(p.method) ? p.influence_radius : p.iso_radius;
 }
 
 }  // namespace nbmc
