@@ -946,6 +946,44 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     expect_same(p1, p2, "post-processing, second run", true);
   }
 
+  // Per-particle radii (every successful free run, no input bytes of their
+  // own): radii all equal to the spacing give the mesh without radii, bit for
+  // bit; radii drawn between half the spacing and the spacing (the first
+  // particle's the spacing, so every global length stays) give a successful
+  // run whose mesh keeps the invariants above, the same on a second run and
+  // with the particles shuffled together with their radii.
+  if (a.status == NBMC_OK && free_run && ex.struct_ok && us == NBMC_OK) {
+    if (upload(ctx, up) != NBMC_OK) die("radii: the upload failed again");
+    std::vector<double> radii(n, prm.spacing);  // spacing is absolute in either unit
+    auto set_radii = [&](const std::vector<double>& v) {
+      if (nbmc_context_set_radii_f64(ctx, v.data(), v.size(), 0) != NBMC_OK)
+        die(std::string("nbmc_context_set_radii_f64 refused valid radii: ") + nbmc_context_last_error(ctx));
+    };
+    set_radii(radii);
+    expect_same(a, reconstruct(ctx, prm, -1), "radii equal to the spacing", false);
+    SplitMix rng{perm_seed ^ 0x9e3779b97f4a7c15ull};
+    for (std::size_t i = 1; i < n; ++i) radii[i] = prm.spacing * (0.5 + double(rng.next() % 1025) / 2048.0);
+    set_radii(radii);
+    const Run v = reconstruct(ctx, prm, -1);
+    if (v.status != NBMC_OK) die("per-particle radii: " + status_text(v.status) + ": \"" + v.message + "\"");
+    check_mesh_invariants(v, prm, cell_abs, bw_abs, iso_abs, n);
+    expect_same(v, reconstruct(ctx, prm, -1), "radii, second run", true);
+    if (n > 1) {
+      std::vector<std::size_t> perm(n);
+      for (std::size_t i = 0; i < n; ++i) perm[i] = i;
+      for (std::size_t i = n - 1; i > 0; --i) std::swap(perm[i], perm[std::size_t(rng.next() % (i + 1))]);
+      std::vector<double> shuffled(values.size()), shuffled_radii(n);
+      for (std::size_t i = 0; i < n; ++i) {
+        for (int k = 0; k < 3; ++k) shuffled[3 * i + k] = values[3 * perm[i] + k];
+        shuffled_radii[i] = radii[perm[i]];
+      }
+      if (upload(ctx, pack(shuffled, f64, stride, n)) != NBMC_OK) die("radii: the shuffled upload failed");
+      set_radii(shuffled_radii);
+      expect_same(v, reconstruct(ctx, prm, -1), "radii, shuffled particle order", false);
+    }
+    if (nbmc_context_set_radii_f64(ctx, nullptr, 0, 0) != NBMC_OK) die("removing the radii failed");
+  }
+
   // The context stays usable after whatever happened: leave it clean.
   if (nbmc_context_set_memory_budget(ctx, 0) != NBMC_OK) die("nbmc_context_set_memory_budget(0) failed");
 

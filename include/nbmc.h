@@ -712,6 +712,73 @@ NBMC_API uint64_t nbmc_mesh_sphere_count(const nbmc_mesh* mesh);
  * Read-only: may be called concurrently on one mesh. */
 NBMC_API const float* nbmc_mesh_spheres(const nbmc_mesh* mesh);
 
+/* ------------------------------------------------------------------------
+ * Per-particle radii: frames whose particles have different sizes
+ * (variable-resolution SPH: SWIFT/GADGET SmoothingLengths, SPH-EXA h,
+ * adaptive SPlisHSPlasH).
+ *
+ * A particle's radius is its r: the length nbmc_params.spacing gives a
+ * uniform frame (the rest distance, the r of eq. (1) of the paper; twice the
+ * "particle radius" of SPlisHSPlasH and splashsurf). The parameters then
+ * describe a particle of radius nbmc_params.spacing, and particle i of radius
+ * r_i takes influence_radius, band_width, surface_radius and iso_radius times
+ * r_i / spacing (in NBMC_UNIT_SPACING: multiples of its own radius):
+ *  - the field: particle i's kernel support is its own R_i; rbar of eq. (1)
+ *    is the kernel-weighted mean of the contributing particles' iso radii
+ *    (SSP07; ZB05 likewise); the SPH density uses R_i as particle i's
+ *    smoothing length (with particle volumes ~ r_i^3);
+ *  - the surface-particle test: within particle i's own surface radius, with
+ *    each neighbour's own volume r_j^3 in the colour field;
+ *  - the narrow band: particle i's box is its own band_width wide;
+ *  - attribute interpolation: particle j's kernel has support R_j.
+ * The cell size stays the frame's: one grid (a cell of at most half the
+ * smallest radius resolves the finest particles). What is global takes the
+ * largest particle's lengths (r_max = the largest radius): the neighbour
+ * search and its cells, the bounding-box margin, the ghost layers of
+ * subdomains and MPI ranks, and the isolated-particle filter's linking
+ * distance. A frame whose radii span a wide range therefore searches its
+ * small particles with the large ones' radius (more particles per search);
+ * at most a factor 1e6 between the smallest and the largest radius.
+ * Radii that are all equal (to r) make a uniform frame of spacing r: with
+ * r == nbmc_params.spacing, the mesh is the one without radii, bit for bit.
+ * Subdomain splits and MPI ranks give the same mesh as the whole frame.
+ * ---------------------------------------------------------------------- */
+
+/* Sets (copies) the radii of the particles uploaded last: count values, which
+ * must be the particle count, particle i's at byte offset i * byte_stride from
+ * radii (byte_stride 0: tightly packed). Absolute lengths, in the unit of the
+ * positions. The radii apply to every following reconstruction on ctx until
+ * they are removed: radii == NULL removes them (count and byte_stride are
+ * then ignored; NBMC_OK also when there are none), and so does every
+ * particle upload (nbmc_context_set_particles*, _load_particles), successful
+ * or not, as for attributes: a solver sets them again with each frame.
+ * Errors (the context then keeps no radii): NBMC_ERROR_NO_PARTICLES before
+ * any particles are uploaded; NBMC_ERROR_INVALID_ARGUMENT for a NULL ctx, a
+ * count other than the particle count, a byte_stride smaller than one value;
+ * NBMC_ERROR_INVALID_PARAMETER for a radius that is NaN, infinite, zero,
+ * negative or above 1e15 (the message names the first such particle and its
+ * value), or radii spanning more than a factor 1e6. Values are checked on the
+ * context's threads, like positions.
+ * Contexts bound to several processes (nbmc_mpi): every rank sets the radii of
+ * its own particles (a rank without particles passes count 0, or nothing);
+ * nbmc_mpi_reconstruct fails with NBMC_ERROR_INVALID_ARGUMENT on every rank
+ * when some ranks with particles have radii and others have none, and with
+ * NBMC_ERROR_INVALID_PARAMETER when the ranks' radii together span more than
+ * a factor 1e6. Same threading rules as every call on ctx. */
+NBMC_API int32_t nbmc_context_set_radii_f32(nbmc_context* ctx, const float* radii, uint64_t count,
+                                            uint64_t byte_stride);
+NBMC_API int32_t nbmc_context_set_radii_f64(nbmc_context* ctx, const double* radii, uint64_t count,
+                                            uint64_t byte_stride);
+/* The same from CUDA device memory of the context's GPU (CUDA backend only,
+ * else NBMC_ERROR_BACKEND_UNAVAILABLE); radii and byte_stride must be aligned
+ * to the value size (else NBMC_ERROR_INVALID_ARGUMENT, as for a host
+ * pointer). The values are copied to the host and validated there before the
+ * call returns. */
+NBMC_API int32_t nbmc_context_set_radii_device_f32(nbmc_context* ctx, const float* radii, uint64_t count,
+                                                   uint64_t byte_stride);
+NBMC_API int32_t nbmc_context_set_radii_device_f64(nbmc_context* ctx, const double* radii, uint64_t count,
+                                                   uint64_t byte_stride);
+
 #ifdef __cplusplus
 } /* extern "C" */
 #endif

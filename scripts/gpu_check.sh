@@ -53,6 +53,8 @@ if want pointers; then
   "$B/tests/gpu/nbmc_cuda_device_pointers" "$DATA" 2>&1 | tee "$OUT/device-pointers.txt" || status=1
   step "particle attributes on the GPU (device uploads, device meshes, subdomains)"
   "$B/tests/gpu/nbmc_cuda_attributes" 2>&1 | tee "$OUT/attributes.txt" || status=1
+  step "per-particle radii on the GPU (OpenMP vs CUDA, device radii, subdomains)"
+  "$B/tests/gpu/nbmc_cuda_radii" 2>&1 | tee "$OUT/radii.txt" || status=1
 fi
 
 SMALL="$DATA/xyz/splashsurf_doubledambreak_f26_4732.xyz"

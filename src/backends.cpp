@@ -490,6 +490,9 @@ void run_backend(nbmc_context& ctx, const Params& p, HostMesh& mesh, RunStats& s
     in.xyz = ctx.particles.data();
     in.count = ctx.particles.size() / 3;
   }
+  // Per-particle radii (host memory, the particles' order) when they differ;
+  // equal radii run as a uniform frame (scale_for_radii).
+  if (p.radius_ref > 0) in.radii = ctx.radii.data();
   const bool mesh_on_device = ctx.mesh_memory == NBMC_MEMORY_DEVICE;
   auto run_one = [&](const ParticleInput& in, const Params& p, bool mesh_on_device, HostMesh& mesh, RunStats& st) {
     dispatch(ctx, in, p, progress, mesh_on_device, mesh, st);
@@ -497,6 +500,7 @@ void run_backend(nbmc_context& ctx, const Params& p, HostMesh& mesh, RunStats& s
   ctx.subdomain_report = SubdomainReport();
   ClusterFilter clusters;
   ParticleVector kept;  // the particles the isolated-particle filter keeps
+  std::vector<double> kept_radii;
   // The input's positions on the host: particles in device memory are
   // copied into `host` first.
   auto host_positions = [&](ParticleVector& host) -> const double* {
@@ -516,6 +520,11 @@ void run_backend(nbmc_context& ctx, const Params& p, HostMesh& mesh, RunStats& s
       kept.resize(3 * clusters.kept.size());
       for (std::size_t i = 0; i < clusters.kept.size(); ++i)
         for (int a = 0; a < 3; ++a) kept[3 * i + a] = xyz[3 * std::size_t(clusters.kept[i]) + a];
+      if (in.radii) {
+        kept_radii.resize(clusters.kept.size());
+        for (std::size_t i = 0; i < clusters.kept.size(); ++i) kept_radii[i] = in.radii[clusters.kept[i]];
+        in.radii = kept_radii.data();
+      }
       in.xyz = kept.data();
       in.count = clusters.kept.size();
       in.on_device = false;
@@ -531,8 +540,8 @@ void run_backend(nbmc_context& ctx, const Params& p, HostMesh& mesh, RunStats& s
         run_one(part, q, false, m, s);
       };
       auto split = [&](std::uint64_t at_least) {
-        if (!reconstruct_subdomains(ctx.subdomains, budget, xyz, in.count, p, run, mesh, st, ctx.subdomain_report,
-                                    at_least))
+        if (!reconstruct_subdomains(ctx.subdomains, budget, xyz, in.radii, in.count, p, run, mesh, st,
+                                    ctx.subdomain_report, at_least))
           return false;
         if (mesh_on_device) move_mesh_to_device(mesh);
         return true;

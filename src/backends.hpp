@@ -66,6 +66,7 @@ struct AttributeJob {
   const double* vertices64 = nullptr;
   std::size_t vertex_count = 0;
   double radius = 0;
+  const double* scale = nullptr;    // host, count: per-particle support radius * scale[j] (NULL: radius)
   bool use_bounds = false;          // bounds (lo[3], hi[3]) fix the cell grid in place of the particles' own
   double bounds[6] = {0, 0, 0, 0, 0, 0};
   double* out = nullptr;            // vertex_count * width
@@ -103,8 +104,10 @@ void move_mesh_to_device(HostMesh& m);
 // to be device memory of the current GPU, aligned to value_bytes), packed
 // into host. Throws Error(NBMC_ERROR_INVALID_ARGUMENT) for a host or
 // misaligned pointer, (NBMC_ERROR_BACKEND_UNAVAILABLE) without CUDA.
+// host_hint names the setter for host arrays (in the message for a host pointer).
 void download_device_items(const void* src, std::uint64_t count, std::uint64_t byte_stride, std::size_t item_bytes,
-                           std::size_t value_bytes, void* host, const char* fn);
+                           std::size_t value_bytes, void* host, const char* fn,
+                           const char* host_hint = "nbmc_context_set_attribute_f32/f64");
 // Free memory of the current CUDA device (0 without CUDA).
 std::uint64_t cuda_free_memory();
 

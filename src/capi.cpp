@@ -8,6 +8,7 @@
 #include "collective.h"
 #include "capi_attributes.hpp"
 #include "capi_mesh.hpp"
+#include "capi_radii.hpp"
 #include "context.hpp"
 
 #include "core/parallel.hpp"
@@ -248,9 +249,9 @@ static int32_t set_particles_impl(nbmc_context* ctx, const T* xyz, uint64_t coun
 // rank's particles out.
 template <class Impl>
 static int32_t collective_upload(nbmc_context* ctx, uint64_t count, const Impl& impl) {
-  // Attributes belong to the particles uploaded last: every upload, even a
-  // failed one, removes them.
-  if (ctx) ctx->attributes.clear();
+  // Attributes and radii belong to the particles uploaded last: every
+  // upload, even a failed one, removes them.
+  if (ctx) ctx->clear_particle_values();
   if (ctx && ctx->collective) {
     ctx->pending_status = 0;
     ctx->pending_error.clear();
@@ -432,7 +433,8 @@ int32_t nbmc_context_reconstruct(nbmc_context* ctx, const nbmc_params* params, n
   nbmc::check_postprocess_params(full);
   if (ctx->particles.empty() && ctx->device_particles.count == 0)
     throw Error(NBMC_ERROR_NO_PARTICLES, "nbmc_context_reconstruct: no particles uploaded");
-  const nbmc::Params p = nbmc::resolve_params(*params);
+  nbmc::Params p = nbmc::resolve_params(*params);
+  nbmc::apply_radii(*ctx, p);
   nbmc::check_domain(p);
   auto m = std::make_unique<nbmc_mesh>();
   nbmc::RunStats st;

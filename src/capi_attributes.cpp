@@ -44,10 +44,6 @@ void check_name(const char* name, const char* fn) {
   }
 }
 
-std::uint64_t particle_count(const nbmc_context& ctx) {
-  return ctx.device_particles.count ? ctx.device_particles.count : ctx.particles.size() / 3;
-}
-
 void remove_attribute(nbmc_context& ctx, const char* name) {
   auto& list = ctx.attributes;
   list.erase(std::remove_if(list.begin(), list.end(), [&](const io::Attribute& a) { return a.name == name; }),
@@ -97,7 +93,7 @@ std::uint64_t check_set(nbmc_context& ctx, const char* name, const T* data, std:
                         std::uint64_t& byte_stride, const char* fn) {
   check_name(name, fn);
   if (!data) return 0;
-  const std::uint64_t count = particle_count(ctx);
+  const std::uint64_t count = ctx.particle_count();
   if (count == 0)
     throw Error(NBMC_ERROR_NO_PARTICLES,
                 std::string(fn) + ": no particles uploaded; upload the particles first (an upload removes all attributes)");
@@ -119,7 +115,7 @@ std::vector<double, NoInitAllocator<double>> interpolate_at_vertices(nbmc_contex
                                                                       const std::vector<io::Attribute>& attributes,
                                                                       const float* vertices, const double* vertices64,
                                                                       std::size_t nv, double radius,
-                                                                      const double* bounds) {
+                                                                      const double* bounds, const double* scale) {
   std::size_t width = 0;
   for (const io::Attribute& a : attributes) {
     if (a.count() != n)
@@ -157,6 +153,7 @@ std::vector<double, NoInitAllocator<double>> interpolate_at_vertices(nbmc_contex
   job.vertices64 = vertices64;
   job.vertex_count = nv;
   job.radius = radius;
+  job.scale = scale;
   if (bounds) {
     job.use_bounds = true;
     for (int a = 0; a < 6; ++a) job.bounds[a] = bounds[a];
@@ -186,12 +183,12 @@ std::vector<double, NoInitAllocator<double>> interpolate_at_vertices(nbmc_contex
       std::vector<double> sub(3 * rest.size());
       for (std::size_t i = 0; i < rest.size(); ++i)
         for (int a = 0; a < 3; ++a) sub[3 * i + a] = vertices64[3 * rest[i] + a];
-      values = io::interpolate_attributes(hxyz, n, attributes, {}, sub.data(), rest.size(), radius, threads);
+      values = io::interpolate_attributes(hxyz, n, attributes, {}, sub.data(), rest.size(), radius, threads, scale);
     } else {
       std::vector<float> sub(3 * rest.size());
       for (std::size_t i = 0; i < rest.size(); ++i)
         for (int a = 0; a < 3; ++a) sub[3 * i + a] = vertices[3 * rest[i] + a];
-      values = io::interpolate_attributes(hxyz, n, attributes, {}, sub.data(), rest.size(), radius, threads);
+      values = io::interpolate_attributes(hxyz, n, attributes, {}, sub.data(), rest.size(), radius, threads, scale);
     }
   } catch (const io::Error& e) {
     throw Error(NBMC_ERROR_INVALID_PARAMETER, std::string("attribute interpolation: ") + e.what());
@@ -244,9 +241,16 @@ void interpolate_mesh_attributes(nbmc_context& ctx, const Params& p, nbmc_mesh& 
   const std::size_t n = device_particles ? ctx.device_particles.count : ctx.particles.size() / 3;
   const double* xyz =
       device_particles ? static_cast<const double*>(ctx.device_particles.data.get()) : ctx.particles.data();
+  // Per-particle radii: particle j's kernel support is R r_j / r_max.
+  std::vector<double> scale;
+  if (p.radius_ref > 0) {
+    if (ctx.radii.size() != n) throw Error(NBMC_ERROR_INTERNAL, "attribute interpolation: the radii do not match");
+    scale.resize(n);
+    for (std::size_t j = 0; j < n; ++j) scale[j] = ctx.radii[j] / p.radius_ref;
+  }
   const auto result = interpolate_at_vertices(ctx, xyz, device_particles, n, ctx.attributes, vertices,
                                               m.f64 ? m.positions64.data() : nullptr, std::size_t(nv),
-                                              p.influence_radius, nullptr);
+                                              p.influence_radius, nullptr, scale.empty() ? nullptr : scale.data());
   store_mesh_attributes(ctx.attributes, result.data(), out);
   const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   st.stage[NBMC_STAGE_ATTRIBUTES] += s;

@@ -31,7 +31,8 @@ std::vector<double, NoInitAllocator<double>> interpolate_at_vertices(nbmc_contex
                                                                       const std::vector<io::Attribute>& attributes,
                                                                       const float* vertices, const double* vertices64,
                                                                       std::size_t nv, double radius,
-                                                                      const double* bounds);
+                                                                      const double* bounds,
+                                                                      const double* scale = nullptr);
 // Stores result (as interpolate_at_vertices gives it, for out's vertices) as
 // out.attributes, named and shaped as layout.
 void store_mesh_attributes(const std::vector<io::Attribute>& layout, const double* result, nbmc_mesh& out);

@@ -71,7 +71,7 @@ int32_t nbmc_context_load_particles(nbmc_context* ctx, const char* path, const c
   return guarded(ctx, fn, [&]() -> int32_t {
     ctx->particles.clear();  // the (pinned) buffer stays for the upload below
     ctx->device_particles = nbmc::DeviceParticles();
-    ctx->attributes.clear();  // they belonged to the particles replaced
+    ctx->clear_particle_values();  // attributes and radii belonged to the particles replaced
     if (!path) return fail(ctx, NBMC_ERROR_INVALID_ARGUMENT, std::string(fn) + ": path is NULL");
     nbmc::io::ReadOptions o;
     o.format = format ? format : "";

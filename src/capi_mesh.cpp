@@ -43,9 +43,9 @@ namespace {
 // positions (PosVec).
 template <class PosVec>
 void postprocess_positions(const nbmc_params& params, PosVec& positions, HostMesh& m, mesh::PostprocessStats& ps,
-                           const FeatureParticles* fp) {
+                           const FeatureParticles* fp, double cell) {
   if (params.cleanup) {
-    const mesh::CleanupResult c = mesh::cleanup_mesh(positions, m.normals, m.triangles);
+    const mesh::CleanupResult c = mesh::cleanup_mesh(positions, m.normals, m.triangles, cell);
     ps.collapses = c.collapses;
     ps.flips = c.flips;
     ps.bad_before = c.bad_before;
@@ -69,7 +69,7 @@ void postprocess_positions(const nbmc_params& params, PosVec& positions, HostMes
     // Smoothing can pull nearly coincident vertices together again (the
     // clusters the clean-up widened): clean what it made.
     if (params.cleanup) {
-      const mesh::CleanupResult c = mesh::cleanup_mesh(positions, m.normals, m.triangles);
+      const mesh::CleanupResult c = mesh::cleanup_mesh(positions, m.normals, m.triangles, cell);
       ps.collapses += c.collapses;
       ps.flips += c.flips;
       ps.bad_after = c.bad_after;
@@ -82,22 +82,23 @@ void postprocess_positions(const nbmc_params& params, PosVec& positions, HostMes
   }
 }
 
-void postprocess_host(const nbmc_params& params, HostMesh& m, mesh::PostprocessStats& ps, const FeatureParticles* fp) {
-  if (m.f64) postprocess_positions(params, m.positions64, m, ps, fp);
-  else postprocess_positions(params, m.positions, m, ps, fp);
+void postprocess_host(const nbmc_params& params, HostMesh& m, mesh::PostprocessStats& ps, const FeatureParticles* fp,
+                      double cell) {
+  if (m.f64) postprocess_positions(params, m.positions64, m, ps, fp, cell);
+  else postprocess_positions(params, m.positions, m, ps, fp, cell);
 }
 
 // A mesh left in GPU memory: copied to the host, post-processed there, and
 // copied back into its own device arrays (the counts only shrink).
 void postprocess_device(const nbmc_params& params, HostMesh& m, mesh::PostprocessStats& ps,
-                        const FeatureParticles* fp) {
+                        const FeatureParticles* fp, double cell) {
   if (m.triangle_count() == 0) return;
   HostMesh h;
   h.positions.resize(3 * m.vertex_count());
   h.normals.resize(m.d_normals ? h.positions.size() : 0);
   h.triangles.resize(3 * m.triangle_count());
   download_mesh(m, h.positions.data(), h.normals.empty() ? nullptr : h.normals.data(), h.triangles.data());
-  postprocess_host(params, h, ps, fp);
+  postprocess_host(params, h, ps, fp, cell);
 #if defined(KOKKOS_ENABLE_CUDA)
   auto put = [](void* dst, const void* src, std::size_t bytes, const char* what) {
     if (bytes && cudaMemcpy(dst, src, bytes, cudaMemcpyHostToDevice) != cudaSuccess) {
@@ -123,8 +124,8 @@ mesh::PostprocessStats postprocess_mesh(const nbmc_params& params, HostMesh& m, 
   ps.raw_triangles = ps.pre_decimation_triangles = m.triangle_count();
   if (!params.cleanup && params.smooth_iterations <= 0 && !(params.decimate_fraction < 1)) return ps;
   const auto t0 = std::chrono::steady_clock::now();
-  if (m.on_device) postprocess_device(params, m, ps, fp);
-  else postprocess_host(params, m, ps, fp);
+  if (m.on_device) postprocess_device(params, m, ps, fp, st.cell);
+  else postprocess_host(params, m, ps, fp, st.cell);
   const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   st.vertices = m.vertex_count();
   st.triangles = m.triangle_count();

@@ -10,6 +10,7 @@
 #include "core/mesh_postprocess.hpp"
 #include "io/attributes.hpp"
 
+#include <cstdint>
 #include <memory>
 #include <mutex>
 #include <new>
@@ -57,6 +58,22 @@ struct nbmc_context {
   // nbmc_context_set_attribute*: per-particle values (doubles) for the
   // particles uploaded last; every particle upload clears them.
   std::vector<nbmc::io::Attribute> attributes;
+  // nbmc_context_set_radii*: one radius per particle uploaded last (absolute,
+  // validated, their smallest and largest), or empty; every particle upload
+  // clears them.
+  std::vector<double> radii;
+  double radius_min = 0, radius_max = 0;
+  // Particles uploaded last (on the host or the device).
+  std::uint64_t particle_count() const {
+    return device_particles.count ? device_particles.count : particles.size() / 3;
+  }
+  // What belongs to the particles uploaded last (attributes, radii): every
+  // particle upload removes it.
+  void clear_particle_values() {
+    attributes.clear();
+    std::vector<double>().swap(radii);
+    radius_min = radius_max = 0;
+  }
 };
 
 namespace nbmc {

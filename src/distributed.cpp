@@ -393,6 +393,9 @@ void collective_attributes(nbmc_context& ctx, const Coll& c, const Params& p, co
 
   const Grid& g = d.grid;
   const double R = p.influence_radius, margin = R + 2 * g.cell;
+  // Per-particle radii: particle j's support is R r_j / r_max (its radius
+  // travels after its values).
+  const bool with_radii = p.radius_ref > 0;
   std::int64_t cells[3];
   std::vector<std::int64_t> bounds[3];  // subdomain coordinate i owns cells [bounds[i], bounds[i + 1])
   for (int a = 0; a < 3; ++a) {
@@ -437,6 +440,7 @@ void collective_attributes(nbmc_context& ctx, const Coll& c, const Params& p, co
   // b. Particles with their values to the owners of the subdomains near them.
   std::vector<std::vector<char>> pout(std::size_t(c.size()));
   step(c, [&] {
+    if (with_radii && ctx.radii.size() != count) throw Error(NBMC_ERROR_INTERNAL, "MPI: the radii do not match");
     std::vector<double> packed(count * width);
     std::size_t off = 0;
     for (const io::Attribute& a : ctx.attributes) {
@@ -461,6 +465,7 @@ void collective_attributes(nbmc_context& ctx, const Coll& c, const Params& p, co
             for (int a = 0; a < 3; ++a) put(b, xyz[3 * i + std::size_t(a)]);
             const char* vp = reinterpret_cast<const char*>(packed.data() + i * width);
             b.insert(b.end(), vp, vp + width * sizeof(double));
+            if (with_radii) put(b, ctx.radii[i]);
           }
     }
   });
@@ -471,7 +476,7 @@ void collective_attributes(nbmc_context& ctx, const Coll& c, const Params& p, co
   std::vector<std::vector<char>> rout(std::size_t(c.size()));
   step(c, [&] {
     struct Work {
-      std::vector<double> xyz;
+      std::vector<double> xyz, scale;
       std::vector<io::Attribute> attrs;
       std::vector<double> verts;
       std::vector<std::pair<int, std::uint64_t>> from;  // (rank, vertex index there)
@@ -502,9 +507,11 @@ void collective_attributes(nbmc_context& ctx, const Coll& c, const Params& p, co
           w.xyz.insert(w.xyz.end(), x, x + 3);
           for (io::Attribute& a : w.attrs)
             for (int q = 0; q < a.components; ++q) a.values.push_back(rd.get<double>());
+          if (with_radii) w.scale.push_back(rd.get<double>() / p.radius_ref);
         } else {
-          if (rd.at + width * sizeof(double) > rd.b.size()) throw Error(NBMC_ERROR_INTERNAL, "MPI: short attribute message");
-          rd.at += width * sizeof(double);
+          const std::size_t skip = (width + (with_radii ? 1 : 0)) * sizeof(double);
+          if (rd.at + skip > rd.b.size()) throw Error(NBMC_ERROR_INTERNAL, "MPI: short attribute message");
+          rd.at += skip;
         }
       }
     }
@@ -513,7 +520,8 @@ void collective_attributes(nbmc_context& ctx, const Coll& c, const Params& p, co
       const std::size_t n = w.xyz.size() / 3, k = w.verts.size() / 3;
       if (n == 0)  // a vertex lies within a cell of the particles that made it
         throw Error(NBMC_ERROR_INTERNAL, "MPI: no particles near the vertices of subdomain " + std::to_string(entry.first));
-      const auto res = interpolate_at_vertices(ctx, w.xyz.data(), false, n, w.attrs, nullptr, w.verts.data(), k, R, box);
+      const auto res = interpolate_at_vertices(ctx, w.xyz.data(), false, n, w.attrs, nullptr, w.verts.data(), k, R, box,
+                                               with_radii ? w.scale.data() : nullptr);
       for (std::size_t i = 0; i < k; ++i) {
         std::vector<char>& b = rout[std::size_t(w.from[i].first)];
         put(b, w.from[i].second);
@@ -591,6 +599,32 @@ void reconstruct_collective(nbmc_context& ctx, const nbmc_params& full, const nb
       xyz = ctx.particles.data();
     }
   });
+  // Per-particle radii: the frame's smallest and largest, over the ranks that
+  // have particles (all with radii, or none), scale the parameters alike on
+  // every rank (scale_for_radii).
+  {
+    const bool mine = !ctx.radii.empty();
+    double rr[4] = {mine ? ctx.radius_min : std::numeric_limits<double>::infinity(),
+                    mine ? -ctx.radius_max : std::numeric_limits<double>::infinity(),
+                    count > 0 && !mine ? 0.0 : 1.0,  // 0 somewhere: a rank with particles and no radii
+                    mine ? -1.0 : 0.0};              // -1 somewhere: a rank with radii
+    c.reduce(rr, 4, NBMC__MIN_F64);
+    step(c, [&] {
+      if (mine && ctx.radii.size() != count)
+        throw Error(NBMC_ERROR_INTERNAL, "MPI: the radii do not match the particles");
+      if (rr[3] < 0 && rr[2] == 0)
+        throw Error(NBMC_ERROR_INVALID_ARGUMENT,
+                    "nbmc_mpi_reconstruct: some ranks set per-particle radii (nbmc_context_set_radii_*) and some "
+                    "ranks with particles did not");
+      if (rr[3] < 0) {
+        scale_for_radii(p, rr[0], -rr[1]);
+        check_domain(p);
+      }
+    });
+  }
+  // Sent with the particles when they differ (then every rank with particles has them).
+  const bool with_radii = p.radius_ref > 0;
+  const double* const radii = with_radii ? ctx.radii.data() : nullptr;
   double box[6];
   particle_bounds(xyz, count, box, box + 3);
   for (int a = 0; a < 3; ++a) box[3 + a] = -box[3 + a];
@@ -634,7 +668,7 @@ void reconstruct_collective(nbmc_context& ctx, const nbmc_params& full, const nb
       mine.push_back(int(s));
     }
   // 4. Particles to the ranks of their subdomains.
-  std::vector<std::vector<double>> parts_xyz(mine.size());
+  std::vector<std::vector<double>> parts_xyz(mine.size()), parts_radii(mine.size());
   {
     std::vector<std::vector<char>> out(static_cast<std::size_t>(c.size()));
     step(c, [&] {
@@ -645,6 +679,8 @@ void reconstruct_collective(nbmc_context& ctx, const nbmc_params& full, const nb
         put(b, std::uint64_t(sel[s].size()));
         for (std::uint32_t i : sel[s]) b.insert(b.end(), reinterpret_cast<const char*>(xyz + 3 * std::size_t(i)),
                                                reinterpret_cast<const char*>(xyz + 3 * std::size_t(i) + 3));
+        if (with_radii)  // then the same particles' radii
+          for (std::uint32_t i : sel[s]) put(b, radii[i]);
       }
       sel.clear();
       sel.shrink_to_fit();
@@ -664,6 +700,10 @@ void reconstruct_collective(nbmc_context& ctx, const nbmc_params& full, const nb
           if (rd.at + 3 * n * sizeof(double) > rd.b.size()) throw Error(NBMC_ERROR_INTERNAL, "MPI: short particle message");
           std::memcpy(dst.data() + at, rd.b.data() + rd.at, 3 * std::size_t(n) * sizeof(double));
           rd.at += 3 * std::size_t(n) * sizeof(double);
+          if (with_radii) {
+            std::vector<double>& rdst = parts_radii[it->second];
+            for (std::uint64_t k = 0; k < n; ++k) rdst.push_back(rd.get<double>());
+          }
         }
       }
     });
@@ -707,9 +747,15 @@ void reconstruct_collective(nbmc_context& ctx, const nbmc_params& full, const nb
   RunStats st;
   ctx.memory.reset_peak();
   std::vector<Piece> pieces = run_subdomain_job(
-      d, q, mine, [&](std::size_t i, std::vector<double>& out) { out = parts_xyz[i]; }, run, comm, st, rep);
+      d, q, mine,
+      [&](std::size_t i, std::vector<double>& out, std::vector<double>& out_radii) {
+        out = parts_xyz[i];
+        out_radii = parts_radii[i];
+      },
+      run, comm, st, rep);
   for (SubdomainEntry& e : rep.entries) e.rank = c.rank();
   parts_xyz.clear();
+  parts_radii.clear();
   // 6. This rank's subdomains merged into one piece (with keys).
   Piece merged;
   step(c, [&] {

@@ -89,7 +89,7 @@ std::vector<Piece> run_subdomain_job(const Decomposition& d, const Params& p, co
   std::vector<Piece> pieces(m);
   std::vector<RunStats> last(m);
   std::vector<SubdomainEntry> entries(m);
-  std::vector<double> xyz;
+  std::vector<double> xyz, radii;
   for (std::size_t i = 0; i < m; ++i) {
     const Subdomain& s = d.subdomains[std::size_t(mine[i])];
     SubdomainEntry& e = entries[i];
@@ -110,7 +110,9 @@ std::vector<Piece> run_subdomain_job(const Decomposition& d, const Params& p, co
       if (!dirty[i]) continue;
       dirty[i] = 0;
       const Subdomain& s = d.subdomains[std::size_t(mine[i])];
-      particles(i, xyz);
+      particles(i, xyz, radii);
+      if (p.radius_ref > 0 && radii.size() != xyz.size() / 3)
+        throw Error(NBMC_ERROR_INTERNAL, "subdomains: the radii do not match the particles");
       SubdomainEntry& e = entries[i];
       if (e.runs == 0) {
         const std::uint64_t owned = owned_particles(d.grid, s, xyz);
@@ -137,6 +139,7 @@ std::vector<Piece> run_subdomain_job(const Decomposition& d, const Params& p, co
       in.xyz = xyz.data();
       in.count = xyz.size() / 3;
       in.region = &reg;
+      in.radii = p.radius_ref > 0 ? radii.data() : nullptr;
       HostMesh mesh;
       RunStats one;
       const double t0 = seconds_now();
@@ -195,8 +198,8 @@ std::vector<Piece> run_subdomain_job(const Decomposition& d, const Params& p, co
 
 namespace {
 
-void run_split(const int parts[3], const Grid& g, const double* xyz, std::size_t count, const Params& p,
-               const RunRegion& run, HostMesh& mesh, RunStats& st, SubdomainReport& rep) {
+void run_split(const int parts[3], const Grid& g, const double* xyz, const double* radii, std::size_t count,
+               const Params& p, const RunRegion& run, HostMesh& mesh, RunStats& st, SubdomainReport& rep) {
   const Decomposition d = decompose(g, p, parts);
   const std::vector<std::vector<std::uint32_t>> sel = select_particles(d, p, xyz, count);
   Params q = p;
@@ -218,11 +221,14 @@ void run_split(const int parts[3], const Grid& g, const double* xyz, std::size_t
   const double t0 = seconds_now();
   std::vector<Piece> pieces = run_subdomain_job(
       d, q, all,
-      [&](std::size_t i, std::vector<double>& out) {
+      [&](std::size_t i, std::vector<double>& out, std::vector<double>& out_radii) {
         out.resize(3 * sel[i].size());
+        out_radii.resize(radii ? sel[i].size() : 0);
         for_chunks(sel[i].size(), chunk_count(sel[i].size(), 50000), [&](std::size_t, std::size_t b, std::size_t e) {
-          for (std::size_t k = b; k < e; ++k)
+          for (std::size_t k = b; k < e; ++k) {
             for (int a = 0; a < 3; ++a) out[3 * k + std::size_t(a)] = xyz[3 * std::size_t(sel[i][k]) + std::size_t(a)];
+            if (radii) out_radii[k] = radii[sel[i][k]];
+          }
         });
       },
       run, local, acc, rep);
@@ -249,8 +255,8 @@ void run_split(const int parts[3], const Grid& g, const double* xyz, std::size_t
 }  // namespace
 
 bool reconstruct_subdomains(const SubdomainSetting& setting, std::uint64_t budget, const double* xyz,
-                            std::size_t count, const Params& p, const RunRegion& run, HostMesh& mesh, RunStats& st,
-                            SubdomainReport& rep, std::uint64_t at_least) {
+                            const double* radii, std::size_t count, const Params& p, const RunRegion& run,
+                            HostMesh& mesh, RunStats& st, SubdomainReport& rep, std::uint64_t at_least) {
   if (p.field != FieldKind::NarrowBand)
     throw Error(NBMC_ERROR_INVALID_PARAMETER, "subdomains need the narrow-band field (not the dense or scatter baselines)");
   double lo[3], hi[3];
@@ -273,7 +279,7 @@ bool reconstruct_subdomains(const SubdomainSetting& setting, std::uint64_t budge
   }
   for (int attempt = 0;; ++attempt) {
     try {
-      run_split(parts, g, xyz, count, p, run, mesh, st, rep);
+      run_split(parts, g, xyz, radii, count, p, run, mesh, st, rep);
       rep.automatic = setting.automatic;
       rep.budget_bytes = setting.automatic ? budget : 0;
       return true;

@@ -39,8 +39,9 @@ struct SubdomainComm {
 };
 
 // Fills `xyz` with the positions (packed doubles) of the particles and ghosts
-// of the i-th of `mine`.
-using PackParticles = std::function<void(std::size_t i, std::vector<double>& xyz)>;
+// of the i-th of `mine`, and with per-particle radii (p.radius_ref > 0)
+// `radii` with theirs, in the same order (left empty otherwise).
+using PackParticles = std::function<void(std::size_t i, std::vector<double>& xyz, std::vector<double>& radii)>;
 
 // Runs the subdomains `mine` of d until no band growth crosses into
 // a subdomain that has not seen it, and returns their pieces (indexed like
@@ -55,10 +56,10 @@ std::vector<Piece> run_subdomain_job(const Decomposition& d, const Params& p, co
 // runs, stitches into mesh. Returns false when `automatic` decided not to
 // split (the caller then runs the frame whole, and calls again with
 // at_least = 2 if that run fails with an error split_would_help accepts).
+// radii: one per particle with per-particle radii (p.radius_ref > 0), else null.
 bool reconstruct_subdomains(const SubdomainSetting& setting, std::uint64_t budget_bytes, const double* xyz,
-                            std::size_t count, const Params& p, const RunRegion& run, HostMesh& mesh, RunStats& st,
-                            SubdomainReport& rep,
-                            std::uint64_t at_least = 1);
+                            const double* radii, std::size_t count, const Params& p, const RunRegion& run,
+                            HostMesh& mesh, RunStats& st, SubdomainReport& rep, std::uint64_t at_least = 1);
 
 // Whether splitting the frame (further) can get past error e: a memory
 // budget, an allocation that failed, a per-run size limit.

@@ -11,7 +11,8 @@
 // These tests build the pipeline's stages on the host (Serial and OpenMP)
 // and check, bit for bit, every band vertex's value from gather_field (the
 // host tile path) and every surface flag against plain serial references
-// written here, which follow that order literally.
+// written here, which follow that order literally; with per-particle radii
+// too (the methods' radii variants, radii.hpp: each particle's own support).
 #include <gtest/gtest.h>
 
 #include "common.hpp"
@@ -22,11 +23,13 @@
 #include "grid.hpp"
 #include "narrow_band.hpp"
 #include "neighbourhood.hpp"
+#include "radii.hpp"
 #include "scalar_field.hpp"
 #include "sph_density.hpp"
 #include "surface_particles.hpp"
 #include "yt10_kernels.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -124,9 +127,11 @@ Params make_params(double r, double cell, int method) {
 // ------------------------------------------------------ serial references
 // Surface flags of the particles of neighbour cell `cell`, as
 // surface_particles_of_cell defines them, with every sum in plain order.
+// With radii (nb.scale): particle i's own h_i, each neighbour's volume t_j^3
+// (scale is then (r_max / h)^3 * 945 / (32 pi), h_abs = h).
 std::size_t reference_surface(const NeighbourView<Host>& nb, const std::vector<std::uint64_t>& keys, std::size_t cell,
                               int range, float h, float scale, float threshold, int min_neighbours,
-                              std::vector<std::uint8_t>& flags, std::vector<float>& grad) {
+                              std::vector<std::uint8_t>& flags, std::vector<float>& grad, double h_abs) {
   const std::uint32_t first = nb.cell_start(cell), last = nb.cell_start(cell + 1);
   if (last - first > kCrowdedCell) {
     for (std::uint32_t i = first; i < last; ++i) flags[i] = 1;
@@ -152,12 +157,27 @@ std::size_t reference_surface(const NeighbourView<Host>& nb, const std::vector<s
   const float* Y = X + nb.n;
   const float* Z = Y + nb.n;
   const float h2 = h * h;
+  const bool radii = nb.scale.extent(0) > 0;
   std::size_t surface = 0;
   for (std::uint32_t i = first; i < last; ++i) {
     float gx = 0, gy = 0, gz = 0;
     int count = 0;
+    const float ti = radii ? nb.scale(i) : 1.f;
+    const float inv_hi = float(1.0 / (h_abs * double(ti)));
     for (const auto& be : ranges)
       for (std::uint32_t j = be.first; j < be.second; ++j) {
+        if (radii) {
+          const float ex = (X[i] - X[j]) * inv_hi, ey = (Y[i] - Y[j]) * inv_hi, ez = (Z[i] - Z[j]) * inv_hi;
+          const float e2 = ex * ex + ey * ey + ez * ez;
+          const float q = e2 < 1.f ? 1.f - e2 : 0.f;
+          const float tj = nb.scale(j);
+          const float w = (q * q) * (tj * tj * tj);
+          gx += w * ex;
+          gy += w * ey;
+          gz += w * ez;
+          count += e2 < 1.f ? 1 : 0;
+          continue;
+        }
         const float dx = X[i] - X[j], dy = Y[i] - Y[j], dz = Z[i] - Z[j];
         const float d2 = dx * dx + dy * dy + dz * dz;
         const float q = d2 < h2 ? h2 - d2 : 0.f;
@@ -167,7 +187,7 @@ std::size_t reference_surface(const NeighbourView<Host>& nb, const std::vector<s
         gz += w * dz;
         count += d2 < h2 ? 1 : 0;
       }
-    grad[i] = std::sqrt(gx * gx + gy * gy + gz * gz) * scale;
+    grad[i] = std::sqrt(gx * gx + gy * gy + gz * gz) * (radii ? scale / (ti * ti * ti) : scale);
     const bool s = count - 1 < min_neighbours || grad[i] > threshold;
     flags[i] = s ? 1 : 0;
     surface += s ? 1 : 0;
@@ -210,10 +230,11 @@ void reference_sums(const NeighbourView<Host>& nb, const float x[3], float S, co
         if (d2 >= R2) continue;
         for (std::uint32_t j = b; j < e; ++j) {
           const float dx = X[j] - x[0], dy = Y[j] - x[1], dz = Z[j] - x[2];
-          const float s2 = (dx * dx + dy * dy + dz * dz) * fc.inv_R2;
+          const float q = Method::radii ? nb.support(j) : fc.inv_R2;
+          const float s2 = (dx * dx + dy * dy + dz * dz) * q;
           evals += s2 < 1.f ? 1 : 0;
           Method::add(acc, dx, dy, dz, s2 < 1.f ? 1.f - s2 : 0.f,
-                      Method::P ? nb.pdata.data() + std::size_t(Method::P) * j : nullptr);
+                      Method::P ? nb.pdata.data() + std::size_t(Method::P) * j : nullptr, q);
         }
       }
 }
@@ -237,8 +258,9 @@ struct Outcome {
   std::string first;  // the first mismatch, described
 };
 
+// radii: one per particle for the radii variants (p.radius_ref set), else empty.
 template <class Method, class Exec>
-Outcome run(const Exec& space, const Points& xyz, const Params& p, bool dense) {
+Outcome run(const Exec& space, const Points& xyz, const Params& p, bool dense, const std::vector<double>& radii) {
   Outcome out;
   MemoryTracker tracker;
   const std::size_t n = xyz.size() / 3;
@@ -251,17 +273,20 @@ Outcome run(const Exec& space, const Points& xyz, const Params& p, bool dense) {
     }
   const Grid g = make_grid(lo, hi, p);
   Neighbourhood<Host> nbh;
-  build_neighbourhood(space, tracker, xyz.data(), n, {}, g, nbh);
+  build_neighbourhood(space, tracker, xyz.data(), n, {}, g, nbh, Method::radii ? radii.data() : nullptr);
   FieldConstants fc = field_constants(p.influence_radius, p.iso_radius, p.t_low, p.t_high, p.iso_threshold);
-  if (std::is_same<Method, FieldSPH>::value) compute_sph_weights(space, tracker, nbh, g, fc);
+  if (Method::radii)
+    attach_radii(space, tracker, Kokkos::View<const double*, Host>(radii.data(), radii.size()), p, nbh);
+  const bool sph = p.method == nbmc::Method::SPH;
+  if (sph) compute_sph_weights<Method::radii>(space, tracker, nbh, g, fc);
   if (std::is_same<Method, FieldYT10>::value) fc = compute_yt10_kernels(space, tracker, nbh, g, p, fc);
   const NeighbourView<Host> nb = view_of(nbh, g);
-  if (std::is_same<Method, FieldSPH>::value) {
+  if (sph) {
     // Each particle's weight: 1 / (its density summed in the serial order).
     std::uint64_t unused = 0;
     for (std::size_t j = 0; j < n; ++j) {
       const float x[3] = {nb.pos(j), nb.pos(n + j), nb.pos(2 * n + j)};
-      const float ref = 1.f / reference_field<SphDensity>(nb, x, float(g.nb_cell), fc, unused);
+      const float ref = 1.f / reference_field<SphDensityT<Method::radii>>(nb, x, float(g.nb_cell), fc, unused);
       out.weight_mismatches += bits(nb.pdata(j)) != bits(ref);
     }
   }
@@ -292,9 +317,12 @@ Outcome run(const Exec& space, const Points& xyz, const Params& p, bool dense) {
   {
     const float h = float(p.surface_radius);
     const int range = int(std::ceil(p.surface_radius / g.nb_cell));
+    const double rh = p.spacing / p.surface_radius;
     const float scale =
-        float(p.spacing * p.spacing * p.spacing * 945.0 / (32.0 * 3.14159265358979 * std::pow(p.surface_radius, 9)) *
-              p.surface_radius);
+        Method::radii
+            ? float(rh * rh * rh * 945.0 / (32.0 * 3.14159265358979))
+            : float(p.spacing * p.spacing * p.spacing * 945.0 / (32.0 * 3.14159265358979 * std::pow(p.surface_radius, 9)) *
+                    p.surface_radius);
     const std::vector<std::uint64_t> hkeys(keys.data(), keys.data() + nbh.n_cells);
     auto compare = [&](const Params& q, const Kokkos::View<std::uint8_t*, Host>& got, std::size_t got_count,
                        std::vector<float>& grad) {
@@ -302,7 +330,7 @@ Outcome run(const Exec& space, const Points& xyz, const Params& p, bool dense) {
       std::size_t ref_count = 0;
       for (std::size_t c = 0; c < nbh.n_cells; ++c)
         ref_count += reference_surface(nb, hkeys, c, range, h, scale, float(q.color_threshold), q.neighbour_threshold,
-                                       ref, grad);
+                                       ref, grad, p.surface_radius);
       std::size_t bad = ref_count != got_count;
       for (std::size_t i = 0; i < n; ++i) bad += got(i) != ref[i];
       return bad;
@@ -327,7 +355,8 @@ Outcome run(const Exec& space, const Points& xyz, const Params& p, bool dense) {
     build_dense_band(space, tracker, g, band);
   else
     build_narrow_band(space, tracker, g, p, Kokkos::View<const float*, Host>(nbh.pos.view()),
-                      Kokkos::View<const std::uint8_t*, Host>(flags), n, band);
+                      Kokkos::View<const std::uint8_t*, Host>(flags), n, band,
+                      Kokkos::View<const float*, Host>(nbh.scale.view()));
   out.band_vertices = band.n_vertices;
   Kokkos::View<float*, Host> phi("phi", band.n_vertices);
   const BandView<Host> bv = view_of(band, g);
@@ -357,23 +386,31 @@ Outcome run(const Exec& space, const Points& xyz, const Params& p, bool dense) {
   return out;
 }
 
+// radii (the radii variants): one per particle, as nbmc_context_set_radii
+// takes them; the parameters are scaled for them as the C API does.
 template <class Method>
 void check(const char* name, const Points& xyz, double r, double cell, bool dense = false,
-           std::size_t min_surface = 1) {
-  const Params p = make_params(r, cell,
-                               std::is_same<Method, FieldZB05>::value  ? NBMC_METHOD_ZB05
-                               : std::is_same<Method, FieldSPH>::value ? NBMC_METHOD_SPH
-                               : std::is_same<Method, FieldYT10>::value ? NBMC_METHOD_YT10
-                                                                       : NBMC_METHOD_SSP07);
+           std::size_t min_surface = 1, const std::vector<double>& radii = {}) {
+  const std::string m = Method::name;
+  Params p = make_params(r, cell,
+                         m == "zb05"   ? NBMC_METHOD_ZB05
+                         : m == "sph"  ? NBMC_METHOD_SPH
+                         : m == "yt10" ? NBMC_METHOD_YT10
+                                       : NBMC_METHOD_SSP07);
+  if (Method::radii) {
+    ASSERT_EQ(radii.size(), xyz.size() / 3);
+    scale_for_radii(p, *std::min_element(radii.begin(), radii.end()), *std::max_element(radii.begin(), radii.end()));
+    ASSERT_GT(p.radius_ref, 0);
+  }
   for (int backend = 0; backend < 2; ++backend) {
-    const Outcome o = backend == 0 ? run<Method>(Kokkos::Serial(), xyz, p, dense)
+    const Outcome o = backend == 0 ? run<Method>(Kokkos::Serial(), xyz, p, dense, radii)
 #if defined(KOKKOS_ENABLE_OPENMP)
-                                   : run<Method>(Kokkos::OpenMP(), xyz, p, dense);
+                                   : run<Method>(Kokkos::OpenMP(), xyz, p, dense, radii);
 #else
-                                   : run<Method>(Kokkos::Serial(), xyz, p, dense);
+                                   : run<Method>(Kokkos::Serial(), xyz, p, dense, radii);
 #endif
-    const std::string what = std::string(name) + " (" + Method::name + ", cell " + std::to_string(cell) + "r, " +
-                             (backend == 0 ? "Serial" : "OpenMP") + ")";
+    const std::string what = std::string(name) + " (" + Method::name + (Method::radii ? " with radii" : "") +
+                             ", cell " + std::to_string(cell) + "r, " + (backend == 0 ? "Serial" : "OpenMP") + ")";
     ASSERT_GT(o.band_vertices, 0u) << what;
     EXPECT_GE(o.surface, min_surface) << what;
     EXPECT_EQ(o.flag_mismatches, 0u) << what << ": surface flags differ from the serial reference";
@@ -459,4 +496,49 @@ TEST(FieldOrder, RealFrame) {
   check<FieldSSP07>("cbd46k", p, 0.0156, 1.0, false, 1000);
   check<FieldSPH>("cbd46k", p, 0.0156, 1.0, false, 1000);
   check<FieldYT10>("cbd46k", p, 0.0156, 1.0, false, 1000);
+}
+
+namespace {
+
+// Radii between lo * r and r, drawn per particle.
+std::vector<double> random_radii(const Points& p, double r, double lo, unsigned seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(lo * r, r);
+  std::vector<double> out(p.size() / 3);
+  for (double& v : out) v = u(rng);
+  return out;
+}
+
+template <bool Radii>
+void check_all(const char* name, const Points& p, double cell, const std::vector<double>& radii, bool dense = false) {
+  check<FieldSSP07T<Radii>>(name, p, kR, cell, dense, 1, radii);
+  check<FieldZB05T<Radii>>(name, p, kR, cell, dense, 1, radii);
+  check<FieldSPHT<Radii>>(name, p, kR, cell, dense, 1, radii);
+}
+
+}  // namespace
+
+// Per-particle radii (each particle's own kernel support, rbar from the
+// radii, the surface test and the band scaled per particle): the host tile
+// path sums in the GPU's per-vertex order too.
+TEST(FieldOrder, RadiiRandomCloud) {
+  const Points p = random_cloud(kR, 6000, 2);
+  for (double cell : {1.0, 0.5}) check_all<true>("random cloud, radii 0.3r..r", p, cell, random_radii(p, kR, 0.3, 4));
+}
+
+TEST(FieldOrder, RadiiTwoResolutions) {
+  // A ball of spacing r next to one of spacing r/4, each with its own radius.
+  Points p = jittered_ball(0, 0, 0, 0.4, kR, 0.25, 3);
+  const std::size_t coarse = p.size() / 3;
+  const Points fine = jittered_ball(0.6, 0, 0, 0.1, kR / 4, 0.25, 5);
+  p.insert(p.end(), fine.begin(), fine.end());
+  std::vector<double> radii(p.size() / 3, kR / 4);
+  std::fill(radii.begin(), radii.begin() + std::ptrdiff_t(coarse), kR);
+  check_all<true>("two resolutions", p, 0.5, radii);
+  check_all<true>("two resolutions, dense", p, 1.0, radii, true);
+}
+
+TEST(FieldOrder, RadiiCoarseCells) {
+  const Points p = jittered_ball(0, 0, 0, 0.6, kR, 0.25, 9);
+  check_all<true>("coarse cells, radii", p, 6.0, random_radii(p, kR, 0.5, 6));
 }

@@ -126,6 +126,29 @@ bool interpolate_attributes(const ExecSpace& space, MemoryTracker& tracker, cons
   }
 
   trace("attributes: values sorted", n * width);
+  // Per-particle supports (radii): 1 / (R scale_j)^2 in the sorted order.
+  Buffer<double, MemSpace> inv_support2;
+  if (job.scale) {
+    inv_support2 = Buffer<double, MemSpace>(tracker, "attributes::inv_support2", n);
+    Buffer<double, MemSpace> raw;
+    Kokkos::View<const double*, MemSpace> src;
+    if constexpr (host_memory) {
+      src = Kokkos::View<const double*, MemSpace, Unmanaged>(job.scale, n);
+    } else {
+      raw = Buffer<double, MemSpace>(tracker, "attributes::scale_upload", n);
+      Kokkos::deep_copy(space, raw.view(), Kokkos::View<const double*, Kokkos::HostSpace, Unmanaged>(job.scale, n));
+      src = raw.view();
+    }
+    const auto dst = inv_support2.view();
+    const auto perm = nb.perm.view();
+    const double inv_r2 = 1.0 / (job.radius * job.radius);
+    Kokkos::parallel_for(
+        "nbmc::attributes::sort_supports", Range(space, 0, n), KOKKOS_LAMBDA(const std::size_t j) {
+          const double sc = src(perm(j));
+          dst(j) = inv_r2 / (sc * sc);
+        });
+    space.fence();
+  }
   // The vertices, relative to the grid origin (double), then the sums.
   Buffer<double, MemSpace> verts(tracker, "attributes::vertices", 3 * nv);
   {
@@ -147,6 +170,8 @@ bool interpolate_attributes(const ExecSpace& space, MemoryTracker& tracker, cons
     const auto val = sorted.view();
     const auto res = out.view();
     const auto emp = empty.view();
+    const auto inv_sup = inv_support2.view();
+    const bool per_particle = job.scale != nullptr;
     const double inv_s = 1.0 / g.nb_cell, inv_r2 = 1.0 / (job.radius * job.radius);
     const std::int64_t nd0 = g.nb_dims[0], nd1 = g.nb_dims[1], nd2 = g.nb_dims[2];
     const std::size_t np = n;
@@ -178,7 +203,7 @@ bool interpolate_attributes(const ExecSpace& space, MemoryTracker& tracker, cons
                   for (std::uint32_t j = b; j < e; ++j) {
                     const double d0 = x - double(nbv.pos(j)), d1 = y - double(nbv.pos(np + j)),
                                  d2 = z - double(nbv.pos(2 * np + j));
-                    const double s2 = (d0 * d0 + d1 * d1 + d2 * d2) * inv_r2;
+                    const double s2 = (d0 * d0 + d1 * d1 + d2 * d2) * (per_particle ? inv_sup(j) : inv_r2);
                     if (s2 >= 1.0) continue;
                     const double t = 1.0 - s2;
                     const double w = t * t * t;

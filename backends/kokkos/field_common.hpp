@@ -6,18 +6,29 @@
 // A method is a type with
 //   static constexpr int N;                       // accumulator size (floats, zero-initialised)
 //   static constexpr int P;                       // floats of per-particle data it reads (below)
-//   static void add(float* a, dx, dy, dz, k, pd)  // contribution of one particle, d = x_j - x,
-//                                                 // k = max(0, 1 - |d|^2/R^2) (0: no contribution),
-//                                                 // pd = particle j's P floats (nullptr if P = 0)
-//   static uint32_t accumulate(a, X, Y, Z, PD, b, e, x0, x1, x2, inv_R2)
+//   static constexpr bool radii;                  // per-particle kernel support (below)
+//   static void add(float* a, dx, dy, dz, k, pd, q) // contribution of one particle, d = x_j - x,
+//                                                 // k = max(0, 1 - |d|^2/R_j^2) (0: no contribution),
+//                                                 // pd = particle j's P floats (nullptr if P = 0),
+//                                                 // q = 1/R_j^2 (radii methods; else 1, unused)
+//   static uint32_t accumulate(a, X, Y, Z, PD, Q, b, e, x0, x1, x2, inv_R2)
 //                                                 // the same for particles [b, e), in order
-//                                                 // (PD: the data, P floats per particle, nullptr if P = 0)
+//                                                 // (PD: the data, P floats per particle, nullptr if P = 0;
+//                                                 // Q: the 1/R_j^2, nullptr if not radii)
 //   static float value(const float* a, const FieldConstants&)  // phi(x); negative inside
 // so the gather (narrow band, dense) and the scatter drivers are written once.
 // A method's per-particle data come from a pass over the particles before the
 // field (NeighbourView::pdata, P floats per particle in the sorted order; SPH:
 // a weight, field_sph.hpp; YT10: a kernel, field_yt10.hpp); a particle that
 // contributes nothing (k = 0) must add exactly +0 whatever its data.
+//
+// Per-particle radii (nbmc_context_set_radii_*, radii.hpp): each method has
+// a variant (radii = true) in which particle j has its own kernel support
+// R_j = R t_j, t_j = r_j / r_max <= 1, R the frame's influence radius (that
+// of the largest particle): k_j = max(0, 1 - |d|^2 q_j), q_j = 1/R_j^2
+// (NeighbourView::support, q_j >= 1/R^2 as floats, so every pruning by R
+// stays exact). Without radii the variant is not instantiated and the
+// uniform code is what it always was.
 //
 // Summation order: every backend adds a vertex's contributions one at a time,
 // in the order of eval_vertex_direct (cells in z, y, x order, particles in
@@ -95,6 +106,20 @@ inline bool host_any_of(M m) {
 #pragma GCC diagnostic pop
 #endif
 #endif
+
+// 1/R_j^2 of particle j in accumulate(): its own (Q[j]) for the radii
+// variants, the frame's inv_R2 otherwise.
+template <bool Radii>
+KOKKOS_INLINE_FUNCTION float inv_support2(const float* Q, std::uint32_t j, float inv_R2) {
+  if constexpr (Radii) {
+    (void)inv_R2;
+    return Q[j];
+  } else {
+    (void)Q;
+    (void)j;
+    return inv_R2;
+  }
+}
 
 struct FieldConstants {
   float R = 0;           // influence radius

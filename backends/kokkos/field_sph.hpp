@@ -13,6 +13,13 @@
 // The particles' 1 / D_j are their weights (NeighbourView::pdata), computed
 // before the field by compute_sph_weights (sph_density.hpp) with the same
 // kernel and the same summation order as a vertex's field value.
+//
+// Per-particle radii (Radii = true, field_common.hpp): particle j's smoothing
+// length is h_j = R_j = R t_j. With masses m_j ~ r_j^3 (the particles' own
+// volumes) and W(., h_j) = sigma_j W~, sigma_j ~ 1 / h_j^3, the masses and the
+// sigmas cancel again: rho(x) = sum_j W~(|x - x_j| / h_j) / D_j with
+// D_j = sum_k W~(|x_j - x_k| / h_k) -- the same sums with each particle's own
+// support.
 #pragma once
 
 #include "field_common.hpp"
@@ -108,27 +115,32 @@ inline HostVecF sph_kernel(HostVecF k) { return sph_kernel_lanes(k); }
 inline HostSimd<8>::F sph_kernel(HostSimd<8>::F k) { return sph_kernel_lanes(k); }
 #endif
 
-struct FieldSPH {
+template <bool Radii>
+struct FieldSPHT {
   static constexpr const char* name = "sph";
   static constexpr int P = 1;  // the weight 1 / D_j
+  static constexpr bool radii = Radii;
   // a[0] = sum_j W~_j / D_j
   static constexpr int N = 1;
   // T is float, or a host SIMD vector of floats (same formula, lane-wise).
   template <class T>
-  KOKKOS_INLINE_FUNCTION static void add(T* a, T /*dx*/, T /*dy*/, T /*dz*/, T k, const float* w) {
+  KOKKOS_INLINE_FUNCTION static void add(T* a, T /*dx*/, T /*dy*/, T /*dz*/, T k, const float* w,
+                                         T /*q: in k already*/) {
     a[0] += sph_kernel(k) * lanes_of<T>(w[0]);
   }
   // Adds particles [b, e) (SoA coordinates, weights W) at vertex x, one after
   // the other (see field_common.hpp); returns how many contribute. Same
   // operations as add().
   KOKKOS_INLINE_FUNCTION static std::uint32_t accumulate(float* a, const float* X, const float* Y, const float* Z,
-                                                         const float* W, std::uint32_t b, std::uint32_t e, float x0,
-                                                         float x1, float x2, float inv_R2) {
+                                                         const float* W, const float* Q, std::uint32_t b,
+                                                         std::uint32_t e, float x0, float x1, float x2,
+                                                         float inv_R2) {
     float a0 = a[0];
     std::uint32_t count = 0;
     for (std::uint32_t j = b; j < e; ++j) {
       const float dx = X[j] - x0, dy = Y[j] - x1, dz = Z[j] - x2;
-      const float s2 = (dx * dx + dy * dy + dz * dz) * inv_R2;
+      const float q = inv_support2<Radii>(Q, j, inv_R2);
+      const float s2 = (dx * dx + dy * dy + dz * dz) * q;
       const float k = s2 < 1.f ? 1.f - s2 : 0.f;
       count += s2 < 1.f ? 1u : 0u;
       a0 += sph_kernel(k) * W[j];
@@ -140,25 +152,30 @@ struct FieldSPH {
     return c.iso_threshold - a[0];
   }
 };
+using FieldSPH = FieldSPHT<false>;
 
 // D_j of one particle: the same sum with unit weights (not a field method
 // of its own; compute_sph_weights evaluates it at every particle).
-struct SphDensity {
+template <bool Radii>
+struct SphDensityT {
   static constexpr const char* name = "sph-density";
   static constexpr int P = 0;
+  static constexpr bool radii = Radii;
   static constexpr int N = 1;
   template <class T>
-  KOKKOS_INLINE_FUNCTION static void add(T* a, T, T, T, T k, const float*) {
+  KOKKOS_INLINE_FUNCTION static void add(T* a, T, T, T, T k, const float*, T) {
     a[0] += sph_kernel(k);
   }
   KOKKOS_INLINE_FUNCTION static std::uint32_t accumulate(float* a, const float* X, const float* Y, const float* Z,
-                                                         const float*, std::uint32_t b, std::uint32_t e, float x0,
-                                                         float x1, float x2, float inv_R2) {
+                                                         const float*, const float* Q, std::uint32_t b,
+                                                         std::uint32_t e, float x0, float x1, float x2,
+                                                         float inv_R2) {
     float a0 = a[0];
     std::uint32_t count = 0;
     for (std::uint32_t j = b; j < e; ++j) {
       const float dx = X[j] - x0, dy = Y[j] - x1, dz = Z[j] - x2;
-      const float s2 = (dx * dx + dy * dy + dz * dz) * inv_R2;
+      const float q = inv_support2<Radii>(Q, j, inv_R2);
+      const float s2 = (dx * dx + dy * dy + dz * dz) * q;
       const float k = s2 < 1.f ? 1.f - s2 : 0.f;
       count += s2 < 1.f ? 1u : 0u;
       a0 += sph_kernel(k);
@@ -168,6 +185,7 @@ struct SphDensity {
   }
   KOKKOS_INLINE_FUNCTION static float value(const float* a, const FieldConstants&) { return a[0]; }
 };
+using SphDensity = SphDensityT<false>;
 
 }  // namespace Details
 }  // namespace nbmc

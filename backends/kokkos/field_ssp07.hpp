@@ -34,21 +34,35 @@ KOKKOS_INLINE_FUNCTION float largest_eigenvalue_sym3(float a, float b, float c, 
   return q + 2.f * p * Kokkos::Experimental::cos(phi);
 }
 
-struct FieldSSP07 {
+// Radii = true: per-particle support R_j and radius r_j (field_common.hpp):
+// the gradient terms carry each particle's own 1/R_j^2 (grad k_j =
+// 6 k_j^2 d_j / R_j^2), and rbar = sum w_j r_j / sum w_j, eq. (1)'s weighted
+// average radius, with w_j = k_j^3 the weights of xbar (NeighbourView::weight
+// holds r_j = iso_radius t_j).
+template <bool Radii>
+struct FieldSSP07T {
   static constexpr const char* name = "ssp07";
   // a[0] = W = sum k^3, a[1..3] = sum k^3 d, a[4..6] = sum k^2 d (grad k without 6/R^2),
-  // a[7..15] = sum d_a k^2 d_b (row-major)
-  static constexpr int P = 0;
-  static constexpr int N = 16;
+  // a[7..15] = sum d_a k^2 d_b (row-major); radii: a[4..15] times q_j, a[16] = sum k^3 r_j
+  static constexpr int P = Radii ? 1 : 0;  // radii: the particle's radius r_j
+  static constexpr bool radii = Radii;
+  static constexpr int N = Radii ? 17 : 16;
   // T is float, or a host SIMD vector of floats (same formula, lane-wise).
   template <class T>
-  KOKKOS_INLINE_FUNCTION static void add(T* a, T dx, T dy, T dz, T k, const float* /*no particle data*/) {
-    const T k2 = k * k;
+  KOKKOS_INLINE_FUNCTION static void add(T* a, T dx, T dy, T dz, T k, const float* pd, T q) {
+    T k2 = k * k;
     const T w = k2 * k;
     a[0] += w;
     a[1] += w * dx;
     a[2] += w * dy;
     a[3] += w * dz;
+    if constexpr (Radii) {
+      a[16] += w * lanes_of<T>(pd[0]);
+      k2 = k2 * q;
+    } else {
+      (void)pd;
+      (void)q;
+    }
     const T gx = k2 * dx, gy = k2 * dy, gz = k2 * dz;
     a[4] += gx;
     a[5] += gy;
@@ -61,23 +75,30 @@ struct FieldSSP07 {
   // order of the sums is part of the result: see field_common.hpp); returns how
   // many contribute. Same operations as add().
   KOKKOS_INLINE_FUNCTION static std::uint32_t accumulate(float* a, const float* X, const float* Y, const float* Z,
-                                                         const float* /*no particle data*/, std::uint32_t b,
+                                                         const float* Rj, const float* Q, std::uint32_t b,
                                                          std::uint32_t e, float x0, float x1, float x2,
                                                          float inv_R2) {
     float w0 = a[0], d0 = a[1], d1 = a[2], d2 = a[3], g0 = a[4], g1 = a[5], g2 = a[6];
     float m00 = a[7], m01 = a[8], m02 = a[9], m10 = a[10], m11 = a[11], m12 = a[12], m20 = a[13], m21 = a[14],
           m22 = a[15];
+    float rs = Radii ? a[N - 1] : 0.f;
     std::uint32_t count = 0;
     for (std::uint32_t j = b; j < e; ++j) {
       const float dx = X[j] - x0, dy = Y[j] - x1, dz = Z[j] - x2;
-      const float s2 = (dx * dx + dy * dy + dz * dz) * inv_R2;
+      const float q = inv_support2<Radii>(Q, j, inv_R2);
+      const float s2 = (dx * dx + dy * dy + dz * dz) * q;
       const float k = s2 < 1.f ? 1.f - s2 : 0.f;
       count += s2 < 1.f ? 1u : 0u;
-      const float k2 = k * k, w = k2 * k;
+      float k2 = k * k;
+      const float w = k2 * k;
       w0 += w;
       d0 += w * dx;
       d1 += w * dy;
       d2 += w * dz;
+      if constexpr (Radii) {
+        rs += w * Rj[j];
+        k2 = k2 * q;
+      }
       const float gx = k2 * dx, gy = k2 * dy, gz = k2 * dz;
       g0 += gx;
       g1 += gy;
@@ -88,11 +109,14 @@ struct FieldSSP07 {
     }
     a[0] = w0; a[1] = d0; a[2] = d1; a[3] = d2; a[4] = g0; a[5] = g1; a[6] = g2;
     a[7] = m00; a[8] = m01; a[9] = m02; a[10] = m10; a[11] = m11; a[12] = m12; a[13] = m20; a[14] = m21; a[15] = m22;
+    if constexpr (Radii) a[N - 1] = rs;
+    (void)Rj;
     return count;
   }
   KOKKOS_INLINE_FUNCTION static float eigenvalue(const float* a, const FieldConstants& c) {
     const float inv = 1.f / a[0];
-    const float s = 6.f * c.inv_R2 * inv;
+    // With radii the sums carry their 1/R_j^2 already.
+    const float s = Radii ? 6.f * inv : 6.f * c.inv_R2 * inv;
     const float db[3] = {a[1] * inv, a[2] * inv, a[3] * inv};
     const float g[3] = {a[4], a[5], a[6]};
     float J[9];
@@ -112,9 +136,11 @@ struct FieldSSP07 {
       g = g < 0.f ? 0.f : (g > 1.f ? 1.f : g);
       f = g * g * g - 3.f * g * g + 3.f * g;
     }
-    return Kokkos::Experimental::sqrt(x * x + y * y + z * z) - c.iso_radius * f;
+    const float rbar = Radii ? a[N - 1] * inv : c.iso_radius;
+    return Kokkos::Experimental::sqrt(x * x + y * y + z * z) - rbar * f;
   }
 };
+using FieldSSP07 = FieldSSP07T<false>;
 
 }  // namespace Details
 }  // namespace nbmc

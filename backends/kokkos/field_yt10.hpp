@@ -90,12 +90,13 @@ inline bool yt10_within(V dx, V dy, V dz, float reach2) {
 struct FieldYT10 {
   static constexpr const char* name = "yt10";
   static constexpr int P = kYt10Floats;
+  static constexpr bool radii = false;  // no radii variant (refused, params.hpp)
   // a[0] = sum_j det(h G_j) W~(|G_j e_j|) / D_j
   static constexpr int N = 1;
   // T is float, or a host SIMD vector of floats (same formula, lane-wise).
   // d = x_j - x; e = d + (xbar_j - x_j) = xbar_j - x (|G e| = |G (x - xbar_j)|).
   template <class T>
-  KOKKOS_INLINE_FUNCTION static void add(T* a, T dx, T dy, T dz, T k, const float* pd) {
+  KOKKOS_INLINE_FUNCTION static void add(T* a, T dx, T dy, T dz, T k, const float* pd, T /*q: uniform*/) {
     if (!yt10_within(dx, dy, dz, pd[10])) return;  // exactly 0 in every lane
     const T ex = dx + lanes_of<T>(pd[0]), ey = dy + lanes_of<T>(pd[1]), ez = dz + lanes_of<T>(pd[2]);
     const T g00 = lanes_of<T>(pd[3]), g01 = lanes_of<T>(pd[4]), g02 = lanes_of<T>(pd[5]);
@@ -110,8 +111,8 @@ struct FieldYT10 {
   // the other (see field_common.hpp); returns how many lie within R. The
   // operations of add(), which it calls.
   KOKKOS_INLINE_FUNCTION static std::uint32_t accumulate(float* a, const float* X, const float* Y, const float* Z,
-                                                         const float* PD, std::uint32_t b, std::uint32_t e, float x0,
-                                                         float x1, float x2, float inv_R2) {
+                                                         const float* PD, const float* /*Q: uniform*/, std::uint32_t b,
+                                                         std::uint32_t e, float x0, float x1, float x2, float inv_R2) {
     float acc[1] = {a[0]};
     std::uint32_t count = 0;
     for (std::uint32_t j = b; j < e; ++j) {
@@ -119,7 +120,7 @@ struct FieldYT10 {
       const float s2 = (dx * dx + dy * dy + dz * dz) * inv_R2;
       const float k = s2 < 1.f ? 1.f - s2 : 0.f;
       count += s2 < 1.f ? 1u : 0u;
-      add(acc, dx, dy, dz, k, PD + std::size_t(kYt10Floats) * j);
+      add(acc, dx, dy, dz, k, PD + std::size_t(kYt10Floats) * j, 1.f);
     }
     a[0] = acc[0];
     return count;
@@ -137,13 +138,15 @@ struct FieldYT10 {
 struct Yt10Moments {
   static constexpr const char* name = "yt10-moments";
   static constexpr int P = 0;
+  static constexpr bool radii = false;
   static constexpr int N = 11;
   // T is float, or a host SIMD vector of floats (the host's pass runs
   // across particles, like the band tiles across vertices). Everything from
   // k: s^2 = 1 - k, which is 1 where the particle does not contribute, and
   // then w = 1 - 1 * 1 and the density term are exactly 0.
   template <class T>
-  KOKKOS_INLINE_FUNCTION static void add(T* a, T dx, T dy, T dz, T k, const float* /*no particle data*/) {
+  KOKKOS_INLINE_FUNCTION static void add(T* a, T dx, T dy, T dz, T k, const float* /*no particle data*/,
+                                         T /*q: uniform*/) {
     const T one = lanes_of<T>(1.f), two = lanes_of<T>(2.f);
     const T s2 = one - k;
     const T s = sqrt_lanes(s2);
@@ -160,8 +163,8 @@ struct Yt10Moments {
   }
   // The same for particles [b, e), one after the other (add's operations).
   KOKKOS_INLINE_FUNCTION static std::uint32_t accumulate(float* a, const float* X, const float* Y, const float* Z,
-                                                         const float*, std::uint32_t b, std::uint32_t e, float x0,
-                                                         float x1, float x2, float inv_R2) {
+                                                         const float*, const float*, std::uint32_t b, std::uint32_t e,
+                                                         float x0, float x1, float x2, float inv_R2) {
     float acc[N];
     for (int q = 0; q < N; ++q) acc[q] = a[q];
     std::uint32_t count = 0;
@@ -170,7 +173,7 @@ struct Yt10Moments {
       const float s2 = (dx * dx + dy * dy + dz * dz) * inv_R2;
       const float k = s2 < 1.f ? 1.f - s2 : 0.f;
       count += s2 < 1.f ? 1u : 0u;
-      add(acc, dx, dy, dz, k, nullptr);
+      add(acc, dx, dy, dz, k, nullptr, 1.f);
     }
     for (int q = 0; q < N; ++q) a[q] = acc[q];
     return count;

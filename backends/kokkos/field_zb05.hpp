@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: MIT
 // Zhu & Bridson 2005: phi(x) = |x - xbar| - rbar, xbar the kernel-weighted mean
-// of the neighbours (eq. 4 with the kernel of eq. 5), rbar the particle radius
-// (uniform here: iso_radius).
+// of the neighbours (eq. 4 with the kernel of eq. 5), rbar the particle radius:
+// iso_radius, or with per-particle radii (Radii = true, field_common.hpp) the
+// mean of the particles' radii r_j with the weights of xbar, as ZB05 define it.
 #pragma once
 
 #include "field_common.hpp"
@@ -11,32 +12,38 @@
 namespace nbmc {
 namespace Details {
 
-struct FieldZB05 {
+template <bool Radii>
+struct FieldZB05T {
   static constexpr const char* name = "zb05";
-  // a[0] = sum k^3, a[1..3] = sum k^3 d
-  static constexpr int P = 0;
-  static constexpr int N = 4;
+  // a[0] = sum k^3, a[1..3] = sum k^3 d; radii: a[4] = sum k^3 r_j
+  static constexpr int P = Radii ? 1 : 0;  // radii: the particle's radius r_j
+  static constexpr bool radii = Radii;
+  static constexpr int N = Radii ? 5 : 4;
   // T is float, or a host SIMD vector of floats (same formula, lane-wise).
   template <class T>
-  KOKKOS_INLINE_FUNCTION static void add(T* a, T dx, T dy, T dz, T k, const float* /*no particle data*/) {
+  KOKKOS_INLINE_FUNCTION static void add(T* a, T dx, T dy, T dz, T k, const float* pd, T /*q: in k already*/) {
     const T w = k * k * k;
     a[0] += w;
     a[1] += w * dx;
     a[2] += w * dy;
     a[3] += w * dz;
+    if constexpr (Radii) a[4] += w * lanes_of<T>(pd[0]);
+    else (void)pd;
   }
   // Adds particles [b, e) (SoA coordinates) at vertex x, one after the other (the
   // order of the sums is part of the result: see field_common.hpp); returns how
   // many contribute. Same operations as add().
   KOKKOS_INLINE_FUNCTION static std::uint32_t accumulate(float* a, const float* X, const float* Y, const float* Z,
-                                                         const float* /*no particle data*/, std::uint32_t b,
+                                                         const float* Rj, const float* Q, std::uint32_t b,
                                                          std::uint32_t e, float x0, float x1, float x2,
                                                          float inv_R2) {
     float a0 = a[0], a1 = a[1], a2 = a[2], a3 = a[3];
+    float rs = Radii ? a[N - 1] : 0.f;
     std::uint32_t count = 0;
     for (std::uint32_t j = b; j < e; ++j) {
       const float dx = X[j] - x0, dy = Y[j] - x1, dz = Z[j] - x2;
-      const float s2 = (dx * dx + dy * dy + dz * dz) * inv_R2;
+      const float q = inv_support2<Radii>(Q, j, inv_R2);
+      const float s2 = (dx * dx + dy * dy + dz * dz) * q;
       const float k = s2 < 1.f ? 1.f - s2 : 0.f;
       count += s2 < 1.f ? 1u : 0u;
       const float w = k * k * k;
@@ -44,17 +51,22 @@ struct FieldZB05 {
       a1 += w * dx;
       a2 += w * dy;
       a3 += w * dz;
+      if constexpr (Radii) rs += w * Rj[j];
     }
     a[0] = a0; a[1] = a1; a[2] = a2; a[3] = a3;
+    if constexpr (Radii) a[N - 1] = rs;
+    (void)Rj;
     return count;
   }
   KOKKOS_INLINE_FUNCTION static float value(const float* a, const FieldConstants& c) {
     if (!(a[0] > 0)) return c.outside;
     const float inv = 1.f / a[0];
     const float x = a[1] * inv, y = a[2] * inv, z = a[3] * inv;
-    return Kokkos::Experimental::sqrt(x * x + y * y + z * z) - c.iso_radius;
+    const float rbar = Radii ? a[N - 1] * inv : c.iso_radius;
+    return Kokkos::Experimental::sqrt(x * x + y * y + z * z) - rbar;
   }
 };
+using FieldZB05 = FieldZB05T<false>;
 
 }  // namespace Details
 }  // namespace nbmc

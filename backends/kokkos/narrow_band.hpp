@@ -239,15 +239,20 @@ void collect_sorted_keys(const ExecSpace& space, MemoryTracker& tracker,
 }
 
 // Narrow band around the surface particles (flags(i) != 0, sorted order).
+// With per-particle radii (scale: t_i, sorted order; empty without), particle
+// i's box is band_width * t_i wide.
 template <class ExecSpace>
 void build_narrow_band(const ExecSpace& space, MemoryTracker& tracker, const Grid& g, const Params& p,
                        const Kokkos::View<const float*, typename ExecSpace::memory_space>& pos,
                        const Kokkos::View<const std::uint8_t*, typename ExecSpace::memory_space>& flags,
-                       std::size_t n, Band<typename ExecSpace::memory_space>& band) {
+                       std::size_t n, Band<typename ExecSpace::memory_space>& band,
+                       const Kokkos::View<const float*, typename ExecSpace::memory_space>& scale = {}) {
   using MemSpace = typename ExecSpace::memory_space;
   ScopedRegion region("nbmc::narrow_band");
   const float inv_c = float(1.0 / g.cell);
   const float bw = float(p.band_width);
+  const double bw_abs = p.band_width;
+  const bool scaled = scale.extent(0) > 0;
   // The grid, or a subdomain's vertex box (band.clip_*, set by the caller).
   const std::int64_t d0 = std::min(g.dims[0] - 1, band.clip_hi[0]), d1 = std::min(g.dims[1] - 1, band.clip_hi[1]),
                      d2 = std::min(g.dims[2] - 1, band.clip_hi[2]);
@@ -256,10 +261,11 @@ void build_narrow_band(const ExecSpace& space, MemoryTracker& tracker, const Gri
   // Vertex box of particle i, clamped to the grid; false if empty.
   auto box = KOKKOS_LAMBDA(std::size_t i, std::int64_t lo[3], std::int64_t hi[3])->bool {
     const std::int64_t dmax[3] = {d0, d1, d2}, dmin[3] = {m0, m1, m2};
+    const float bwi = scaled ? float(bw_abs * double(scale(i))) : bw;
     for (int a = 0; a < 3; ++a) {
       const float x = pos(std::size_t(a) * n + i);
-      lo[a] = std::int64_t(Kokkos::Experimental::ceil((x - bw) * inv_c));
-      hi[a] = std::int64_t(Kokkos::Experimental::floor((x + bw) * inv_c));
+      lo[a] = std::int64_t(Kokkos::Experimental::ceil((x - bwi) * inv_c));
+      hi[a] = std::int64_t(Kokkos::Experimental::floor((x + bwi) * inv_c));
       if (lo[a] < dmin[a]) lo[a] = dmin[a];
       if (hi[a] > dmax[a]) hi[a] = dmax[a];
       if (lo[a] > hi[a]) return false;

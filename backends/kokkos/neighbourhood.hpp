@@ -29,9 +29,13 @@ struct Neighbourhood {
   Buffer<std::uint32_t, MemSpace> cell_start;  // n_cells + 1
   HashMapStorage<MemSpace> cells;              // Morton key -> cell index
   // Per-particle data of a field method with a pass over the particles (P
-  // floats per particle, sorted order: SPH's weight, YT10's kernel); empty
+  // floats per particle, sorted order: SPH's weight, YT10's kernel; with
+  // per-particle radii, SSP07's and ZB05's radius r_j, radii.hpp); empty
   // for the others.
   Buffer<float, MemSpace> pdata;
+  // Per-particle radii (radii.hpp), sorted order; empty without them.
+  Buffer<float, MemSpace> scale;    // t_j = r_j / r_max, in (0, 1]
+  Buffer<float, MemSpace> support;  // 1 / R_j^2, R_j = R t_j
 };
 
 // Read-only device view of a neighbourhood for kernels.
@@ -46,6 +50,9 @@ struct NeighbourView {
   // Per-particle data of the field method (Neighbourhood::pdata): particle
   // j's P floats at pdata(P j), ..., pdata(P j + P - 1); empty if P = 0.
   Kokkos::View<const float*, MemSpace> pdata;
+  // Per-particle radii (radii.hpp; sorted order, empty without them): the
+  // radius relative to the largest, t_j, and the kernel's 1 / R_j^2.
+  Kokkos::View<const float*, MemSpace> scale, support;
 
   // Range of particles of neighbour cell (x, y, z); empty if unoccupied.
   KOKKOS_INLINE_FUNCTION bool cell_range(std::int64_t x, std::int64_t y, std::int64_t z, std::uint32_t& b,
@@ -68,6 +75,8 @@ NeighbourView<MemSpace> view_of(const Neighbourhood<MemSpace>& nb, const Grid& g
   for (int a = 0; a < 3; ++a) v.nb_dims[a] = g.nb_dims[a];
   v.inv_nb_cell = float(1.0 / g.nb_cell);
   v.pdata = nb.pdata.view();
+  v.scale = nb.scale.view();
+  v.support = nb.support.view();
   return v;
 }
 
@@ -80,7 +89,10 @@ struct SortRecord {
 // The order of the handlers: cell key, then x, y, z, then the uploaded index
 // (a strict total order, so the sorted sequence and every sum over it are the
 // same for any input order and any sort algorithm; the device sort in
-// build_neighbourhood_device gives exactly this order too).
+// build_neighbourhood_device gives exactly this order too). With per-particle
+// radii, particles at the same position are ordered by their radius before
+// their index (order_by_radius), so that their sums, which read the radii,
+// do not depend on the input order either.
 inline bool operator<(const SortRecord& a, const SortRecord& b) {
   if (a.key != b.key) return a.key < b.key;
   if (a.x != b.x) return a.x < b.x;
@@ -113,12 +125,29 @@ void insert_cells(const ExecSpace& space, MemoryTracker& tracker, Neighbourhood<
   space.fence();
 }
 
+// Per-particle radii (host, uploaded order): the runs of handlers at one
+// position (same cell, same x, y, z) sorted by radius, then index. Such runs
+// are rare (duplicates), so this is one pass over the sorted handlers.
+inline void order_by_radius(SortRecord* r, std::size_t n, const double* radii) {
+  for (std::size_t i = 0; i < n;) {
+    std::size_t j = i + 1;
+    while (j < n && r[j].key == r[i].key && r[j].x == r[i].x && r[j].y == r[i].y && r[j].z == r[i].z) ++j;
+    if (j - i > 1)
+      std::sort(r + i, r + j, [radii](const SortRecord& a, const SortRecord& b) {
+        const double ra = radii[a.index], rb = radii[b.index];
+        return ra != rb ? ra < rb : a.index < b.index;
+      });
+    i = j;
+  }
+}
+
 // Builds the neighbourhood from host positions (absolute, double, 3 per particle).
-// `keep` (may be empty) selects the particles to use.
+// `keep` (may be empty) selects the particles to use; `radii` (null without
+// per-particle radii) are the uploaded particles' radii.
 template <class ExecSpace>
 void build_neighbourhood(const ExecSpace& space, MemoryTracker& tracker, const double* xyz, std::size_t count,
                          const std::vector<std::uint32_t>& keep, const Grid& g,
-                         Neighbourhood<typename ExecSpace::memory_space>& out) {
+                         Neighbourhood<typename ExecSpace::memory_space>& out, const double* radii = nullptr) {
   using MemSpace = typename ExecSpace::memory_space;
   ScopedRegion region("nbmc::neighbourhood");
   const std::size_t n = keep.empty() ? count : keep.size();
@@ -163,6 +192,7 @@ void build_neighbourhood(const ExecSpace& space, MemoryTracker& tracker, const d
 #else
   std::sort(r, r + n);
 #endif
+  if (radii) order_by_radius(r, n, radii);
 
   // Cells: start indices of each run of equal keys.
   std::vector<std::uint32_t> starts;
@@ -213,16 +243,29 @@ KOKKOS_INLINE_FUNCTION std::uint64_t float_order_bits(float f) {
   return (b.u & 0x80000000u) ? std::uint64_t(~b.u) : std::uint64_t(b.u | 0x80000000u);
 }
 
+// The bits of a positive double, which sort in its order.
+KOKKOS_INLINE_FUNCTION std::uint64_t positive_double_bits(double d) {
+  union {
+    double d;
+    std::uint64_t u;
+  } b;
+  b.d = d;
+  return b.u;
+}
+
 // The same neighbourhood, built on the device from device positions (absolute,
 // double, 3 per particle; `keep`, if not empty, selects the particles, in
 // increasing order). The handlers are sorted by four stable radix sorts, least
 // significant criterion first (z, y, x, then the cell key), which gives
-// exactly the host's order: key, x, y, z, then index.
+// exactly the host's order: key, x, y, z, then index. With per-particle radii
+// (`radii`, device memory, uploaded order; empty without), a first pass by
+// radius gives the host's order_by_radius too.
 template <class ExecSpace>
 void build_neighbourhood_device(const ExecSpace& space, MemoryTracker& tracker,
                                 const Kokkos::View<const double*, typename ExecSpace::memory_space>& xyz,
                                 const Kokkos::View<const std::uint32_t*, typename ExecSpace::memory_space>& keep,
-                                std::size_t n, const Grid& g, Neighbourhood<typename ExecSpace::memory_space>& out) {
+                                std::size_t n, const Grid& g, Neighbourhood<typename ExecSpace::memory_space>& out,
+                                const Kokkos::View<const double*, typename ExecSpace::memory_space>& radii = {}) {
   using MemSpace = typename ExecSpace::memory_space;
   using Range = Kokkos::RangePolicy<ExecSpace>;
   ScopedRegion region("nbmc::neighbourhood");
@@ -260,14 +303,18 @@ void build_neighbourhood_device(const ExecSpace& space, MemoryTracker& tracker,
   std::uint32_t* other = vb.data();
   std::uint64_t* keys_in = ka.data();
   std::uint64_t* keys_out = kb.data();
-  for (int pass = 0; pass < 4; ++pass) {  // z, y, x, cell key
-    const int axis = 2 - pass;
+  const bool by_radius = radii.extent(0) > 0;
+  for (int pass = by_radius ? -1 : 0; pass < 4; ++pass) {  // (radius,) z, y, x, cell key
+    const int axis = 2 - pass;                              // 3: the radius
     std::uint32_t* const cur = order;
     Kokkos::parallel_for(
         "nbmc::neighbourhood::sort_keys", Range(space, 0, n), KOKKOS_LAMBDA(const std::size_t i) {
-          keys_in[i] = axis >= 0 ? float_order_bits(relv(std::size_t(axis) * n + cur[i])) : cellv(cur[i]);
+          keys_in[i] = axis == 3   ? positive_double_bits(radii(has_keep ? std::size_t(keep(cur[i])) : cur[i]))
+                       : axis >= 0 ? float_order_bits(relv(std::size_t(axis) * n + cur[i]))
+                                   : cellv(cur[i]);
         });
-    device_sort_pairs(space, tracker, keys_in, keys_out, order, other, n, axis >= 0 ? 32 : 3 * key_bits);
+    device_sort_pairs(space, tracker, keys_in, keys_out, order, other, n,
+                      axis == 3 ? 63 : axis >= 0 ? 32 : 3 * key_bits);
     std::swap(order, other);
   }
   cell.release();

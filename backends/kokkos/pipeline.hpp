@@ -9,6 +9,7 @@
 #include "marching_cubes.hpp"
 #include "narrow_band.hpp"
 #include "neighbourhood.hpp"
+#include "radii.hpp"
 #include "scalar_field.hpp"
 #include "sph_density.hpp"
 #include "yt10_kernels.hpp"
@@ -65,12 +66,15 @@ struct Region {
 
 // The particles of a reconstruction: absolute positions, 3 doubles each, in
 // host memory or (on_device) in the memory of the CUDA execution space; with
-// a region, one subdomain's particles and ghosts (host memory).
+// a region, one subdomain's particles and ghosts (host memory). With
+// per-particle radii (Params::radius_ref > 0), radii holds one radius per
+// particle, in host memory, in the order of xyz.
 struct ParticleInput {
   const double* xyz = nullptr;
   std::size_t count = 0;
   bool on_device = false;
   Region* region = nullptr;
+  const double* radii = nullptr;
 };
 
 #if defined(KOKKOS_ENABLE_CUDA)
@@ -233,25 +237,35 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
     // the surface flags and the cells.
     const std::uint64_t sort_bytes = host_memory ? sizeof(SortRecord) : 3 * sizeof(float) + 8 + 2 * (8 + 4);
     std::uint64_t need = n * (sort_bytes + 3 * sizeof(float) + sizeof(std::uint32_t) + 1) + n / 2 * 24;
+    if (p.radius_ref > 0) need += n * 3 * sizeof(float) + (host_memory ? 0 : count * sizeof(double));
     if (p.field != FieldKind::NarrowBand) {
       const std::uint64_t nv = g.vertex_count();
       need += nv * 14;  // field value, cell info, vertex numbering, bitmap
-      if (p.field == FieldKind::Scatter) need += nv * 4 * std::uint64_t(field_state_floats(p.method));
+      if (p.field == FieldKind::Scatter) need += nv * 4 * std::uint64_t(field_state_floats(p.method, p.radius_ref > 0));
     }
     tracker.require(need, p.field == FieldKind::NarrowBand ? "the neighbourhood" : "the dense baseline grid (estimated)");
   }
 
   // ---------------------------------------------------------- neighbourhood
+  // Per-particle radii (radii.hpp): they order coincident particles, then
+  // give every particle its lengths.
+  const bool radii = p.radius_ref > 0;
+  Buffer<double, MemSpace> radii_copy;
+  Kokkos::View<const double*, MemSpace> radii_in =
+      radii ? radii_view(space, tracker, in.radii, count, radii_copy) : Kokkos::View<const double*, MemSpace>();
   Neighbourhood<MemSpace> nbh;
   if constexpr (host_memory) {
-    build_neighbourhood(space, tracker, xyz, count, keep, g, nbh);
+    build_neighbourhood(space, tracker, xyz, count, keep, g, nbh, radii ? in.radii : nullptr);
   } else {
     build_neighbourhood_device(space, tracker, dxyz, Kokkos::View<const std::uint32_t*, MemSpace>(dkeep.view()),
-                               n_used, g, nbh);
+                               n_used, g, nbh, radii_in);
     dkeep.release();
     staged.release();
     dxyz = Kokkos::View<const double*, MemSpace>();
   }
+  if (radii) attach_radii(space, tracker, radii_in, p, nbh);
+  radii_in = Kokkos::View<const double*, MemSpace>();
+  radii_copy.release();
   const NeighbourView<MemSpace> nb = view_of(nbh, g);
   st.occupied_cells = nbh.n_cells;
   lap(1);
@@ -297,7 +311,8 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
         band.own_hi[a] = region_in->cell_hi[a];
       }
     build_narrow_band(space, tracker, g, p, Kokkos::View<const float*, MemSpace>(nbh.pos.view()),
-                      Kokkos::View<const std::uint8_t*, MemSpace>(flags.view()), nbh.n, band);
+                      Kokkos::View<const std::uint8_t*, MemSpace>(flags.view()), nbh.n, band,
+                      Kokkos::View<const float*, MemSpace>(nbh.scale.view()));
     if (region_in && !region_in->seeds.empty()) {
       // Cells its neighbours' band growth added near this subdomain.
       Band<MemSpace> seeded;
@@ -318,8 +333,12 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
   }
   FieldConstants fc = field_constants(p.influence_radius, p.iso_radius, p.t_low, p.t_high, p.iso_threshold);
   // The passes over the particles: the SPH density's weights, YT10's kernels
-  // (which also narrow the radius the field visits).
-  if (p.method == Method::SPH) compute_sph_weights(space, tracker, nbh, g, fc);
+  // (which also narrow the radius the field visits; YT10 has no radii
+  // variant, params.hpp refuses it with per-particle radii).
+  if (p.method == Method::SPH) {
+    if (radii) compute_sph_weights<true>(space, tracker, nbh, g, fc);
+    else compute_sph_weights<false>(space, tracker, nbh, g, fc);
+  }
   if (p.method == Method::YT10) fc = compute_yt10_kernels(space, tracker, nbh, g, p, fc);
   const NeighbourView<MemSpace> nbf = view_of(nbh, g);
   Buffer<float, MemSpace> phi(tracker, "scalar_field::values", band.n_vertices);
@@ -330,7 +349,8 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
     if (p.field == FieldKind::Scatter) {
       if constexpr (Kokkos::SpaceAccessibility<Kokkos::HostSpace, MemSpace>::accessible) {
         return scatter_field<Method>(space, tracker, Kokkos::View<const float*, Kokkos::HostSpace>(nbh.pos.view()),
-                                     Kokkos::View<const float*, Kokkos::HostSpace>(nbh.pdata.view()), nbh.n, bv0,
+                                     Kokkos::View<const float*, Kokkos::HostSpace>(nbh.pdata.view()),
+                                     Kokkos::View<const float*, Kokkos::HostSpace>(nbh.support.view()), nbh.n, bv0,
                                      n_words0, g, fc, phi.view(), progress);
       } else {
         throw Error(4, "the scatter baseline runs on the CPU backends only");
@@ -339,7 +359,7 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
     }
     return gather_field<Method>(space, nbf, bv0, n_words0, g, fc, phi.view(), progress);
   };
-  st.evaluations = with_field_method(p.method, run_field);
+  st.evaluations = with_field_method(p.method, radii, run_field);
 
   // Close the band where the surface leaves it (a triangulated cell with a
   // crossed face next to a cell that is not entirely in the band): add that
@@ -390,7 +410,7 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
           return gather_field<decltype(method)>(space, nbf, view_of(grown, g), growth.words.size(), g, fc,
                                                 grown_phi.view(), progress, list);
         };
-        if (!growth.words.empty()) st.evaluations += with_field_method(p.method, grow);
+        if (!growth.words.empty()) st.evaluations += with_field_method(p.method, radii, grow);
       }
       band = std::move(grown);
       phi = std::move(grown_phi);

@@ -233,7 +233,7 @@ void download_particles(const void* device_xyz, std::size_t count, double* host)
 }
 
 void download_device_items(const void* src, std::uint64_t count, std::uint64_t byte_stride, std::size_t item_bytes,
-                           std::size_t value_bytes, void* host, const char* fn) {
+                           std::size_t value_bytes, void* host, const char* fn, const char* host_hint) {
 #if defined(KOKKOS_ENABLE_CUDA)
   if (byte_stride % value_bytes != 0 || reinterpret_cast<std::uintptr_t>(src) % value_bytes != 0) {
     std::ostringstream s;
@@ -241,13 +241,13 @@ void download_device_items(const void* src, std::uint64_t count, std::uint64_t b
       << " bytes (aligned values)";
     throw Error(1, s.str());
   }
-  check_device_pointer(src, fn, "data", "nbmc_context_set_attribute_f32/f64");
+  check_device_pointer(src, fn, "data", host_hint);
   if (count)
     cuda_check(cudaMemcpy2D(host, item_bytes, src, std::size_t(byte_stride), item_bytes, std::size_t(count),
                             cudaMemcpyDeviceToHost),
                "copying the attribute to the host");
 #else
-  (void)src; (void)count; (void)byte_stride; (void)item_bytes; (void)value_bytes; (void)host;
+  (void)src; (void)count; (void)byte_stride; (void)item_bytes; (void)value_bytes; (void)host; (void)host_hint;
   throw Error(7, std::string(fn) + ": the CUDA backend is not compiled in");
 #endif
 }

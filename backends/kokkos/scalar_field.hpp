@@ -138,6 +138,7 @@ inline bool eval_points_host_lanes(const NeighbourView<MemSpace>& nb, const std:
   const float* Y = X + nb.n;
   const float* Z = Y + nb.n;
   const float* PD = nb.pdata.data();  // methods with particle data only
+  const float* Qt = nb.support.data();  // radii methods only: 1/R_j^2
   for (int g0 = 0; g0 < n_points; g0 += L) {
     const int m = n_points - g0 < L ? n_points - g0 : L;  // lanes in use; the others repeat lane 0, all masked
     HostVecF vx, vy, vz;
@@ -167,7 +168,8 @@ inline bool eval_points_host_lanes(const NeighbourView<MemSpace>& nb, const std:
     // are skipped. They would add k = 0 in every lane, leaving every sum as it
     // is; a skipped particle has ((X - xmin)^2) * inv_R2 >= 1 (or the same
     // with xmax), computed with the lanes' own float operations, and every
-    // lane's s2 is at least that (rounding is monotone), so s2 >= 1 there.
+    // lane's s2 is at least that (rounding is monotone), so s2 >= 1 there
+    // (with radii too: a particle's own 1/R_j^2 is at least inv_R2).
     float xmin = vx[0], xmax = vx[0];
     for (int l = 1; l < L; ++l) {
       xmin = vx[l] < xmin ? vx[l] : xmin;
@@ -190,11 +192,13 @@ inline bool eval_points_host_lanes(const NeighbourView<MemSpace>& nb, const std:
         const HostVecF dx = lanes_of<HostVecF>(X[p]) - vx;
         const HostVecF dy = lanes_of<HostVecF>(Y[p]) - vy;
         const HostVecF dz = lanes_of<HostVecF>(Z[p]) - vz;
-        const HostVecF s2 = (dx * dx + dy * dy + dz * dz) * inv_R2;
+        HostVecF q = inv_R2;
+        if constexpr (Method::radii) q = lanes_of<HostVecF>(Qt[p]);
+        const HostVecF s2 = (dx * dx + dy * dy + dz * dz) * q;
         const HostVecI inside = (s2 < one) & visit;  // -1 where the particle contributes
         const HostVecF k = (HostVecF)((HostVecI)(one - s2) & inside);
         count -= inside;
-        Method::add(acc, dx, dy, dz, k, Method::P ? PD + std::size_t(Method::P) * p : nullptr);
+        Method::add(acc, dx, dy, dz, k, Method::P ? PD + std::size_t(Method::P) * p : nullptr, q);
       }
     }
     for (int l = 0; l < m; ++l) {
@@ -303,8 +307,8 @@ KOKKOS_INLINE_FUNCTION std::uint32_t sum_vertex_direct(const NeighbourView<MemSp
         if (!nb.cell_range(xx, y, z, b, e)) continue;
         const float clo[3] = {float(xx) * S, float(y) * S, float(z) * S};
         if (box_distance2(clo, S, x) >= fc.R * fc.R) continue;
-        evals += Method::accumulate(acc, X, X + nb.n, X + 2 * nb.n, Method::P ? nb.pdata.data() : nullptr, b, e,
-                                    x[0], x[1], x[2], fc.inv_R2);
+        evals += Method::accumulate(acc, X, X + nb.n, X + 2 * nb.n, Method::P ? nb.pdata.data() : nullptr,
+                                    Method::radii ? nb.support.data() : nullptr, b, e, x[0], x[1], x[2], fc.inv_R2);
       }
   return evals;
 }
@@ -428,7 +432,9 @@ std::uint64_t gather_words_team(const ExecSpace& space, const NeighbourView<type
   using U32 = Kokkos::View<std::uint32_t*, Scratch, Kokkos::MemoryUnmanaged>;
   using F32 = Kokkos::View<float*, Scratch, Kokkos::MemoryUnmanaged>;
   const float c = float(g.cell), S = float(g.nb_cell);
-  constexpr int kStaged = 3 + Method::P;  // x, y, z (and the particle data) of each staged particle
+  // x, y, z (and the particle data, and 1/R_j^2 with radii) of each staged particle
+  constexpr int kSupport = 3 + Method::P;
+  constexpr int kStaged = 3 + Method::P + (Method::radii ? 1 : 0);
   const std::size_t shmem = 3 * U32::shmem_size(kMaxTileCells + 1) + F32::shmem_size(kStaged * kTeamChunk);
   Kokkos::View<std::uint64_t, MemSpace> counter("nbmc::scalar_field::evals");
   Policy policy(space, int(w1 - w0), 64);
@@ -507,12 +513,14 @@ std::uint64_t gather_words_team(const ExecSpace& space, const NeighbourView<type
             px(2 * kTeamChunk + e) = nb.pos(2 * nb.n + j);
             for (int q = 0; q < Method::P; ++q)
               px(3 * kTeamChunk + Method::P * e + q) = nb.pdata(std::size_t(Method::P) * j + q);
+            if (Method::radii) px(kSupport * kTeamChunk + e) = nb.support(j);
           });
           team.team_barrier();
           if (mine)
             evals += Method::accumulate(acc, px.data(), px.data() + kTeamChunk, px.data() + 2 * kTeamChunk,
-                                        Method::P ? px.data() + 3 * kTeamChunk : nullptr, 0, m, x[0], x[1],
-                                        x[2], fc.inv_R2);
+                                        Method::P ? px.data() + 3 * kTeamChunk : nullptr,
+                                        Method::radii ? px.data() + kSupport * kTeamChunk : nullptr, 0, m, x[0],
+                                        x[1], x[2], fc.inv_R2);
           team.team_barrier();
         }
         if (mine) {
@@ -603,7 +611,8 @@ std::uint64_t gather_field(const ExecSpace& space, const NeighbourView<typename 
 template <class Method, class ExecSpace>
 std::uint64_t scatter_field(const ExecSpace& space, MemoryTracker& tracker,
                             const Kokkos::View<const float*, Kokkos::HostSpace>& pos,
-                            const Kokkos::View<const float*, Kokkos::HostSpace>& pdata, std::size_t n,
+                            const Kokkos::View<const float*, Kokkos::HostSpace>& pdata,
+                            const Kokkos::View<const float*, Kokkos::HostSpace>& support, std::size_t n,
                             const BandView<typename ExecSpace::memory_space>& band, std::size_t n_words,
                             const Grid& g, const FieldConstants& fc,
                             const Kokkos::View<float*, typename ExecSpace::memory_space>& phi,
@@ -619,6 +628,7 @@ std::uint64_t scatter_field(const ExecSpace& space, MemoryTracker& tracker,
   for (std::size_t p = 0; p < n; ++p) {
     const float px = pos(p), py = pos(n + p), pz = pos(2 * n + p);
     const float* const pd = Method::P ? pdata.data() + std::size_t(Method::P) * p : nullptr;
+    const float qp = Method::radii ? support(p) : fc.inv_R2;  // the vertex range below stays R's
     const std::int64_t lo[3] = {std::max<std::int64_t>(0, std::int64_t(std::ceil((px - fc.R) / c))),
                                 std::max<std::int64_t>(0, std::int64_t(std::ceil((py - fc.R) / c))),
                                 std::max<std::int64_t>(0, std::int64_t(std::ceil((pz - fc.R) / c)))};
@@ -632,9 +642,9 @@ std::uint64_t scatter_field(const ExecSpace& space, MemoryTracker& tracker,
         float* row = a + N * std::size_t(d0) * (std::size_t(j) + std::size_t(d1) * std::size_t(k));
         for (std::int64_t i = lo[0]; i <= hi[0]; ++i) {
           const float dx = px - float(i) * float(c);
-          const float s2 = (dx * dx + dy * dy + dz * dz) * fc.inv_R2;
+          const float s2 = (dx * dx + dy * dy + dz * dz) * qp;
           if (s2 >= 1.f) continue;
-          Method::add(row + N * i, dx, dy, dz, 1.f - s2, pd);
+          Method::add(row + N * i, dx, dy, dz, 1.f - s2, pd, qp);
           ++evals;
         }
       }

@@ -6,7 +6,9 @@
 // particles in sorted order, the same float operations), so the weights, and
 // the field after them, are bit-identical on every backend. A particle's
 // D_j needs the particles within R of it: a subdomain's ghost layer is 2R
-// wide for this method (particle_reach in src/core/params.hpp).
+// wide for this method (particle_reach in src/core/params.hpp). With
+// per-particle radii, D_j sums each particle k's kernel of support R_k
+// (field_sph.hpp); R_k <= R, so the ghost layer stays 2R.
 #pragma once
 
 #include "common.hpp"
@@ -17,7 +19,7 @@
 namespace nbmc {
 namespace Details {
 
-template <class ExecSpace>
+template <bool Radii, class ExecSpace>
 void compute_sph_weights(const ExecSpace& space, MemoryTracker& tracker,
                          Neighbourhood<typename ExecSpace::memory_space>& nbh, const Grid& g,
                          const FieldConstants& fc) {
@@ -34,7 +36,7 @@ void compute_sph_weights(const ExecSpace& space, MemoryTracker& tracker,
         const float x[3] = {nb.pos(j), nb.pos(n + j), nb.pos(2 * n + j)};
         std::uint64_t evals = 0;
         // >= 1: the particle's own W~(0) = 1 is in the sum
-        const float d = eval_vertex_direct<SphDensity>(nb, x, S, fc, evals);
+        const float d = eval_vertex_direct<SphDensityT<Radii>>(nb, x, S, fc, evals);
         w(j) = 1.f / d;
       });
   space.fence();

@@ -14,6 +14,14 @@
 // empty-cell rule, hence the surface particles, do not depend on R. (Cells of
 // R/2 < h, as nbmc had before, were one particle wide at R = 2r: the
 // empty-cell rule then marked most of the fluid as surface.)
+//
+// With per-particle radii (radii.hpp) particle i uses its own h_i = h t_i
+// (h the largest particle's, so the 27 cells still cover it) and every
+// neighbour its own volume V_j = r_j^3:
+//   |grad c(x_i)| h_i = 945 / (32 pi) * |sum_j (r_j / h_i)^3 q_j^2 e_j|,
+//   e_j = (x_i - x_j) / h_i, q_j = 1 - |e_j|^2 (> 0),
+// which for equal radii is the test above; the neighbours counted are those
+// within h_i. One scalar loop on every backend.
 #pragma once
 
 #include "common.hpp"
@@ -35,12 +43,14 @@ constexpr std::uint32_t kCrowdedCell = 2048;
 // particle's colour gradient is summed in one order on every backend: the
 // cells in z, y, x order, their particles in sorted order (the host computes
 // kHostLanes particles i at a time, one lane each, with the same operations).
-template <class MemSpace>
+// Radii: scale is (r_max / h)^3 * 945 / (32 pi) and h_abs = h in double.
+template <bool Radii, class MemSpace>
 KOKKOS_INLINE_FUNCTION std::size_t surface_particles_of_cell(const NeighbourView<MemSpace>& nb,
                                                              const Kokkos::View<const std::uint64_t*, MemSpace>& keys,
                                                              std::size_t cell, int range, float h, float scale,
                                                              float threshold, int min_neighbours,
-                                                             const Kokkos::View<std::uint8_t*, MemSpace>& flags) {
+                                                             const Kokkos::View<std::uint8_t*, MemSpace>& flags,
+                                                             double h_abs = 0) {
   constexpr int kMaxCells = 27;  // range 1: cells at least h wide
   // A cell crowded far beyond any fluid density (256x the rest density: a
   // solver blow-up, or many particles at one point) is all surface, without
@@ -77,13 +87,37 @@ KOKKOS_INLINE_FUNCTION std::size_t surface_particles_of_cell(const NeighbourView
   const float* Z = Y + nb.n;
   const float h2 = h * h;
   std::size_t surface = 0;
-  auto mark = [&](std::uint32_t i, float gx, float gy, float gz, int count) {
+  auto mark = [&](std::uint32_t i, float gx, float gy, float gz, int count, float scale_i) {
     const int neighbours = count - 1;  // i itself is counted
-    const float grad_h = Kokkos::Experimental::sqrt(gx * gx + gy * gy + gz * gz) * scale;
+    const float grad_h = Kokkos::Experimental::sqrt(gx * gx + gy * gy + gz * gz) * scale_i;
     const bool is_surface = neighbours < min_neighbours || grad_h > threshold;
     flags(i) = is_surface ? 1 : 0;
     surface += is_surface ? 1 : 0;
   };
+  if constexpr (Radii) {
+    const float* T = nb.scale.data();
+    for (std::uint32_t i = first; i < last; ++i) {
+      const float xi = X[i], yi = Y[i], zi = Z[i];
+      const float ti = T[i];
+      const float inv_hi = float(1.0 / (h_abs * double(ti)));
+      float gx = 0, gy = 0, gz = 0;
+      int count = 0;
+      for (int c = 0; c < n_cells; ++c)
+        for (std::uint32_t j = begin[c]; j < end[c]; ++j) {
+          const float ex = (xi - X[j]) * inv_hi, ey = (yi - Y[j]) * inv_hi, ez = (zi - Z[j]) * inv_hi;
+          const float e2 = ex * ex + ey * ey + ez * ez;
+          const float q = e2 < 1.f ? 1.f - e2 : 0.f;
+          const float tj = T[j];
+          const float w = (q * q) * (tj * tj * tj);  // 0 for i itself (e = 0)
+          gx += w * ex;
+          gy += w * ey;
+          gz += w * ez;
+          count += e2 < 1.f ? 1 : 0;
+        }
+      mark(i, gx, gy, gz, count, scale / (ti * ti * ti));
+    }
+  } else {
+    (void)h_abs;
 #if defined(__CUDA_ARCH__)
   for (std::uint32_t i = first; i < last; ++i) {
     const float xi = X[i], yi = Y[i], zi = Z[i];
@@ -100,7 +134,7 @@ KOKKOS_INLINE_FUNCTION std::size_t surface_particles_of_cell(const NeighbourView
         gz += w * dz;
         count += d2 < h2 ? 1 : 0;
       }
-    mark(i, gx, gy, gz, count);
+    mark(i, gx, gy, gz, count, scale);
   }
 #else
   // The loop above, for kHostLanes particles i at once (the last lanes of the
@@ -129,9 +163,11 @@ KOKKOS_INLINE_FUNCTION std::size_t surface_particles_of_cell(const NeighbourView
         gz += w * dz;
         count -= in;
       }
-    for (int l = 0; l < L && i0 + std::uint32_t(l) < last; ++l) mark(i0 + std::uint32_t(l), gx[l], gy[l], gz[l], count[l]);
+    for (int l = 0; l < L && i0 + std::uint32_t(l) < last; ++l)
+      mark(i0 + std::uint32_t(l), gx[l], gy[l], gz[l], count[l], scale);
   }
 #endif
+  }
   // Safety net for clumps the two criteria miss (coincident or compressed
   // particles: many neighbours, no colour gradient): a cell next to an empty
   // cell that holds no surface particle is all surface. Cells on a normal
@@ -161,11 +197,26 @@ std::size_t mark_surface_particles(const ExecSpace& space, const NeighbourView<t
   const float threshold = float(p.color_threshold);
   const int min_neighbours = p.neighbour_threshold;
   std::size_t count = 0;
+  if (p.radius_ref > 0) {  // per-particle radii (radii.hpp): p.spacing is r_max
+    const double rh = p.spacing / p.surface_radius;
+    const float scale_r = float(rh * rh * rh * 945.0 / (32.0 * 3.14159265358979));
+    const double h_abs = p.surface_radius;
+    Kokkos::parallel_reduce(
+        "nbmc::surface_particles",
+        Kokkos::RangePolicy<ExecSpace, Kokkos::Schedule<Kokkos::Dynamic>>(space, 0, n_cells),
+        KOKKOS_LAMBDA(const std::size_t c, std::size_t& acc) {
+          acc += surface_particles_of_cell<true>(nb, keys, c, range, h, scale_r, threshold, min_neighbours, flags,
+                                                 h_abs);
+        },
+        count);
+    space.fence();
+    return count;
+  }
   Kokkos::parallel_reduce(
       "nbmc::surface_particles",
       Kokkos::RangePolicy<ExecSpace, Kokkos::Schedule<Kokkos::Dynamic>>(space, 0, n_cells),
       KOKKOS_LAMBDA(const std::size_t c, std::size_t& acc) {
-        acc += surface_particles_of_cell(nb, keys, c, range, h, scale, threshold, min_neighbours, flags);
+        acc += surface_particles_of_cell<false>(nb, keys, c, range, h, scale, threshold, min_neighbours, flags);
       },
       count);
   space.fence();

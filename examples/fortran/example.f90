@@ -186,6 +186,40 @@ program example
   if (nbmc_mesh_sphere_count(mesh) == 0 .and. associated(nbmc_mesh_spheres(mesh))) error stop 'spheres: none expected'
   params%decimate_fraction = 1
   params%isolated = NBMC_ISOLATED_KEEP
+  ! Per-particle radii: all equal to the spacing give the mesh without radii;
+  ! the lower layers half as large give another closed surface; bad radii a
+  ! clear status; clearing them gives the first mesh back.
+  block
+    real(c_double), allocatable :: radii(:)
+    integer(c_int64_t) :: nv0, nt0
+    status = nbmc_context_reconstruct(ctx, params, mesh)
+    call check(status, 'nbmc_context_reconstruct (no radii)')
+    nv0 = nbmc_mesh_vertex_count(mesh)
+    nt0 = nbmc_mesh_triangle_count(mesh)
+    allocate (radii(n))
+    radii = spacing
+    status = nbmc_context_set_radii(ctx, radii)
+    call check(status, 'nbmc_context_set_radii (equal)')
+    status = nbmc_context_reconstruct(ctx, params, mesh)
+    call check(status, 'nbmc_context_reconstruct (equal radii)')
+    if (nbmc_mesh_vertex_count(mesh) /= nv0 .or. nbmc_mesh_triangle_count(mesh) /= nt0) &
+         error stop 'equal radii changed the mesh'
+    where (rest_height < 0.5d0 * (ny - 1) * spacing) radii = 0.5d0 * spacing
+    status = nbmc_context_set_radii(ctx, real(radii, c_float))
+    call check(status, 'nbmc_context_set_radii (two sizes)')
+    status = nbmc_context_reconstruct(ctx, params, mesh)
+    call check(status, 'nbmc_context_reconstruct (two sizes)')
+    if (nbmc_mesh_triangle_count(mesh) == nt0) error stop 'two radii gave the uniform mesh'
+    write (output_unit, '(a, i0, a)') 'radii of two sizes: ', nbmc_mesh_triangle_count(mesh), ' triangles'
+    radii(1) = -1
+    if (nbmc_context_set_radii(ctx, radii) /= NBMC_ERROR_INVALID_PARAMETER) error stop 'a negative radius passed'
+    if (nbmc_context_set_radii(ctx, radii(2:)) /= NBMC_ERROR_INVALID_ARGUMENT) error stop 'a short radii array passed'
+    status = nbmc_context_clear_radii(ctx)
+    call check(status, 'nbmc_context_clear_radii')
+    status = nbmc_context_reconstruct(ctx, params, mesh)
+    call check(status, 'nbmc_context_reconstruct (radii cleared)')
+    if (nbmc_mesh_triangle_count(mesh) /= nt0) error stop 'clearing the radii did not restore the mesh'
+  end block
   ! Device memory needs the CUDA backend; elsewhere the call fails cleanly.
   if (backend /= NBMC_BACKEND_CUDA) then
     status = nbmc_context_set_mesh_memory(ctx, NBMC_MEMORY_DEVICE)

@@ -29,6 +29,12 @@
 ! The module checks that the array has one item per particle of the last
 ! upload made through it (ctx%particles).
 !
+! Per-particle radii (variable-resolution particles; also removed by every
+! upload), radii(n) real32/64, absolute: a radius is a particle's r, the
+! spacing it would have in a uniform frame (docs/api.md):
+!   status = nbmc_context_set_radii(ctx, radii)
+!   status = nbmc_context_clear_radii(ctx)
+!
 ! Names follow the C API; nbmc_version() is nbmc_library_version() here (Fortran
 ! is case-insensitive and NBMC_VERSION is the constant), nbmc_*_destroy are
 ! nbmc_*_close.
@@ -252,6 +258,8 @@ module nbmc
   public :: nbmc_context_set_attribute, nbmc_context_remove_attribute
   public :: nbmc_context_set_attribute_device_f32, nbmc_context_set_attribute_device_f64
   public :: nbmc_mesh_attribute_count, nbmc_mesh_attribute_name, nbmc_mesh_attribute
+  public :: nbmc_context_set_radii, nbmc_context_clear_radii
+  public :: nbmc_context_set_radii_device_f32, nbmc_context_set_radii_device_f64
   public :: nbmc_abi_ok
 
   !> Uploads (copies) positions pos(3, n), real(c_float) or real(c_double).
@@ -270,6 +278,17 @@ module nbmc
   interface nbmc_context_set_attribute
     module procedure set_attribute_f32_1, set_attribute_f64_1, set_attribute_f32_2, set_attribute_f64_2
   end interface nbmc_context_set_attribute
+
+  !> Sets (copies) per-particle radii(n), real(c_float) or real(c_double),
+  !> for the particles uploaded last (n their count): each particle takes the
+  !> lengths of params (given for a particle of radius params%spacing) times
+  !> its radius over params%spacing; the cell size stays the frame's. They
+  !> stay until nbmc_context_clear_radii or the next upload. A NaN, infinite,
+  !> zero or negative radius gives NBMC_ERROR_INVALID_PARAMETER, a wrong n
+  !> NBMC_ERROR_INVALID_ARGUMENT.
+  interface nbmc_context_set_radii
+    module procedure set_radii_f32, set_radii_f64
+  end interface nbmc_context_set_radii
 
   ! -------------------------------------------------- the C ABI (private)
   interface
@@ -522,6 +541,38 @@ module nbmc
       integer(c_int64_t), value :: byte_stride
       integer(c_int32_t) :: status
     end function c_context_set_attribute_device_f64
+
+    function c_context_set_radii_f32(ctx, radii, count, byte_stride) &
+         bind(c, name="nbmc_context_set_radii_f32") result(status)
+      import :: c_ptr, c_int32_t, c_int64_t
+      type(c_ptr), value :: ctx, radii
+      integer(c_int64_t), value :: count, byte_stride
+      integer(c_int32_t) :: status
+    end function c_context_set_radii_f32
+
+    function c_context_set_radii_f64(ctx, radii, count, byte_stride) &
+         bind(c, name="nbmc_context_set_radii_f64") result(status)
+      import :: c_ptr, c_int32_t, c_int64_t
+      type(c_ptr), value :: ctx, radii
+      integer(c_int64_t), value :: count, byte_stride
+      integer(c_int32_t) :: status
+    end function c_context_set_radii_f64
+
+    function c_context_set_radii_device_f32(ctx, radii, count, byte_stride) &
+         bind(c, name="nbmc_context_set_radii_device_f32") result(status)
+      import :: c_ptr, c_int32_t, c_int64_t
+      type(c_ptr), value :: ctx, radii
+      integer(c_int64_t), value :: count, byte_stride
+      integer(c_int32_t) :: status
+    end function c_context_set_radii_device_f32
+
+    function c_context_set_radii_device_f64(ctx, radii, count, byte_stride) &
+         bind(c, name="nbmc_context_set_radii_device_f64") result(status)
+      import :: c_ptr, c_int32_t, c_int64_t
+      type(c_ptr), value :: ctx, radii
+      integer(c_int64_t), value :: count, byte_stride
+      integer(c_int32_t) :: status
+    end function c_context_set_radii_device_f64
 
     function c_mesh_attribute_count(mesh) bind(c, name="nbmc_mesh_attribute_count") result(n)
       import :: c_ptr, c_int32_t
@@ -1135,6 +1186,58 @@ contains
     integer(c_int32_t) :: status
     status = c_context_set_attribute_device_f64(ctx%ptr, trim(name) // c_null_char, data, components, byte_stride)
   end function nbmc_context_set_attribute_device_f64
+
+  function set_radii_f32(ctx, radii) result(status)
+    type(nbmc_context), intent(inout) :: ctx
+    real(c_float), intent(in), contiguous, target :: radii(:)
+    integer(c_int32_t) :: status
+    if (size(radii) == 0) then  ! no array to point at: as the library would answer
+      status = NBMC_ERROR_INVALID_ARGUMENT
+      if (ctx%particles == 0) status = NBMC_ERROR_NO_PARTICLES
+      return
+    end if
+    status = c_context_set_radii_f32(ctx%ptr, c_loc(radii), size(radii, kind=c_int64_t), 0_c_int64_t)
+  end function set_radii_f32
+
+  function set_radii_f64(ctx, radii) result(status)
+    type(nbmc_context), intent(inout) :: ctx
+    real(c_double), intent(in), contiguous, target :: radii(:)
+    integer(c_int32_t) :: status
+    if (size(radii) == 0) then
+      status = NBMC_ERROR_INVALID_ARGUMENT
+      if (ctx%particles == 0) status = NBMC_ERROR_NO_PARTICLES
+      return
+    end if
+    status = c_context_set_radii_f64(ctx%ptr, c_loc(radii), size(radii, kind=c_int64_t), 0_c_int64_t)
+  end function set_radii_f64
+
+  !> Removes the per-particle radii (NBMC_OK also when there are none).
+  function nbmc_context_clear_radii(ctx) result(status)
+    type(nbmc_context), intent(inout) :: ctx
+    integer(c_int32_t) :: status
+    status = c_context_set_radii_f64(ctx%ptr, c_null_ptr, 0_c_int64_t, 0_c_int64_t)
+  end function nbmc_context_clear_radii
+
+  !> Radii from CUDA device memory of the context's GPU (radii a device
+  !> address as for nbmc_context_set_particles_device_f32; count values, the
+  !> particle count, byte_stride apart, 0 = packed). CUDA backend only, else
+  !> NBMC_ERROR_BACKEND_UNAVAILABLE.
+  function nbmc_context_set_radii_device_f32(ctx, radii, count, byte_stride) result(status)
+    type(nbmc_context), intent(inout) :: ctx
+    type(c_ptr), intent(in) :: radii
+    integer(c_int64_t), intent(in) :: count, byte_stride
+    integer(c_int32_t) :: status
+    status = c_context_set_radii_device_f32(ctx%ptr, radii, count, byte_stride)
+  end function nbmc_context_set_radii_device_f32
+
+  !> The same for real(c_double) values (byte_stride a multiple of 8).
+  function nbmc_context_set_radii_device_f64(ctx, radii, count, byte_stride) result(status)
+    type(nbmc_context), intent(inout) :: ctx
+    type(c_ptr), intent(in) :: radii
+    integer(c_int64_t), intent(in) :: count, byte_stride
+    integer(c_int32_t) :: status
+    status = c_context_set_radii_device_f64(ctx%ptr, radii, count, byte_stride)
+  end function nbmc_context_set_radii_device_f64
 
   !> Attributes interpolated onto the mesh (0 without).
   integer(c_int32_t) function nbmc_mesh_attribute_count(mesh)

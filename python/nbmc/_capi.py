@@ -279,6 +279,10 @@ _SIGNATURES = {
     "nbmc_mesh_attribute_count": (c_uint32, [_mesh_p]),
     "nbmc_mesh_attribute_name": (c_char_p, [_mesh_p, c_uint32]),
     "nbmc_mesh_attribute": (c_void_p, [_mesh_p, c_char_p, POINTER(c_uint32)]),
+    "nbmc_context_set_radii_f32": (c_int32, [_ctx_p, c_void_p, c_uint64, c_uint64]),
+    "nbmc_context_set_radii_f64": (c_int32, [_ctx_p, c_void_p, c_uint64, c_uint64]),
+    "nbmc_context_set_radii_device_f32": (c_int32, [_ctx_p, c_void_p, c_uint64, c_uint64]),
+    "nbmc_context_set_radii_device_f64": (c_int32, [_ctx_p, c_void_p, c_uint64, c_uint64]),
 }
 
 _NAMES = ("libnbmc.so.0", "libnbmc.so") if sys.platform.startswith("linux") else (

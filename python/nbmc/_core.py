@@ -679,6 +679,41 @@ class Context:
         """Removes the attribute ``name`` (no error when there is none)."""
         self.set_attribute(name, None)
 
+    def set_radii(self, radii: Any) -> None:
+        """Sets (copies) per-particle radii for the particles uploaded last:
+        an (N,) array-like, float32 or float64 (other numeric types are
+        converted to float64), absolute, N the particle count. A radius is a
+        particle's r, the spacing it would have in a uniform frame: the
+        parameters then describe a particle of radius ``spacing``, and each
+        particle scales the influence radius, band width, surface radius and
+        iso radius by its own radius over it; the cell size stays the
+        frame's (docs/api.md, "Per-particle radii"). They stay for the
+        following reconstructions until ``set_radii(None)`` or the next
+        particle upload. A NaN, infinite, zero or negative radius raises
+        :class:`nbmc.InvalidParameter`; a wrong length ValueError."""
+        with self._lock:
+            self._set_radii(radii)
+
+    def _set_radii(self, radii: Any) -> None:
+        if radii is None:
+            self._check(lib.nbmc_context_set_radii_f64(self._handle, None, 0, 0))
+            return
+        a = np.asarray(radii)
+        if a.dtype not in (np.float32, np.float64) or not a.dtype.isnative:
+            if a.dtype.kind not in "fiub":
+                raise TypeError(f"radii must be numeric, not {a.dtype}")
+            a = np.asarray(a, dtype=np.float64)
+        if a.ndim != 1:
+            raise ValueError(f"radii must have shape (N,), not {a.shape}")
+        if not self._count:
+            raise error_for(C.ERROR_NO_PARTICLES, "set_radii: no particles uploaded; upload the particles "
+                            "first (an upload removes the radii)")
+        if a.shape[0] != self._count:
+            raise ValueError(f"{a.shape[0]} radii for {self._count} particles")
+        a = np.ascontiguousarray(a)
+        fn = lib.nbmc_context_set_radii_f64 if a.dtype == np.float64 else lib.nbmc_context_set_radii_f32
+        self._check(fn(self._handle, a.ctypes.data, a.shape[0], 0))
+
     def load_particles(self, path: PathLike, format: Optional[str] = None) -> int:
         """Reads a particle file with nbmc's readers (xyz, ply, vtk, vtu, vtp,
         bgeo, h5part, pysph, gadget/swift, hdf5; ``"run.h5:/PartType1"`` names
@@ -700,11 +735,12 @@ class Context:
                     particle_radius: Optional[float] = None, bbox: Any = None,
                     format: Optional[str] = None,
                     attributes: Union[Mapping[str, Any], Sequence[str], None] = None,
-                    **params: Any) -> Mesh:
+                    radii: Any = None, **params: Any) -> Mesh:
         """Reconstructs the surface; see :func:`nbmc.reconstruct` for the
         parameters. ``points``: an array (uploaded first), a path (read with
         :meth:`load_particles`, ``format`` as there), a :class:`Particles`
-        (its file is read), or None to reuse the particles uploaded last."""
+        (its file is read), or None to reuse the particles uploaded last
+        (and their radii, :meth:`set_radii`, unless ``radii`` is given)."""
         if attributes and not isinstance(attributes, Mapping):
             raise NotImplementedError(
                 "attributes: the C ABI cannot read a particle file's attributes; pass arrays "
@@ -719,6 +755,8 @@ class Context:
                 self._set_particles(points)
             for name, values in (attributes or {}).items():
                 self._set_attribute(name, values)
+            if radii is not None:
+                self._set_radii(radii)
             return self._reconstruct(p)
 
     def _reconstruct(self, p: C.Params) -> Mesh:
@@ -878,7 +916,8 @@ def reconstruct(points: Any, spacing: Optional[float] = None, *,
                 device_id: int = 0, memory_budget: Union[int, str, None] = None,
                 mesh_memory: str = "host", progress: Optional[ProgressFn] = None,
                 format: Optional[str] = None,
-                attributes: Union[Mapping[str, Any], Sequence[str], None] = None) -> Mesh:
+                attributes: Union[Mapping[str, Any], Sequence[str], None] = None,
+                radii: Any = None) -> Mesh:
     """Reconstructs the surface of particles as a triangle mesh.
 
     points
@@ -954,6 +993,11 @@ def reconstruct(points: Any, spacing: Optional[float] = None, *,
         :meth:`Context.set_attribute`). A particle file's own attributes
         cannot be read through the C ABI (a list of names raises
         NotImplementedError).
+    radii
+        Per-particle radii, an (N,) array-like (absolute): particles of
+        different sizes (variable-resolution SPH); see
+        :meth:`Context.set_radii`. The lengths above then describe a particle
+        of radius ``spacing``.
 
     The defaults above are read from the loaded library (``nbmc_params_init``)
     and are what ``None`` means. Names follow the CLI's options
@@ -964,7 +1008,7 @@ def reconstruct(points: Any, spacing: Optional[float] = None, *,
     with Context(backend, threads=threads, device_id=device_id, progress=progress,
                  memory_budget=memory_budget, mesh_memory=mesh_memory) as ctx:
         return ctx.reconstruct(points, spacing, particle_radius=particle_radius, bbox=bbox,
-                               format=format, attributes=attributes, cell_size=cell_size,
+                               format=format, attributes=attributes, radii=radii, cell_size=cell_size,
                                influence_radius=influence_radius, band_width=band_width,
                                surface_radius=surface_radius, iso_radius=iso_radius,
                                method=method, field=field, t_low=t_low, t_high=t_high,

@@ -1,7 +1,7 @@
 // SPDX-License-Identifier: MIT
 // nbmc — command-line surface reconstruction of particle files.
 //
-//   nbmc reconstruct IN -o OUT (--spacing R | --particle-radius P) [options]
+//   nbmc reconstruct IN -o OUT (--spacing R | --particle-radius P | --radius-attribute NAME) [options]
 //   nbmc reconstruct 'frames/fluid_{}.bgeo' -o 'out/surface_{}.ply' ...   (a sequence)
 //   nbmc reconstruct dump.h5part -o 'out/surface_{}.glb' ...              (every step)
 //
@@ -20,11 +20,13 @@
 
 #include <CLI/CLI.hpp>
 
+#include <algorithm>
 #include <cctype>
 #include <cerrno>
 #include <chrono>
 #include <cstdio>
 #include <cstring>
+#include <limits>
 #include <memory>
 #include <new>
 #include <string>
@@ -104,6 +106,9 @@ struct Options {
   bool json = false;
   std::string json_path;
   std::vector<std::string> attributes; // --attributes
+  std::string radius_attribute;         // --radius-attribute: per-particle radii from this attribute
+  double radius_scale = 1;              // --radius-scale: times this
+  bool spacing_from_radii = false;      // no --spacing/--particle-radius: each frame's largest radius
   std::string frames;                   // --frames a:b[:step]
   bool resume = false;
   std::int64_t step = -1; // H5Part step of a single-frame run (-1: the first)
@@ -299,6 +304,54 @@ std::vector<nbmc::io::Attribute> mesh_attributes(const nbmc_mesh* mesh) {
   return out;
 }
 
+// What to read from a particle file: the --attributes and the
+// --radius-attribute.
+nbmc::io::ReadOptions read_options(const Options& o) {
+  nbmc::io::ReadOptions ro;
+  ro.format = o.input_format;
+  ro.only = o.attributes;
+  if (!o.radius_attribute.empty()) ro.only.push_back(o.radius_attribute);
+  ro.attributes = !ro.only.empty();
+  return ro;
+}
+
+// --radius-attribute: the attribute's values times --radius-scale as the
+// particles' radii (nbmc_context_set_radii_f64), and the parameters of the
+// frame (without --spacing/--particle-radius, spacing is its largest radius).
+// Returns the status (the message is the context's, or in error); the report
+// (may be null) gets the smallest and largest radius.
+std::int32_t set_radii(nbmc_context* ctx, const Options& o, const nbmc::io::Particles& p, nbmc_params& params,
+                       std::string& error, nbmc::cli::Report* report = nullptr) {
+  params = o.params;
+  if (o.radius_attribute.empty()) return NBMC_OK;
+  const nbmc::io::Attribute* a = p.attribute(o.radius_attribute);
+  if (!a) return NBMC_OK;  // check_attributes reported it
+  if (a->components != 1) {
+    error = "--radius-attribute: '" + a->name + "' is a vector; radii need a scalar attribute";
+    return NBMC_ERROR_INVALID_PARAMETER;
+  }
+  std::vector<double> radii(a->values.size());
+  double largest = 0, smallest = radii.empty() ? 0 : a->values[0] * o.radius_scale;
+  for (std::size_t i = 0; i < radii.size(); ++i) {
+    radii[i] = a->values[i] * o.radius_scale;
+    largest = std::max(largest, radii[i]);
+    smallest = std::min(smallest, radii[i]);
+  }
+  const std::int32_t st = nbmc_context_set_radii_f64(ctx, radii.data(), radii.size(), 0);
+  if (st != NBMC_OK) {
+    error = std::string("--radius-attribute '") + a->name + "': " + nbmc_context_last_error(ctx);
+    return st;
+  }
+  if (o.spacing_from_radii) params.spacing = largest;
+  if (report) {
+    report->radius_attribute = a->name;
+    report->radius_scale = o.radius_scale;
+    report->radius_min = smallest;
+    report->radius_max = largest;
+  }
+  return NBMC_OK;
+}
+
 // Every name asked for with --attributes must be in the file. The message
 // lists what the file has (read again with all attributes: only on error).
 void check_attributes(const std::string& path, const nbmc::io::Particles& p, const std::vector<std::string>& names,
@@ -333,21 +386,22 @@ nbmc::cli::FrameResult run_frame(const Options& o, nbmc_context* ctx, const nbmc
     r.status = "skipped";
   } else {
     try {
-      io::ReadOptions ro;
-      ro.format = o.input_format;
-      ro.attributes = !o.attributes.empty();
-      ro.only = o.attributes;
+      io::ReadOptions ro = read_options(o);
       ro.frame = f.step;
       io::Particles particles = io::read_particles(f.input, ro);
-      check_attributes(f.input, particles, o.attributes, ro);
+      check_attributes(f.input, particles, ro.only, ro);
       r.particles = particles.count();
       std::int32_t st = nbmc_context_set_particles_f64(ctx, particles.xyz.data(), particles.count(), 0);
       if (st != NBMC_OK) throw cli::FrameError(std::string(nbmc_status_string(st)) + ": " + nbmc_context_last_error(ctx));
       st = set_attributes(ctx, particles, o.attributes);
       if (st != NBMC_OK) throw cli::FrameError(std::string(nbmc_status_string(st)) + ": " + nbmc_context_last_error(ctx));
+      nbmc_params params;
+      std::string radii_error;
+      st = set_radii(ctx, o, particles, params, radii_error);
+      if (st != NBMC_OK) throw cli::FrameError(std::string(nbmc_status_string(st)) + ": " + radii_error);
       particles = io::Particles();  // the context has its copies
       nbmc_mesh* raw_mesh = nullptr;
-      st = nbmc_context_reconstruct(ctx, &o.params, &raw_mesh);
+      st = nbmc_context_reconstruct(ctx, &params, &raw_mesh);
       MeshPtr mesh(raw_mesh);
       if (st == NBMC_ERROR_CANCELLED) {
         cancelled_run = true;
@@ -460,14 +514,11 @@ int reconstruct(Options& o) {
     report.output_format = io::mesh_format(o.output);
     report.input_format = io::particle_format(o.input, o.input_format);
     const auto t0 = Clock::now();
-    io::ReadOptions ro;
-    ro.format = o.input_format;
-    ro.attributes = !o.attributes.empty();
-    ro.only = o.attributes;
+    io::ReadOptions ro = read_options(o);
     ro.frame = o.step;
     particles = io::read_particles(o.input, ro);
     report.read_seconds = seconds_since(t0);
-    check_attributes(o.input, particles, o.attributes, ro);
+    check_attributes(o.input, particles, ro.only, ro);
   } catch (const io::Error& e) {
     std::fprintf(stderr, "nbmc: error: %s\n", e.what());
     return 1;
@@ -489,10 +540,14 @@ int reconstruct(Options& o) {
   if (st != NBMC_OK) return library_error(st, nbmc_context_last_error(ctx.get()));
   st = set_attributes(ctx.get(), particles, o.attributes);
   if (st != NBMC_OK) return library_error(st, nbmc_context_last_error(ctx.get()));
+  nbmc_params params;
+  std::string radii_error;
+  st = set_radii(ctx.get(), o, particles, params, radii_error, &report);
+  if (st != NBMC_OK) return library_error(st, radii_error.c_str());
   particles = io::Particles(); // the context has its copies
 
   nbmc_mesh* raw_mesh = nullptr;
-  st = nbmc_context_reconstruct(ctx.get(), &o.params, &raw_mesh);
+  st = nbmc_context_reconstruct(ctx.get(), &params, &raw_mesh);
   MeshPtr mesh(raw_mesh);
   progress.finish();
   if (st == NBMC_ERROR_CANCELLED) return cancelled(progress);
@@ -500,7 +555,7 @@ int reconstruct(Options& o) {
   nbmc_stats_init(&report.stats);
   st = nbmc_context_stats(ctx.get(), &report.stats);
   if (st != NBMC_OK) return library_error(st, nbmc_context_last_error(ctx.get()));
-  report.params = o.params;
+  report.params = params;
   nbmc_subdomain_stats_init(&report.subdomains);
   if (nbmc_context_subdomain_stats(ctx.get(), &report.subdomains) == NBMC_OK)
     for (std::uint64_t i = 0; i < report.subdomains.count; ++i) {
@@ -653,7 +708,7 @@ int reconstruct_mpi(Options& o, int rank, int size, bool pieces) {
   }
   // (--attributes: rank 0 reads them with the positions and scatters both;
   // the per-rank hyperslab reads take positions only.)
-  const bool parallel_read = !o.read_on_root && o.attributes.empty() &&
+  const bool parallel_read = !o.read_on_root && o.attributes.empty() && o.radius_attribute.empty() &&
                              (format == "h5part" || format == "hdf5" || format == "pysph" || format == "gadget");
   std::vector<double> mine;
   io::Particles mine_attributes;  // this rank's share of the --attributes (names as in the file)
@@ -688,13 +743,10 @@ int reconstruct_mpi(Options& o, int rank, int size, bool pieces) {
       report.output_format = pieces ? piece_ext : io::mesh_format(o.output);
       report.input_format = io::particle_format(o.input, o.input_format);
       const auto t0 = Clock::now();
-      io::ReadOptions ro;
-      ro.format = o.input_format;
+      io::ReadOptions ro = read_options(o);
       ro.frame = o.step;
-      ro.attributes = !o.attributes.empty();
-      ro.only = o.attributes;
       particles = io::read_particles(o.input, ro);
-      check_attributes(o.input, particles, o.attributes, ro);
+      check_attributes(o.input, particles, ro.only, ro);
       report.read_seconds = seconds_since(t0);
     } catch (const std::exception& e) {
       error = e.what();
@@ -721,7 +773,9 @@ int reconstruct_mpi(Options& o, int rank, int size, bool pieces) {
                counts[std::size_t(rank)], MPI_DOUBLE, 0, MPI_COMM_WORLD);
   // The attributes asked for, the same shares (each name is in the file:
   // check_attributes on rank 0 agreed above).
-  for (const std::string& name : o.attributes) {
+  std::vector<std::string> scattered = o.attributes;
+  if (!o.radius_attribute.empty()) scattered.push_back(o.radius_attribute);
+  for (const std::string& name : scattered) {
     const io::Attribute* a = root ? particles.attribute(name) : nullptr;
     int comps = a ? a->components : 0;
     MPI_Bcast(&comps, 1, MPI_INT, 0, MPI_COMM_WORLD);
@@ -754,21 +808,37 @@ int reconstruct_mpi(Options& o, int rank, int size, bool pieces) {
   std::int32_t st = nbmc_mpi_context_set_comm(ctx.get(), MPI_COMM_WORLD);
   if (st != NBMC_OK) return fail(nbmc_context_last_error(ctx.get()), 1);
   nbmc_context_set_particles_f64(ctx.get(), mine.empty() ? nullptr : mine.data(), mine.size() / 3, 0);
+  // This rank's attributes and radii (--radius-attribute: the spacing
+  // without --spacing is the largest radius over all ranks).
+  nbmc_params params = o.params;
   {
     std::string attr_error;
+    double extent[2] = {0, -std::numeric_limits<double>::infinity()};  // -smallest, largest
     if (!mine.empty()) {
-      std::vector<std::string> names;
-      for (const io::Attribute& a : mine_attributes.attributes) names.push_back(a.name);
-      if (set_attributes(ctx.get(), mine_attributes, names) != NBMC_OK) attr_error = nbmc_context_last_error(ctx.get());
+      if (set_attributes(ctx.get(), mine_attributes, o.attributes) != NBMC_OK)
+        attr_error = nbmc_context_last_error(ctx.get());
+      else if (set_radii(ctx.get(), o, mine_attributes, params, attr_error, &report) != NBMC_OK && attr_error.empty())
+        attr_error = nbmc_context_last_error(ctx.get());
+      if (!o.radius_attribute.empty()) extent[0] = -report.radius_min, extent[1] = report.radius_max;
     }
     attr_error = agree_error(attr_error, rank, size);
     if (!attr_error.empty()) return fail(attr_error, 1);
+    if (!o.radius_attribute.empty()) {
+      if (mine.empty()) extent[0] = -std::numeric_limits<double>::infinity();
+      MPI_Allreduce(MPI_IN_PLACE, extent, 2, MPI_DOUBLE, MPI_MAX, MPI_COMM_WORLD);
+      report.radius_attribute = o.radius_attribute;
+      report.radius_scale = o.radius_scale;
+      report.radius_min = -extent[0];
+      report.radius_max = extent[1];
+      params = o.params;
+      if (o.spacing_from_radii) params.spacing = extent[1];
+    }
   }
   std::vector<double>().swap(mine);
   mine_attributes = io::Particles();
 
   nbmc_mesh* raw_mesh = nullptr;
-  st = nbmc_mpi_reconstruct(ctx.get(), &o.params, pieces ? NBMC_MPI_PIECES : NBMC_MPI_GATHER, 0, &raw_mesh);
+  st = nbmc_mpi_reconstruct(ctx.get(), &params, pieces ? NBMC_MPI_PIECES : NBMC_MPI_GATHER, 0, &raw_mesh);
   MeshPtr mesh(raw_mesh);
   progress.finish();
   if (st != NBMC_OK) {
@@ -777,7 +847,7 @@ int reconstruct_mpi(Options& o, int rank, int size, bool pieces) {
   }
   nbmc_stats_init(&report.stats);
   nbmc_context_stats(ctx.get(), &report.stats);
-  report.params = o.params;
+  report.params = params;
   report.ranks = size;
   nbmc_subdomain_stats_init(&report.subdomains);
   if (nbmc_context_subdomain_stats(ctx.get(), &report.subdomains) == NBMC_OK && root)
@@ -1189,6 +1259,17 @@ int main(int argc, char** argv) {
                   "written by the PLY, VTK, VTU and glTF writers")
       ->delimiter(',')
       ->option_text("NAME[,NAME...]");
+  rec->add_option("--radius-attribute", o.radius_attribute,
+                  "Per-particle radii from this scalar particle attribute (e.g. SmoothingLengths, h, radius) times "
+                  "--radius-scale. A radius is a particle's r, the spacing it would have in a uniform frame: "
+                  "--spacing then describes a particle of that radius (default: each frame's largest radius) and "
+                  "every particle gets the other lengths scaled by its own radius; the cell size stays global "
+                  "(docs/api.md, per-particle radii)")
+      ->option_text("NAME");
+  rec->add_option("--radius-scale", o.radius_scale,
+                  "Factor from the --radius-attribute values to radii (e.g. SWIFT smoothing lengths to spacings)")
+      ->check(CLI::PositiveNumber)
+      ->capture_default_str();
   rec->add_option("--frames", o.frames,
                   "Sequences: only frames a to b (inclusive), every step-th; IN with {} or a multi-step H5Part file")
       ->option_text("A:B[:STEP]");
@@ -1210,12 +1291,13 @@ int main(int argc, char** argv) {
     return rc == 0 ? 0 : 2;
   }
 
-  if (sp->count() == 0 && pr->count() == 0) {
-    std::fputs("nbmc: error: one of --spacing or --particle-radius is required\n"
+  if (sp->count() == 0 && pr->count() == 0 && o.radius_attribute.empty()) {
+    std::fputs("nbmc: error: one of --spacing, --particle-radius or --radius-attribute is required\n"
                "Run with --help for more information.\n",
                stderr);
     return 2;
   }
+  o.spacing_from_radii = sp->count() == 0 && pr->count() == 0;
   p.spacing = sp->count() > 0 ? o.spacing : 2.0 * o.particle_radius;
   p.method = value_of(kMethods, o.method);
   p.field = value_of(kFields, o.field);

@@ -223,6 +223,9 @@ std::string format_report(const Report& r) {
                          (r.params.isolated == NBMC_ISOLATED_SPHERE ? ", written as spheres to " + r.spheres_path
                                                                     : std::string()));
   line("spacing", printf_string("%g", r.params.spacing) + " (cell size " + printf_string("%g", s.cell_size) + ")");
+  if (!r.radius_attribute.empty())
+    line("radii", "'" + r.radius_attribute + "' x " + printf_string("%g", r.radius_scale) + ": " +
+                      printf_string("%g", r.radius_min) + " to " + printf_string("%g", r.radius_max));
   line("grid", grouped(s.grid_dims[0]) + " x " + grouped(s.grid_dims[1]) + " x " + grouped(s.grid_dims[2]) +
                    " vertices, origin (" + printf_string("%g", s.grid_origin[0]) + ", " +
                    printf_string("%g", s.grid_origin[1]) + ", " + printf_string("%g", s.grid_origin[2]) + ")");
@@ -318,6 +321,12 @@ std::string format_json(const Report& r) {
   o += "  \"attributes\": [";
   for (std::size_t i = 0; i < r.attributes.size(); ++i) o += (i ? ", " : "") + json_string(r.attributes[i]);
   o += "],\n";
+  if (r.radius_attribute.empty())
+    o += "  \"radii\": null,\n";
+  else
+    o += "  \"radii\": {\"attribute\": " + json_string(r.radius_attribute) + ", \"scale\": " +
+         json_number(r.radius_scale) + ", \"min\": " + json_number(r.radius_min) + ", \"max\": " +
+         json_number(r.radius_max) + "},\n";
 
   o += "  \"params\": {";
   o += "\"length_unit\": " + json_string(p.length_unit == NBMC_UNIT_ABSOLUTE ? "absolute" : "spacing");

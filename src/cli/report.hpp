@@ -27,6 +27,9 @@ struct Report {
   bool normals = false;  // the mesh has normals
   std::vector<std::string> attributes; // interpolated onto the vertices
   std::string spheres_path;            // --isolated sphere: the file the spheres went to
+  // --radius-attribute: the attribute, the factor, the smallest and largest radius
+  std::string radius_attribute;
+  double radius_scale = 1, radius_min = 0, radius_max = 0;
   double interpolate_seconds = 0;
   bool has_check = false;             // --check
   nbmc_mesh_check_result check{};     // of the written mesh

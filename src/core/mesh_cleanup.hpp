@@ -22,17 +22,43 @@
 //  3. collapsing one of its edges (to the midpoint or to either end), when
 //     the link condition holds (the two ends share no neighbour but the two
 //     opposite vertices) and the opposite vertices keep three neighbours.
+// Rounds: passes of these until nothing more is repaired with the normal
+// turn limit of 60 degrees, then with 90 degrees (a fold, beyond 90, never),
+// then a last round that adds the last resorts (never pre-empting a repair
+// that keeps more of the mesh):
+//  - in 3., a triangle that was degenerate may stay degenerate, and one
+//    that was bad may stay bad whatever its normal (several vertices at or
+//    near one point, where the field is zero at a grid vertex, as SPH's
+//    level set makes: one collapse after the other merges them);
+//  - 4. cutting a pinched tube: when the needle's short edge (a, b) and a
+//    third vertex c nearly coincide (edges below sin(1 degree) times the
+//    needle's long edge) and form a 3-cycle that is no triangle (ZB05 makes
+//    these where the zero set pinches off at a grid vertex, often with a cap
+//    of three triangles around a fourth vertex on one side), no collapse
+//    passes the link condition. The cycle is cut: the triangles on its left
+//    take a, those on its right take b (c, and a cap's apex, go), both at the
+//    cycle's centre; the six triangles with two vertices on the cycle go.
+//    Every vertex around must keep one closed fan of at least three
+//    triangles; a cap closes its side, otherwise the component splits in two
+//    (or loses a handle) that touch at one point, as the zero set does. Six
+//    triangles fewer; the Euler characteristic is kept for a cap and grows by
+//    2 otherwise.
 // Every repair must make the bad triangle good (or remove it), keep every
-// good triangle good, create no degenerate triangle, and turn no triangle's
-// normal by 60 degrees or more (a second round allows 90 degrees for what is
-// left; a fold, beyond 90, never). Vertices on a boundary, non-manifold or
-// misoriented edge are left alone, so an open or broken input is never made
-// worse. Orientation is kept by construction (collapses rename a vertex,
-// flips keep the quad's boundary direction).
+// good triangle good, create no degenerate triangle (but for the last
+// resort in 3.), and turn no triangle's normal beyond the round's limit.
+// Vertices on a boundary, non-manifold or misoriented edge are left alone, so
+// an open or broken input is never made worse. Orientation is kept by
+// construction (collapses and cuts rename vertices, flips keep the quad's
+// boundary direction).
 //
-// Last, a connected component made of degenerate triangles only (a speck
-// where the field barely dips below zero at one grid vertex) is removed as a
-// whole.
+// Last, what no repair could fix and is only noise is removed, whole
+// connected components at a time (the rest of the mesh is untouched):
+//  - components made of degenerate triangles only (a speck where the field
+//    barely dips below zero at one grid vertex);
+//  - given the cell size, components that still hold a bad triangle and
+//    enclose less than kSmallComponentCells cells (cell^3): droplets the
+//    grid cannot resolve (such as a flat ZB05 droplet of 22 triangles and
+//    0.3 cell^3). CleanupResult counts their triangles.
 //
 // Serial and in a fixed order (worst triangle first, then by index), so the
 // result depends only on the input mesh: the same on every backend and
@@ -44,6 +70,7 @@
 #include "parallel.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cstdint>
 #include <iterator>
 #include <tuple>
@@ -60,9 +87,14 @@ constexpr double kCosMaxNormalTurnLast = 0.0;  // 90 degrees
 // Passes over the bad triangles (each pass repairs what the previous one
 // could not, after its neighbours changed).
 constexpr int kCleanupPasses = 8;
+// Components that still hold a bad triangle after every repair are removed
+// when they enclose less than this many marching-cubes cells (cell^3).
+constexpr double kSmallComponentCells = 1.0;
 
 struct CleanupResult {
   std::uint64_t collapses = 0, flips = 0, moves = 0;
+  std::uint64_t cuts = 0;  // pinched tubes cut
+  std::uint64_t small_component_triangles = 0;  // in droplets below kSmallComponentCells, removed
   std::uint64_t removed_triangles = 0, removed_vertices = 0;
   std::uint64_t bad_before = 0;  // degenerate + sliver triangles of the input
   std::uint64_t bad_after = 0;   // of the output
@@ -106,9 +138,12 @@ class Cleaner {
     mark_irregular();
   }
 
-  std::uint64_t collapses = 0, flips = 0, moves = 0;
+  std::uint64_t collapses = 0, flips = 0, moves = 0, cuts = 0;
   // Largest turn of a triangle's normal a repair may cause (cosine).
   double cos_limit = kCosMaxNormalTurn;
+  // The last round: a collapse may leave degenerate triangles degenerate,
+  // and pinched tubes may be cut.
+  bool last_resort = false;
 
   // Bad triangles now: (class, sin of the smallest angle, index), worst first.
   // (A scan on all host threads; the sort makes the list independent of them.)
@@ -159,8 +194,17 @@ class Cleaner {
       const Vec3 targets[3] = {0.5 * (pa + pb), pa, pb};
       for (int w = 0; w < 3; ++w) consider_collapse(a, b, targets[w], w, best);
     }
-    if (!best.valid) return false;
-    apply_collapse(best);
+    if (best.valid) {
+      apply_collapse(best);
+      return true;
+    }
+    // Last, a needle in a pinched tube: cut the tube (in the last round
+    // only, when nothing else worked).
+    if (!last_resort) return false;
+    CutCandidate cut;
+    consider_cut(t, cut);
+    if (!cut.valid) return false;
+    apply_cut(cut);
     return true;
   }
 
@@ -194,6 +238,51 @@ class Cleaner {
         alive_[t] = 0;
         ++removed;
       }
+    return removed;
+  }
+
+  // Removes the connected components that still hold a bad triangle and
+  // enclose less than max_volume (a component's signed volume, summed in
+  // triangle order): droplets smaller than a marching-cubes cell, whose
+  // surface the grid cannot resolve (a flat lens, or a tube pinched off at a
+  // grid vertex), noise like the degenerate specks. Returns the triangles
+  // removed.
+  std::uint64_t drop_small_bad_components(double max_volume) {
+    std::vector<std::uint32_t> parent(nv_);
+    for (std::size_t v = 0; v < nv_; ++v) parent[v] = std::uint32_t(v);
+    auto root = [&](std::uint32_t v) {
+      while (parent[v] != v) v = parent[v] = parent[parent[v]];
+      return v;
+    };
+    for (std::size_t t = 0; t < nt_; ++t) {
+      if (!alive_[t]) continue;
+      const std::uint32_t* v = T_ + 3 * t;
+      for (int k = 1; k < 3; ++k) {
+        const std::uint32_t a = root(v[0]), b = root(v[k]);
+        if (a != b) parent[std::max(a, b)] = std::min(a, b);
+      }
+    }
+    std::vector<std::uint8_t> bad(nv_, 0);  // by root
+    std::vector<double> volume(nv_, 0.0);   // by root, six times
+    for (std::size_t t = 0; t < nt_; ++t) {
+      if (!alive_[t]) continue;
+      const std::uint32_t* v = T_ + 3 * t;
+      const std::uint32_t r = root(v[0]);
+      if (tri_class(std::uint32_t(t)) != 0) bad[r] = 1;
+      // Relative to the component's root vertex: no cancellation far from
+      // the origin.
+      const Vec3 o = load(P_, r);
+      volume[r] += dot(load(P_, v[0]) - o, cross(load(P_, v[1]) - o, load(P_, v[2]) - o));
+    }
+    std::uint64_t removed = 0;
+    for (std::size_t t = 0; t < nt_; ++t) {
+      if (!alive_[t]) continue;
+      const std::uint32_t r = root(T_[3 * t]);
+      if (bad[r] && std::abs(volume[r]) < 6 * max_volume) {
+        alive_[t] = 0;
+        ++removed;
+      }
+    }
     return removed;
   }
 
@@ -370,7 +459,13 @@ class Cleaner {
         const TriangleShape s_new = triangle_shape(q[0], q[1], q[2]);
         const int c_old = triangle_class(s_old, degenerate_double_area_);
         const int c_new = triangle_class(s_new, degenerate_double_area_);
+        // A triangle that was degenerate may stay so: where several
+        // vertices coincide (the field is zero at a grid vertex), one
+        // collapse after the other removes their degenerate triangles.
+        if (last_resort && c_old == 2 && c_new == 2) continue;
         if (c_new == 2 || (c_old == 0 && c_new != 0)) return;
+        // (and one that was bad may stay bad, its normal noise as before)
+        if (last_resort && c_old != 0 && c_new != 0) continue;
         const Vec3 n_new = cross(q[1] - q[0], q[2] - q[0]);
         const Vec3 n_ref = c_old == 0 ? cross(o[1] - o[0], o[2] - o[0]) : ref;
         if (dot(n_new, n_ref) <= cos_limit * norm(n_new) * norm(n_ref)) return;
@@ -515,6 +610,242 @@ class Cleaner {
     }
   }
 
+  // A pinched tube: the needle t's short edge (a, b) and a third vertex c
+  // nearly coincide (edges shorter than sin(1 degree) times the needle's
+  // long edge) and form a 3-cycle that is no triangle of the mesh: the
+  // surface is a tube of radius ~1e-5 cell there, which marching cubes makes
+  // where the field's zero set pinches off at a grid vertex. No collapse
+  // can shorten that cycle (the link condition fails) and widening it
+  // turns triangles too far. The tube is cut along the cycle instead: the
+  // triangles on one side of it take a, those on the other side take b (c
+  // goes), both at the cycle's centre; the six triangles with two vertices
+  // on the cycle (the needles among them) vanish. Two closed surfaces (or
+  // one of lower genus) meet at a point there, as the zero set does.
+  struct CutCandidate {
+    bool valid = false;
+    double score = -1;
+    std::uint32_t a = 0, b = 0, c = 0;
+    Vec3 p;
+    std::vector<std::pair<std::uint32_t, std::array<std::uint32_t, 3>>> rewritten;  // kept triangles, new vertices
+    std::vector<std::uint32_t> removed;
+  };
+
+  // The triangles of v's fan from the one with edge v -> from (v's next
+  // vertex is `from`) around to the one with edge to -> v, in fan order
+  // (each next triangle shares the previous one's edge to its previous
+  // vertex); false when the fan does not lead there.
+  bool fan_arc(std::uint32_t v, std::uint32_t from, std::uint32_t to, std::vector<std::uint32_t>& arc) {
+    fan(v, scratch_);
+    arc.clear();
+    auto next_of = [&](std::uint32_t t, int which) {
+      const std::uint32_t* w = T_ + 3 * std::size_t(t);
+      const int k = w[0] == v ? 0 : w[1] == v ? 1 : 2;
+      return w[(k + which) % 3];
+    };
+    std::uint32_t cur = kNone;
+    for (std::uint32_t t : scratch_)
+      if (next_of(t, 1) == from) cur = t;
+    while (cur != kNone && arc.size() < scratch_.size()) {
+      arc.push_back(cur);
+      const std::uint32_t pv = next_of(cur, 2);
+      if (pv == to) return true;
+      std::uint32_t nxt = kNone;
+      for (std::uint32_t t : scratch_)
+        if (next_of(t, 1) == pv) nxt = t;
+      cur = nxt;
+    }
+    return false;
+  }
+
+  // True when the triangles around v (each holding v once) form one closed
+  // fan of at least three triangles, each edge used once in each direction.
+  static bool closed_fan(std::uint32_t v, const std::vector<std::array<std::uint32_t, 3>>& f) {
+    if (f.size() < 3) return false;
+    std::vector<std::pair<std::uint32_t, std::uint32_t>> in;
+    std::vector<std::uint32_t> out;
+    for (std::size_t i = 0; i < f.size(); ++i) {
+      const auto& w = f[i];
+      if ((w[0] == v) + (w[1] == v) + (w[2] == v) != 1) return false;
+      if (w[0] == w[1] || w[1] == w[2] || w[2] == w[0]) return false;
+      const int k = w[0] == v ? 0 : w[1] == v ? 1 : 2;
+      out.push_back(w[(k + 1) % 3]);
+      in.push_back({w[(k + 2) % 3], std::uint32_t(i)});
+    }
+    std::sort(in.begin(), in.end());
+    for (std::size_t k = 1; k < in.size(); ++k)
+      if (in[k].first == in[k - 1].first) return false;
+    std::uint32_t cur = 0, steps = 0;
+    do {
+      auto it = std::lower_bound(in.begin(), in.end(), std::make_pair(out[cur], 0u));
+      if (it == in.end() || it->first != out[cur]) return false;
+      cur = it->second;
+      ++steps;
+    } while (cur != 0 && steps <= out.size());
+    return cur == 0 && steps == out.size();
+  }
+
+  void consider_cut(std::uint32_t t, CutCandidate& best) {
+    const std::uint32_t* v = T_ + 3 * std::size_t(t);
+    int k_short = 0;
+    double l_short = 0, l_long = 0;
+    for (int k = 0; k < 3; ++k) {
+      const double l = norm(load(P_, v[(k + 1) % 3]) - load(P_, v[k]));
+      if (k == 0 || l < l_short) l_short = l, k_short = k;
+      l_long = std::max(l_long, l);
+    }
+    const double near = kSinOneDegree * l_long;
+    if (!(l_short < near)) return;
+    // (a, b) in the triangle's direction.
+    const std::uint32_t a = v[k_short], b = v[(k_short + 1) % 3];
+    fan(a, fa_);
+    ring(a, fa_, ra_);
+    fan(b, fb_);
+    ring(b, fb_, rb_);
+    common_.clear();
+    std::set_intersection(ra_.begin(), ra_.end(), rb_.begin(), rb_.end(), std::back_inserter(common_));
+    const std::vector<std::uint32_t> candidates = common_;
+    for (std::uint32_t c : candidates) {
+      const Vec3 pa = load(P_, a), pb = load(P_, b), pc = load(P_, c);
+      if (!(norm(pc - pa) < near && norm(pc - pb) < near)) continue;
+      if (irregular_[c]) continue;
+      // (a, b, c) must be no triangle.
+      bool face = false;
+      for (std::uint32_t u : fa_)
+        if (contains(T_ + 3 * std::size_t(u), b) && contains(T_ + 3 * std::size_t(u), c)) face = true;
+      if (face) continue;
+      // The two sides of the cycle a -> b -> c -> a: "left" holds the
+      // triangles with edges a -> b, b -> c, c -> a.
+      std::vector<std::uint32_t> left, right, arc;
+      const std::uint32_t cyc[3] = {a, b, c};
+      bool ok = true;
+      std::size_t fans = 0;
+      for (int k = 0; k < 3 && ok; ++k) {
+        const std::uint32_t x = cyc[k], nx = cyc[(k + 1) % 3], pv = cyc[(k + 2) % 3];
+        ok = fan_arc(x, nx, pv, arc);
+        left.insert(left.end(), arc.begin(), arc.end());
+        std::size_t n = arc.size();
+        ok = ok && fan_arc(x, pv, nx, arc);
+        right.insert(right.end(), arc.begin(), arc.end());
+        n += arc.size();
+        fan(x, scratch_);
+        ok = ok && n == scratch_.size();
+        fans += scratch_.size();
+      }
+      if (!ok) continue;
+      std::sort(left.begin(), left.end());
+      left.erase(std::unique(left.begin(), left.end()), left.end());
+      std::sort(right.begin(), right.end());
+      right.erase(std::unique(right.begin(), right.end()), right.end());
+      common_.clear();
+      std::set_intersection(left.begin(), left.end(), right.begin(), right.end(), std::back_inserter(common_));
+      if (!common_.empty()) continue;  // a side that wraps around to the other
+      CutCandidate cand;
+      cand.a = a, cand.b = b, cand.c = c;
+      const Vec3 centre = (1.0 / 3) * (pa + pb + pc);
+      cand.p = Vec3{double(Real(centre.x)), double(Real(centre.y)), double(Real(centre.z))};
+      for (int side = 0; side < 2; ++side)
+        for (std::uint32_t u : side == 0 ? left : right) {
+          std::array<std::uint32_t, 3> w;
+          int on = 0;
+          for (int k = 0; k < 3; ++k) {
+            w[k] = T_[3 * std::size_t(u) + k];
+            if (w[k] == a || w[k] == b || w[k] == c) {
+              w[k] = side == 0 ? a : b;
+              ++on;
+            }
+          }
+          if (on >= 2) cand.removed.push_back(u);
+          else cand.rewritten.push_back({u, w});
+        }
+      if (cand.removed.size() != 6 || cand.rewritten.empty()) continue;
+      // Topology: every vertex of a changed triangle keeps one closed fan.
+      std::vector<std::uint32_t> touched;
+      for (std::uint32_t u : left) touched.insert(touched.end(), T_ + 3 * std::size_t(u), T_ + 3 * std::size_t(u) + 3);
+      for (std::uint32_t u : right) touched.insert(touched.end(), T_ + 3 * std::size_t(u), T_ + 3 * std::size_t(u) + 3);
+      std::sort(touched.begin(), touched.end());
+      touched.erase(std::unique(touched.begin(), touched.end()), touched.end());
+      auto new_triangle = [&](std::uint32_t u, std::array<std::uint32_t, 3>& w) {
+        if (std::binary_search(cand.removed.begin(), cand.removed.end(), u)) return false;
+        for (const auto& r : cand.rewritten)
+          if (r.first == u) {
+            w = r.second;
+            return true;
+          }
+        for (int k = 0; k < 3; ++k) w[k] = T_[3 * std::size_t(u) + k];
+        return true;
+      };
+      std::sort(cand.removed.begin(), cand.removed.end());
+      std::vector<std::array<std::uint32_t, 3>> f;
+      for (std::uint32_t x : touched) {
+        if (x == c) continue;
+        f.clear();
+        if (x == a || x == b) {
+          for (const auto& r : cand.rewritten)
+            if (contains(r.second.data(), x)) f.push_back(r.second);
+        } else {
+          fan(x, scratch_);
+          std::array<std::uint32_t, 3> w;
+          for (std::uint32_t u : scratch_)
+            if (new_triangle(u, w)) f.push_back(w);
+        }
+        // A vertex all of whose triangles go (the apex of a cap of three
+        // triangles closing one side) goes with them.
+        if (!f.empty() && !closed_fan(x, f)) {
+          ok = false;
+          break;
+        }
+      }
+      if (!ok) continue;
+      // Geometry: as for the other repairs.
+      Vec3 ref;
+      for (const auto& r : cand.rewritten) {
+        const std::uint32_t* w = T_ + 3 * std::size_t(r.first);
+        ref = ref + cross(load(P_, w[1]) - load(P_, w[0]), load(P_, w[2]) - load(P_, w[0]));
+      }
+      double score = 2;
+      for (const auto& r : cand.rewritten) {
+        Vec3 q[3], o[3];
+        for (int k = 0; k < 3; ++k) {
+          o[k] = load(P_, T_[3 * std::size_t(r.first) + k]);
+          q[k] = r.second[k] == a || r.second[k] == b ? cand.p : o[k];
+        }
+        const TriangleShape s_old = triangle_shape(o[0], o[1], o[2]);
+        const TriangleShape s_new = triangle_shape(q[0], q[1], q[2]);
+        const int c_old = triangle_class(s_old, degenerate_double_area_);
+        const int c_new = triangle_class(s_new, degenerate_double_area_);
+        if (c_new == 2 || (c_old == 0 && c_new != 0)) {
+          ok = false;
+          break;
+        }
+        const Vec3 n_new = cross(q[1] - q[0], q[2] - q[0]);
+        const Vec3 n_ref = c_old == 0 ? cross(o[1] - o[0], o[2] - o[0]) : ref;
+        if (dot(n_new, n_ref) <= cos_limit * norm(n_new) * norm(n_ref)) {
+          ok = false;
+          break;
+        }
+        score = std::min(score, s_new.sin_min_angle);
+      }
+      if (!ok || score <= best.score) continue;
+      cand.valid = true;
+      cand.score = score;
+      best = std::move(cand);
+    }
+  }
+
+  void apply_cut(const CutCandidate& c) {
+    for (std::uint32_t u : c.removed) alive_[u] = 0;
+    for (const auto& r : c.rewritten) {
+      for (int k = 0; k < 3; ++k) T_[3 * std::size_t(r.first) + k] = r.second[k];
+      add_incidence(contains(r.second.data(), c.a) ? c.a : c.b, r.first);
+    }
+    for (std::uint32_t x : {c.a, c.b}) {
+      P_[3 * std::size_t(x)] = Real(c.p.x);
+      P_[3 * std::size_t(x) + 1] = Real(c.p.y);
+      P_[3 * std::size_t(x) + 2] = Real(c.p.z);
+    }
+    ++cuts;
+  }
+
   void consider_flip(std::uint32_t t, Candidate& best) {
     const std::uint32_t* v = T_ + 3 * std::size_t(t);
     // The longest edge (a, b), in the triangle's direction; c opposite.
@@ -626,21 +957,28 @@ class Cleaner {
 // Cleans the mesh in place: positions (3 floats or doubles per vertex) and
 // normals (3 floats per vertex; may be empty), triangles (3 indices each).
 // Vectors of any allocator; they are shrunk to the new counts.
+// cell: the marching-cubes cell edge; with cell > 0, the components that
+// still hold a bad triangle at the end and enclose less than
+// kSmallComponentCells cells are removed (0: never).
 template <class PosVec, class NormalVec, class IndexVec>
-CleanupResult cleanup_mesh(PosVec& positions, NormalVec& normals, IndexVec& triangles) {
+CleanupResult cleanup_mesh(PosVec& positions, NormalVec& normals, IndexVec& triangles, double cell = 0) {
   CleanupResult r;
   const std::size_t nv = positions.size() / 3, nt = triangles.size() / 3;
   if (nt == 0) return r;
   const bool has_normals = !normals.empty() && normals.size() == positions.size();
   detail::Cleaner<typename PosVec::value_type> c(positions.data(), has_normals ? normals.data() : nullptr, nv, triangles.data(), nt);
   // Passes until nothing more can be repaired; then again with a looser
-  // limit on the normals' turn for what is left (folds stay excluded).
+  // limit on the normals' turn for what is left (folds stay excluded);
+  // then, for what is still left, with the last resorts (collapses that
+  // leave degenerate triangles degenerate, cuts of pinched tubes), so that
+  // they never pre-empt a repair that keeps more of the mesh.
   // (A scan costs about 40 ns per triangle: none is repeated needlessly.)
   constexpr std::uint64_t kUnknown = ~std::uint64_t(0);
   std::uint64_t remaining = kUnknown;
   bool first = true;
-  for (double cos_limit : {kCosMaxNormalTurn, kCosMaxNormalTurnLast}) {
-    c.cos_limit = cos_limit;
+  for (int round = 0; round < 3; ++round) {
+    c.cos_limit = round == 0 ? kCosMaxNormalTurn : kCosMaxNormalTurnLast;
+    c.last_resort = round == 2;
     for (int pass = 0; pass < kCleanupPasses && remaining != 0; ++pass) {
       const auto bad = c.bad_triangles();
       if (first) r.bad_before = bad.size();
@@ -655,8 +993,14 @@ CleanupResult cleanup_mesh(PosVec& positions, NormalVec& normals, IndexVec& tria
   // What no repair could fix and is only noise: specks made of degenerate
   // triangles alone.
   if (remaining != 0 && c.drop_degenerate_components() > 0) remaining = kUnknown;
+  // ... and droplets smaller than a cell that still hold a bad triangle.
+  if (remaining != 0 && cell > 0) {
+    r.small_component_triangles = c.drop_small_bad_components(kSmallComponentCells * cell * cell * cell);
+    if (r.small_component_triangles > 0) remaining = kUnknown;
+  }
   r.bad_after = remaining != kUnknown ? remaining : c.bad_triangles().size();
   r.collapses = c.collapses;
+  r.cuts = c.cuts;
   r.flips = c.flips;
   r.moves = c.moves;
   const auto counts = c.compact();

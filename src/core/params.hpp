@@ -7,6 +7,7 @@
 #include "nbmc.h"
 
 #include <cstdint>
+#include <cstdio>
 #include <memory>
 #include <new>
 #include <stdexcept>
@@ -86,6 +87,12 @@ struct Params {
   bool double_positions = false;  // mesh positions in double (HostMesh::positions64)
   bool use_bbox = false;
   double bbox_min[3] = {0, 0, 0}, bbox_max[3] = {0, 0, 0};
+  // Per-particle radii (nbmc_context_set_radii_*): the largest radius r_max
+  // of the frame, 0 without radii. The lengths above are then those of a
+  // particle of radius r_max (spacing = r_max; scale_for_radii), and
+  // particle j's are t_j = r_j / r_max times them (backends/kokkos/radii.hpp);
+  // the cell size is the frame's.
+  double radius_ref = 0;
 };
 
 // YT10's bounds (backends/kokkos/field_yt10.hpp): a kernel's longest axis is
@@ -101,6 +108,40 @@ constexpr double kYt10MaxShift = 0.2;
 // density, the smoothed centre and the anisotropy) are sums over the
 // particles within R; they have no iso_radius.
 inline bool is_density_field(Method m) { return m == Method::SPH || m == Method::YT10; }
+
+// The largest ratio between the largest and the smallest per-particle radius.
+constexpr double kMaxRadiusRatio = 1e6;
+
+// Per-particle radii, the smallest r_min and the largest r_max (absolute,
+// validated): p's lengths, resolved for a particle of radius p.spacing,
+// become those of the largest particle -- influence radius, band width,
+// surface radius and iso radius times r_max / p.spacing; the cell size stays
+// the frame's -- and spacing becomes r_max. Unless every radius is the same,
+// the per-particle path is on (radius_ref = r_max: particle j's lengths are
+// r_j / r_max times these). Equal radii make a uniform frame of spacing r_max,
+// which takes the path without radii (r_max == p.spacing leaves p as it is).
+// YT10 has no per-particle radii (its anisotropic kernels are fitted at one
+// support h = R/2): refused whether or not the radii differ.
+inline void scale_for_radii(Params& p, double r_min, double r_max) {
+  if (p.method == Method::YT10)
+    throw Error(NBMC_ERROR_INVALID_PARAMETER,
+                "per-particle radii are not supported with method yt10 (use ssp07, zb05 or sph, or no radii)");
+  if (!(r_min > 0) || !(r_max >= r_min))
+    throw Error(NBMC_ERROR_INTERNAL, "per-particle radii: no valid smallest and largest radius");
+  if (r_max > kMaxRadiusRatio * r_min) {
+    char msg[160];
+    std::snprintf(msg, sizeof msg, "the per-particle radii span more than a factor 1e6 (smallest %g, largest %g)",
+                  r_min, r_max);
+    throw Error(NBMC_ERROR_INVALID_PARAMETER, msg);
+  }
+  const double f = r_max / p.spacing;
+  p.influence_radius *= f;
+  p.band_width *= f;
+  p.surface_radius *= f;
+  p.iso_radius *= f;
+  p.spacing = r_max;
+  p.radius_ref = r_min < r_max ? r_max : 0;
+}
 
 // How far from a point the particles that change its field value can lie:
 // R, or 2R for the SPH density and YT10, whose value at a point also depends

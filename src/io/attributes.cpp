@@ -129,7 +129,7 @@ namespace {
 template <class Real>
 std::vector<Attribute> interpolate_at(const double* xyz, std::size_t n, const std::vector<Attribute>& attributes,
                                       const std::vector<std::string>& names, const Real* vertices,
-                                      std::uint64_t vertex_count, double radius, int threads) {
+                                      std::uint64_t vertex_count, double radius, int threads, const double* scale) {
   const std::string who = "attribute interpolation";
   if (!(radius > 0) || !std::isfinite(radius)) detail::fail_arg(who, "the radius must be positive and finite");
   if (n > 0 && !xyz) detail::fail_arg(who, "no particle positions");
@@ -209,7 +209,7 @@ std::vector<Attribute> interpolate_at(const double* xyz, std::size_t n, const st
             for (std::uint32_t q = b; q < e; ++q) {
               const std::size_t p = order[q];
               const double d0 = x[0] - xyz[3 * p], d1 = x[1] - xyz[3 * p + 1], d2 = x[2] - xyz[3 * p + 2];
-              const double s2 = (d0 * d0 + d1 * d1 + d2 * d2) / r2;
+              const double s2 = (d0 * d0 + d1 * d1 + d2 * d2) / (scale ? r2 * (scale[p] * scale[p]) : r2);
               if (s2 >= 1.0) continue;
               const double t = 1.0 - s2;
               const double w = t * t * t;
@@ -270,14 +270,16 @@ std::vector<Attribute> interpolate_at(const double* xyz, std::size_t n, const st
 
 std::vector<Attribute> interpolate_attributes(const double* xyz, std::size_t n, const std::vector<Attribute>& attributes,
                                               const std::vector<std::string>& names, const float* vertices,
-                                              std::uint64_t vertex_count, double radius, int threads) {
-  return interpolate_at(xyz, n, attributes, names, vertices, vertex_count, radius, threads);
+                                              std::uint64_t vertex_count, double radius, int threads,
+                                              const double* scale) {
+  return interpolate_at(xyz, n, attributes, names, vertices, vertex_count, radius, threads, scale);
 }
 
 std::vector<Attribute> interpolate_attributes(const double* xyz, std::size_t n, const std::vector<Attribute>& attributes,
                                               const std::vector<std::string>& names, const double* vertices,
-                                              std::uint64_t vertex_count, double radius, int threads) {
-  return interpolate_at(xyz, n, attributes, names, vertices, vertex_count, radius, threads);
+                                              std::uint64_t vertex_count, double radius, int threads,
+                                              const double* scale) {
+  return interpolate_at(xyz, n, attributes, names, vertices, vertex_count, radius, threads, scale);
 }
 
 } // namespace nbmc::io

@@ -52,15 +52,19 @@ std::vector<Attribute> interpolate_attributes(const std::vector<double>& particl
 
 // The same over particle_count particles at xyz (3 doubles each), on threads
 // OpenMP threads (0: the OpenMP default); the result does not depend on it.
+// scale (may be null; per-particle radii): particle p's kernel support is
+// radius * scale[p], scale[p] in (0, 1].
 std::vector<Attribute> interpolate_attributes(const double* xyz, std::size_t particle_count,
                                               const std::vector<Attribute>& attributes,
                                               const std::vector<std::string>& names, const float* vertices,
-                                              std::uint64_t vertex_count, double radius, int threads = 0);
+                                              std::uint64_t vertex_count, double radius, int threads = 0,
+                                              const double* scale = nullptr);
 // The same at double-precision vertices (meshes made with double_positions).
 std::vector<Attribute> interpolate_attributes(const double* xyz, std::size_t particle_count,
                                               const std::vector<Attribute>& attributes,
                                               const std::vector<std::string>& names, const double* vertices,
-                                              std::uint64_t vertex_count, double radius, int threads = 0);
+                                              std::uint64_t vertex_count, double radius, int threads = 0,
+                                              const double* scale = nullptr);
 
 } // namespace nbmc::io
 

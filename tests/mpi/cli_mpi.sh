@@ -51,6 +51,14 @@ rc=$?
 check "--attributes under MPI: a missing name fails on every rank, no output" \
   "[ $rc -ne 0 ] && grep -q \"no particle attribute 'nosuch'\" bad-attr.err && [ ! -e bad-attr.ply ]"
 
+"$NBMC" reconstruct "$H5" --radius-attribute rho --radius-scale 0.0001 --attributes v -o h5-radii-whole.ply -q
+"${MPIRUN[@]}" -n 3 "$NBMC" reconstruct "$H5" --radius-attribute rho --radius-scale 0.0001 --attributes v \
+  -o h5-radii-mpi.ply --json radii.json -q
+check "--radius-attribute (radii 0.1-0.102) with --attributes under MPI: one process's file, byte for byte" \
+  "[ -s h5-radii-whole.ply ] && cmp -s h5-radii-whole.ply h5-radii-mpi.ply"
+check "--radius-attribute under MPI: the frame's smallest and largest radius in the report" \
+  "grep -q '\"min\": 0.1, \"max\": 0.1019' radii.json"
+
 "${MPIRUN[@]}" -n 3 "$NBMC" reconstruct "$FRAME" --particle-radius 0.025 -o surf.pvtp --pieces -q
 check "--pieces: three pieces and an index" \
   "[ -s surf_0.vtp ] && [ -s surf_1.vtp ] && [ -s surf_2.vtp ] && grep -c 'Piece Source' surf.pvtp | grep -q 3"

@@ -377,6 +377,22 @@ extern "C" {
     // (x, y, z, radius), host memory; null when there are none.
     pub fn nbmc_mesh_sphere_count(mesh: *const nbmc_mesh) -> u64;
     pub fn nbmc_mesh_spheres(mesh: *const nbmc_mesh) -> *const f32;
+    // per-particle radii (`radii` NULL removes them; count = the particle count)
+    pub fn nbmc_context_set_radii_f32(ctx: *mut nbmc_context, radii: *const f32, count: u64, byte_stride: u64) -> i32;
+    pub fn nbmc_context_set_radii_f64(ctx: *mut nbmc_context, radii: *const f64, count: u64, byte_stride: u64) -> i32;
+    // `radii` is CUDA device memory of the context's GPU (CUDA backend only).
+    pub fn nbmc_context_set_radii_device_f32(
+        ctx: *mut nbmc_context,
+        radii: *const f32,
+        count: u64,
+        byte_stride: u64,
+    ) -> i32;
+    pub fn nbmc_context_set_radii_device_f64(
+        ctx: *mut nbmc_context,
+        radii: *const f64,
+        count: u64,
+        byte_stride: u64,
+    ) -> i32;
 }
 
 /// include/nbmc_mpi.h (feature `mpi`, links libnbmc_mpi): one frame over the

@@ -720,6 +720,62 @@ impl Context {
         self.check(s)
     }
 
+    /// Sets (copies) per-particle radii, one per particle of the last upload
+    /// (absolute, in the unit of the positions): a radius is the particle's
+    /// `r`, the spacing it would have in a uniform frame. The [`Params`] then
+    /// describe a particle of radius `Params::spacing`, and each particle
+    /// scales the influence radius, band width, surface radius and iso radius
+    /// by its own radius over it; the cell size stays the frame's (see
+    /// docs/api.md, "Per-particle radii"). They stay for the following
+    /// reconstructions until [`Context::clear_radii`] or the next particle
+    /// upload. A slice of the wrong length gives [`Error::INVALID_ARGUMENT`];
+    /// a NaN, infinite, zero or negative radius
+    /// [`Error::INVALID_PARAMETER`] (the message names the particle).
+    pub fn set_radii_f32(&mut self, radii: &[f32]) -> Result<()> {
+        let s = unsafe { sys::nbmc_context_set_radii_f32(self.raw.as_ptr(), radii.as_ptr(), radii.len() as u64, 0) };
+        self.check(s)
+    }
+
+    /// Double-precision version of [`Context::set_radii_f32`].
+    pub fn set_radii_f64(&mut self, radii: &[f64]) -> Result<()> {
+        let s = unsafe { sys::nbmc_context_set_radii_f64(self.raw.as_ptr(), radii.as_ptr(), radii.len() as u64, 0) };
+        self.check(s)
+    }
+
+    /// Removes the per-particle radii (Ok also when there are none).
+    pub fn clear_radii(&mut self) -> Result<()> {
+        let s = unsafe { sys::nbmc_context_set_radii_f64(self.raw.as_ptr(), ptr::null(), 0, 0) };
+        self.check(s)
+    }
+
+    /// Sets the per-particle radii from CUDA device memory: `count` f32
+    /// values (the particle count), value i at byte offset `i * byte_stride`
+    /// from `radii` (0 = packed; otherwise a multiple of 4). CUDA backend
+    /// only, else [`Error::BACKEND_UNAVAILABLE`].
+    ///
+    /// # Safety
+    /// `radii` must be CUDA device (or managed) memory of the context's GPU
+    /// in which those values are allocated and unchanged for the duration of
+    /// the call (see [`Context::set_particles_device_f32`]).
+    pub unsafe fn set_radii_device_f32(&mut self, radii: *const f32, count: usize, byte_stride: usize) -> Result<()> {
+        let s = unsafe {
+            sys::nbmc_context_set_radii_device_f32(self.raw.as_ptr(), radii, count as u64, byte_stride as u64)
+        };
+        self.check(s)
+    }
+
+    /// Double-precision version of [`Context::set_radii_device_f32`].
+    ///
+    /// # Safety
+    /// As for [`Context::set_radii_device_f32`], with f64 values aligned to 8
+    /// bytes.
+    pub unsafe fn set_radii_device_f64(&mut self, radii: *const f64, count: usize, byte_stride: usize) -> Result<()> {
+        let s = unsafe {
+            sys::nbmc_context_set_radii_device_f64(self.raw.as_ptr(), radii, count as u64, byte_stride as u64)
+        };
+        self.check(s)
+    }
+
     fn check(&self, status: i32) -> Result<()> {
         if status == sys::NBMC_OK {
             Ok(())

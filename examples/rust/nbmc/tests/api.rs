@@ -510,6 +510,46 @@ fn decimation_and_spheres() {
     assert_eq!(ctx.reconstruct(&params).unwrap_err().code, Error::INVALID_PARAMETER);
 }
 
+/// Per-particle radii: equal to the spacing, the mesh without radii; two
+/// sizes, a closed mesh that differs; exact codes for bad radii; an upload
+/// removes them.
+fn radii_follow_the_particles() {
+    let particles = sample();
+    let n = particles.len();
+    let mut ctx = Context::with_options(ContextOptions { backend: Backend::OpenMp, ..Default::default() }).unwrap();
+    assert_eq!(ctx.set_radii_f64(&[SPACING]).unwrap_err().code, Error::NO_PARTICLES);
+    ctx.set_particles_f32(&particles).unwrap();
+    let params = Params::new(SPACING);
+    let plain = ctx.reconstruct(&params).unwrap();
+    ctx.set_radii_f64(&vec![SPACING; n]).unwrap();
+    let equal = ctx.reconstruct(&params).unwrap();
+    assert_eq!(equal.positions(), plain.positions());
+    assert_eq!(equal.triangles(), plain.triangles());
+    // The left half of the frame half as large.
+    let radii: Vec<f32> =
+        particles.iter().map(|p| if p[0] < 0.5 { 0.5 * SPACING as f32 } else { SPACING as f32 }).collect();
+    ctx.set_radii_f32(&radii).unwrap();
+    let mixed = ctx.reconstruct(&params).unwrap();
+    assert_closed(&mixed);
+    assert_ne!(mixed.triangle_count(), plain.triangle_count());
+    ctx.clear_radii().unwrap();
+    assert_eq!(ctx.reconstruct(&params).unwrap().positions(), plain.positions());
+    // Bad radii, a wrong count.
+    assert_eq!(ctx.set_radii_f32(&radii[1..]).unwrap_err().code, Error::INVALID_ARGUMENT);
+    let mut bad = radii.clone();
+    bad[5] = -1.0;
+    let e = ctx.set_radii_f32(&bad).unwrap_err();
+    assert_eq!(e.code, Error::INVALID_PARAMETER);
+    assert!(e.message.contains("particle 5"), "{e}");
+    // SAFETY: a host array; a CPU context rejects the call without reading it.
+    let e = unsafe { ctx.set_radii_device_f32(radii.as_ptr(), n, 0) }.unwrap_err();
+    assert_eq!(e.code, Error::BACKEND_UNAVAILABLE, "{e}");
+    // An upload removes them.
+    ctx.set_radii_f32(&radii).unwrap();
+    ctx.set_particles_f32(&particles).unwrap();
+    assert_eq!(ctx.reconstruct(&params).unwrap().positions(), plain.positions());
+}
+
 // ------------------------------------------------------------------ runner
 
 fn main() -> std::process::ExitCode {
@@ -534,6 +574,7 @@ fn main() -> std::process::ExitCode {
         ("attributes_follow_the_particles_onto_the_mesh", attributes_follow_the_particles_onto_the_mesh),
         ("double_positions_far_from_the_origin", double_positions_far_from_the_origin),
         ("decimation_and_spheres", decimation_and_spheres),
+        ("radii_follow_the_particles", radii_follow_the_particles),
     ];
     // libtest-like arguments: options are ignored, the first free word filters.
     let filter = std::env::args().skip(1).find(|a| !a.starts_with('-')).unwrap_or_default();

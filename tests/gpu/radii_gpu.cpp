@@ -1,0 +1,218 @@
+// SPDX-License-Identifier: MIT
+// Per-particle radii on the CUDA backend (run on a GPU machine):
+//  - a coarse box and a sphere sampled four times finer, with their radii
+//    (and larger twins of some fine particles at their very positions):
+//    OpenMP and CUDA give the same topology (the SPH density the same mesh
+//    bit for bit; SSP07 and ZB05 positions within 1e-3 of a cell, as
+//    cuda_equivalence allows for the eigenvalue's acosf/cosf);
+//  - radii from device memory (float strided, double packed) equal the same
+//    radii from the host, bit for bit; device particles with host radii, and
+//    a device mesh, too;
+//  - a subdomain split on the GPU gives the GPU's whole-frame mesh;
+//  - errors: a host pointer, a misaligned stride, a negative radius on the
+//    device.
+//   nbmc_cuda_radii
+#include "nbmc_test.hpp"
+
+#include <cuda_runtime.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <string>
+#include <vector>
+
+using namespace nbmc_test;
+
+namespace {
+int failures = 0;
+
+void check(bool ok, const std::string& what) {
+  std::printf("%s %s\n", ok ? "ok  " : "FAIL", what.c_str());
+  if (!ok) ++failures;
+}
+
+struct Ctx {
+  nbmc_context* c = nullptr;
+  explicit Ctx(int32_t backend) {
+    nbmc_context_desc d;
+    nbmc_context_desc_init(&d);
+    d.backend = backend;
+    if (nbmc_context_create(&d, &c) != NBMC_OK) c = nullptr;
+  }
+  ~Ctx() { nbmc_context_destroy(c); }
+  std::string error() const { return nbmc_context_last_error(c); }
+};
+
+template <class T> T* to_device(const std::vector<T>& v) {
+  T* d = nullptr;
+  if (cudaMalloc(&d, v.size() * sizeof(T)) != cudaSuccess) return nullptr;
+  cudaMemcpy(d, v.data(), v.size() * sizeof(T), cudaMemcpyHostToDevice);
+  return d;
+}
+
+struct Host {
+  std::vector<float> pos, nrm;
+  std::vector<std::uint32_t> tri;
+};
+
+// The mesh (any memory) copied to the host; destroys it.
+Host take(nbmc_mesh* m) {
+  Host h;
+  if (!m) return h;
+  h.pos.resize(3 * nbmc_mesh_vertex_count(m));
+  h.nrm.resize(3 * nbmc_mesh_vertex_count(m));
+  h.tri.resize(3 * nbmc_mesh_triangle_count(m));
+  nbmc_mesh_copy_to_host(m, h.pos.data(), h.nrm.data(), h.tri.data());
+  nbmc_mesh_destroy(m);
+  return h;
+}
+
+bool same(const Host& a, const Host& b) {
+  return !a.tri.empty() && a.pos == b.pos && a.nrm == b.nrm && a.tri == b.tri;
+}
+
+Host run(int32_t backend, const Points& p, const std::vector<double>& radii, const nbmc_params& prm,
+         const int split[3] = nullptr) {
+  Ctx ctx(backend);
+  if (!ctx.c) return {};
+  nbmc_context_set_particles_f64(ctx.c, p.data(), p.size() / 3, 0);
+  if (nbmc_context_set_radii_f64(ctx.c, radii.data(), radii.size(), 0) != NBMC_OK) {
+    check(false, "set_radii: " + ctx.error());
+    return {};
+  }
+  if (split) nbmc_context_set_subdomains(ctx.c, split[0], split[1], split[2]);
+  nbmc_mesh* m = nullptr;
+  if (nbmc_context_reconstruct(ctx.c, &prm, &m) != NBMC_OK) {
+    check(false, "reconstruct: " + ctx.error());
+    return {};
+  }
+  return take(m);
+}
+}  // namespace
+
+int main() {
+  if (!nbmc_backend_available(NBMC_BACKEND_CUDA)) {
+    std::printf("no CUDA backend/device: skipped\n");
+    return 0;
+  }
+  // The frame of tests/test_radii.cpp: spacing 0.1 box, spacing 0.025 sphere.
+  const double rc = 0.1, rf = 0.025;
+  const double lo[3] = {-1.2, -0.4, -0.4}, hi[3] = {-0.6, 0.4, 0.4};
+  Points p = box(lo, hi, rc);
+  const std::size_t coarse = p.size() / 3;
+  p = concat(p, sphere(0.6, 0, 0, 0.4, rf));
+  // Larger twins of every 7th fine particle: coincident particles of
+  // different radii, which both backends order by radius (the device by a
+  // radix pass, the host by order_by_radius).
+  const std::size_t singles = p.size() / 3;
+  for (std::size_t i = coarse; i < singles; i += 7) p.insert(p.end(), {p[3 * i], p[3 * i + 1], p[3 * i + 2]});
+  const std::size_t n = p.size() / 3;
+  std::vector<double> radii(n, rf);
+  std::fill(radii.begin(), radii.begin() + std::ptrdiff_t(coarse), rc);
+  std::fill(radii.begin() + std::ptrdiff_t(singles), radii.end(), 1.5 * rf);
+  nbmc_params prm = params(rc);
+  prm.cell_size = rf / rc;
+
+  // OpenMP against CUDA, per method.
+  for (int32_t method : {NBMC_METHOD_SSP07, NBMC_METHOD_ZB05, NBMC_METHOD_SPH}) {
+    nbmc_params q = prm;
+    q.method = method;
+    const Host cpu = run(NBMC_BACKEND_OPENMP, p, radii, q), gpu = run(NBMC_BACKEND_CUDA, p, radii, q);
+    const std::string name = method == NBMC_METHOD_SSP07 ? "ssp07" : method == NBMC_METHOD_ZB05 ? "zb05" : "sph";
+    Mesh gm;
+    gm.positions = gpu.pos;
+    gm.triangles = gpu.tri;
+    const MeshReport rep = check_mesh(gm);
+    check(rep.closed && rep.oriented && rep.vertex_manifold && rep.components == 2,
+          name + ": GPU mesh closed, two components (" + rep.summary() + ")");
+    // As tests/gpu/cuda_equivalence.cpp: identical topology with positions
+    // within 1e-3 of a cell, or (a value within rounding of zero) the same
+    // triangle count with at most 0.01% of the triangles different.
+    const bool topology = !cpu.tri.empty() && cpu.tri == gpu.tri;
+    double worst = 0;
+    std::size_t diff = 0;
+    if (topology) {
+      for (std::size_t i = 0; i < cpu.pos.size(); ++i)
+        worst = std::max(worst, double(std::fabs(cpu.pos[i] - gpu.pos[i])));
+    } else {
+      for (std::size_t t = 0; t < std::min(cpu.tri.size(), gpu.tri.size()); ++t) diff += cpu.tri[t] != gpu.tri[t];
+    }
+    const double cell = rf;
+    if (method == NBMC_METHOD_SPH)
+      check(same(cpu, gpu), name + ": OpenMP and CUDA meshes bit for bit");
+    else
+      check(topology ? worst <= 1e-3 * cell
+                     : cpu.tri.size() == gpu.tri.size() && double(diff) <= 1e-4 * double(cpu.tri.size()),
+            name + ": OpenMP and CUDA topology " + (topology ? "identical" : "differs in " + std::to_string(diff) +
+                                                                                  " indices") +
+                ", max |dpos| " + std::to_string(worst / cell) + " cell");
+  }
+
+  Ctx gpu(NBMC_BACKEND_CUDA);
+  check(gpu.c != nullptr, "CUDA context");
+  if (!gpu.c) return 1;
+  auto reconstruct = [&]() {
+    nbmc_mesh* m = nullptr;
+    const int32_t st = nbmc_context_reconstruct(gpu.c, &prm, &m);
+    if (st != NBMC_OK) check(false, "reconstruct: " + gpu.error());
+    return take(m);
+  };
+  // Host particles, host radii: the reference.
+  nbmc_context_set_particles_f64(gpu.c, p.data(), n, 0);
+  check(nbmc_context_set_radii_f64(gpu.c, radii.data(), n, 0) == NBMC_OK, "host radii: " + gpu.error());
+  const Host ref = reconstruct();
+  check(!ref.tri.empty(), "reference mesh (" + std::to_string(ref.tri.size() / 3) + " triangles)");
+
+  // Device radii: float, every other float (byte_stride 8); double, packed.
+  std::vector<float> strided(2 * n, -1.f);
+  for (std::size_t i = 0; i < n; ++i) strided[2 * i] = float(radii[i]);
+  float* d_strided = to_device(strided);
+  double* d_radii = to_device(radii);
+  check(nbmc_context_set_radii_device_f64(gpu.c, d_radii, n, 0) == NBMC_OK, "device f64 radii: " + gpu.error());
+  check(same(reconstruct(), ref), "device f64 radii == host radii");
+  check(nbmc_context_set_radii_device_f32(gpu.c, d_strided, n, 2 * sizeof(float)) == NBMC_OK,
+        "device f32 strided radii: " + gpu.error());
+  {
+    // The float radii from the host give the same mesh.
+    std::vector<float> rf32(n);
+    for (std::size_t i = 0; i < n; ++i) rf32[i] = float(radii[i]);
+    const Host dev = reconstruct();
+    check(nbmc_context_set_radii_f32(gpu.c, rf32.data(), n, 0) == NBMC_OK, "host f32 radii");
+    check(same(dev, reconstruct()), "device f32 strided radii == host f32 radii");
+  }
+
+  // Device particles, host radii, a device mesh.
+  double* d_p = to_device(p);
+  check(nbmc_context_set_particles_device_f64(gpu.c, d_p, n, 0) == NBMC_OK, "device particles: " + gpu.error());
+  check(nbmc_context_set_radii_f64(gpu.c, radii.data(), n, 0) == NBMC_OK, "radii after device particles");
+  check(nbmc_context_set_mesh_memory(gpu.c, NBMC_MEMORY_DEVICE) == NBMC_OK, "device meshes");
+  check(same(reconstruct(), ref), "device particles + host radii + device mesh == host run");
+  nbmc_context_set_mesh_memory(gpu.c, NBMC_MEMORY_HOST);
+
+  // A split on the GPU.
+  {
+    const int split[3] = {3, 2, 1};
+    check(same(run(NBMC_BACKEND_CUDA, p, radii, prm, split), ref), "3x2x1 subdomains on the GPU == whole frame");
+  }
+
+  // Errors.
+  nbmc_context_set_particles_f64(gpu.c, p.data(), n, 0);
+  int32_t st = nbmc_context_set_radii_device_f64(gpu.c, radii.data(), n, 0);
+  check(st == NBMC_ERROR_INVALID_ARGUMENT, "host pointer refused: " + gpu.error());
+  st = nbmc_context_set_radii_device_f64(gpu.c, d_radii, n, 12);
+  check(st == NBMC_ERROR_INVALID_ARGUMENT, "misaligned stride refused: " + gpu.error());
+  std::vector<double> bad = radii;
+  bad[3] = -1;
+  double* d_bad = to_device(bad);
+  st = nbmc_context_set_radii_device_f64(gpu.c, d_bad, n, 0);
+  check(st == NBMC_ERROR_INVALID_PARAMETER && gpu.error().find("particle 3") != std::string::npos,
+        "negative radius on the device: " + gpu.error());
+  cudaFree(d_bad);
+  cudaFree(d_p);
+  cudaFree(d_radii);
+  cudaFree(d_strided);
+  std::printf("%s (%d failed)\n", failures ? "FAILED" : "PASSED", failures);
+  return failures ? 1 : 0;
+}
