@@ -965,21 +965,30 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     for (std::size_t i = 1; i < n; ++i) radii[i] = prm.spacing * (0.5 + double(rng.next() % 1025) / 2048.0);
     set_radii(radii);
     const Run v = reconstruct(ctx, prm, -1);
-    if (v.status != NBMC_OK) die("per-particle radii: " + status_text(v.status) + ": \"" + v.message + "\"");
-    check_mesh_invariants(v, prm, cell_abs, bw_abs, iso_abs, n);
-    expect_same(v, reconstruct(ctx, prm, -1), "radii, second run", true);
-    if (n > 1) {
-      std::vector<std::size_t> perm(n);
-      for (std::size_t i = 0; i < n; ++i) perm[i] = i;
-      for (std::size_t i = n - 1; i > 0; --i) std::swap(perm[i], perm[std::size_t(rng.next() % (i + 1))]);
-      std::vector<double> shuffled(values.size()), shuffled_radii(n);
-      for (std::size_t i = 0; i < n; ++i) {
-        for (int k = 0; k < 3; ++k) shuffled[3 * i + k] = values[3 * perm[i] + k];
-        shuffled_radii[i] = radii[perm[i]];
+    // YT10 has no per-particle radii: differing ones are refused.
+    const bool refused = prm.method == NBMC_METHOD_YT10 &&
+                         std::any_of(radii.begin(), radii.end(), [&](double r) { return r != radii[0]; });
+    if (refused) {
+      if (v.status != NBMC_ERROR_INVALID_PARAMETER)
+        die("yt10 with differing radii: " + status_text(v.status) + " (expected invalid parameter): \"" + v.message +
+            "\"");
+    } else {
+      if (v.status != NBMC_OK) die("per-particle radii: " + status_text(v.status) + ": \"" + v.message + "\"");
+      check_mesh_invariants(v, prm, cell_abs, bw_abs, iso_abs, n);
+      expect_same(v, reconstruct(ctx, prm, -1), "radii, second run", true);
+      if (n > 1) {
+        std::vector<std::size_t> perm(n);
+        for (std::size_t i = 0; i < n; ++i) perm[i] = i;
+        for (std::size_t i = n - 1; i > 0; --i) std::swap(perm[i], perm[std::size_t(rng.next() % (i + 1))]);
+        std::vector<double> shuffled(values.size()), shuffled_radii(n);
+        for (std::size_t i = 0; i < n; ++i) {
+          for (int k = 0; k < 3; ++k) shuffled[3 * i + k] = values[3 * perm[i] + k];
+          shuffled_radii[i] = radii[perm[i]];
+        }
+        if (upload(ctx, pack(shuffled, f64, stride, n)) != NBMC_OK) die("radii: the shuffled upload failed");
+        set_radii(shuffled_radii);
+        expect_same(v, reconstruct(ctx, prm, -1), "radii, shuffled particle order", false);
       }
-      if (upload(ctx, pack(shuffled, f64, stride, n)) != NBMC_OK) die("radii: the shuffled upload failed");
-      set_radii(shuffled_radii);
-      expect_same(v, reconstruct(ctx, prm, -1), "radii, shuffled particle order", false);
     }
     if (nbmc_context_set_radii_f64(ctx, nullptr, 0, 0) != NBMC_OK) die("removing the radii failed");
   }

@@ -433,8 +433,9 @@ TEST(Radii, AttributesFollowThePerParticleKernel) {
 }
 
 // Exact statuses for bad input; the context keeps no radii after a failure.
-// YT10 has no per-particle radii: refused with INVALID_PARAMETER (differing
-// or equal radii); without the radii the same context reconstructs.
+// YT10 has no per-particle radii: differing radii are refused with
+// INVALID_PARAMETER; equal radii are a uniform frame (equal to the spacing:
+// the mesh without radii); without the radii the same context reconstructs.
 TEST(Radii, Yt10IsRefused) {
   const Frame f = two_resolutions();
   const std::size_t n = f.radii.size();
@@ -445,7 +446,10 @@ TEST(Radii, Yt10IsRefused) {
   EXPECT_NE(differing.error.find("not supported with method yt10"), std::string::npos) << differing.error;
   const std::vector<double> equal(n, kCoarse);
   const Outcome same = run(f.xyz, &equal, prm);
-  EXPECT_EQ(same.status, NBMC_ERROR_INVALID_PARAMETER) << same.error;
+  ASSERT_EQ(same.status, NBMC_OK) << same.error;
+  const Outcome plain = run(f.xyz, nullptr, prm);
+  ASSERT_EQ(plain.status, NBMC_OK) << plain.error;
+  EXPECT_TRUE(same_mesh(plain.mesh, same.mesh));
   Ctx ctx;
   ASSERT_EQ(nbmc_context_set_particles_f64(ctx.c, f.xyz.data(), n, 0), NBMC_OK);
   ASSERT_EQ(nbmc_context_set_radii_f64(ctx.c, f.radii.data(), n, 0), NBMC_OK);

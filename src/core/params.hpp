@@ -121,9 +121,10 @@ constexpr double kMaxRadiusRatio = 1e6;
 // r_j / r_max times these). Equal radii make a uniform frame of spacing r_max,
 // which takes the path without radii (r_max == p.spacing leaves p as it is).
 // YT10 has no per-particle radii (its anisotropic kernels are fitted at one
-// support h = R/2): refused whether or not the radii differ.
+// support h = R/2): differing radii are refused; equal radii are a uniform
+// frame, as for every method.
 inline void scale_for_radii(Params& p, double r_min, double r_max) {
-  if (p.method == Method::YT10)
+  if (p.method == Method::YT10 && r_min < r_max)
     throw Error(NBMC_ERROR_INVALID_PARAMETER,
                 "per-particle radii are not supported with method yt10 (use ssp07, zb05 or sph, or no radii)");
   if (!(r_min > 0) || !(r_max >= r_min))
