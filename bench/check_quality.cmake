@@ -4,8 +4,11 @@
 # checks the figures that are known:
 #  - every configuration of the example frame parses, with all keys and
 #    numeric values, and its mesh is closed, manifold and oriented; the
-#    cleaned variants have no degenerate triangle and none below 1 degree;
-#    yt10 is reported as not available;
+#    cleaned variants have no degenerate triangle and (ssp07, zb05) none
+#    below 1 degree; yt10 at most 0.1% below 1 degree (measured at cell r: 6
+#    of 17,096, all at one sharp crease in the frame's corner where the
+#    clean-up's 90-degree normal-turn limit refuses every repair; none at
+#    cell r/2);
 #  - one particle is a sphere of radius r: the vertices lie at about 1 r from
 #    it (marching cubes puts them on the iso-surface, inside by a little
 #    between grid edges), none beyond 2 r, one component, and the volume
@@ -50,12 +53,6 @@ if(NOT n EQUAL 9)
 endif()
 set(ok 0)
 foreach(line IN LISTS lines)
-  if(line MATCHES "method=yt10 ")
-    if(NOT line MATCHES "status=not-available")
-      message(FATAL_ERROR "yt10 should be not available: ${line}")
-    endif()
-    continue()
-  endif()
   if(NOT line MATCHES "status=ok")
     message(FATAL_ERROR "configuration failed: ${line}")
   endif()
@@ -67,7 +64,11 @@ foreach(line IN LISTS lines)
   if(NOT q_particles EQUAL 4732 OR q_triangles LESS 1000 OR q_triangles GREATER q_raw_triangles)
     message(FATAL_ERROR "implausible counts: ${line}")
   endif()
-  if(NOT line MATCHES "variant=raw" AND NOT (q_degenerate EQUAL 0 AND q_below1deg EQUAL 0))
+  set(allowed 0)
+  if(line MATCHES "method=yt10 ")
+    math(EXPR allowed "${q_triangles} / 1000")
+  endif()
+  if(NOT line MATCHES "variant=raw" AND NOT (q_degenerate EQUAL 0 AND q_below1deg LESS_EQUAL allowed))
     message(FATAL_ERROR "cleaned mesh with degenerate or < 1 degree triangles: ${line}")
   endif()
   if(q_below1deg LESS q_slivers OR q_dist_p50 GREATER q_dist_p99 OR q_dist_p99 GREATER q_dist_max
@@ -75,8 +76,8 @@ foreach(line IN LISTS lines)
     message(FATAL_ERROR "inconsistent figures: ${line}")
   endif()
 endforeach()
-if(NOT ok EQUAL 6)
-  message(FATAL_ERROR "expected 6 measured configurations, got ${ok}")
+if(NOT ok EQUAL 9)
+  message(FATAL_ERROR "expected 9 measured configurations, got ${ok}")
 endif()
 
 # ---- one particle: a sphere of radius r = 1

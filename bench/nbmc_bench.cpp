@@ -4,7 +4,7 @@
 // narrow band; 1 thread and all threads; two cell sizes).
 //
 //   nbmc_bench FRAME.xyz --spacing R [--cell-size C] [--threads N]
-//              [--field narrow-band|dense|scatter] [--method ssp07|zb05|sph] [--backend B]
+//              [--field narrow-band|dense|scatter] [--method ssp07|zb05|sph|yt10] [--backend B]
 //              [--repeat K] [--device-resident] [--tile N] [--subdomains auto|NxMxK]
 //              [--memory-budget MIB] [--influence-radius K] [--surface-radius K]
 //
@@ -66,7 +66,7 @@ struct Options {
 
 [[noreturn]] void usage(const char* msg) {
   std::fprintf(stderr, "nbmc_bench: %s\nusage: nbmc_bench FRAME.xyz --spacing R [--cell-size C] [--threads N] "
-                       "[--field narrow-band|dense|scatter] [--method ssp07|zb05|sph] [--backend auto|serial|openmp|cuda] "
+                       "[--field narrow-band|dense|scatter] [--method ssp07|zb05|sph|yt10] [--backend auto|serial|openmp|cuda] "
                        "[--repeat K] [--device-resident] | --table [--cell-sizes 1,0.5] [--skip-scatter] [--max-threads N]\n", msg);
   std::exit(2);
 }
@@ -77,6 +77,10 @@ int field_of(const std::string& s) {
   if (s == "scatter") return NBMC_FIELD_SCATTER;
   usage("unknown --field");
 }
+const char* method_name(int m) {
+  return m == NBMC_METHOD_ZB05 ? "zb05" : m == NBMC_METHOD_SPH ? "sph" : m == NBMC_METHOD_YT10 ? "yt10" : "ssp07";
+}
+
 const char* field_name(int f) {
   return f == NBMC_FIELD_NARROW_BAND ? "narrow-band" : f == NBMC_FIELD_DENSE ? "dense" : "scatter";
 }
@@ -230,7 +234,7 @@ std::string child(const Options& o, int field, int threads, double cell) {
   std::ostringstream cmd;
   cmd << "'" << self_path() << "' '" << o.file << "' --one --spacing " << o.spacing << " --cell-size " << cell
       << " --threads " << threads << " --field " << field_name(field) << " --method "
-      << (o.method == NBMC_METHOD_ZB05 ? "zb05" : o.method == NBMC_METHOD_SPH ? "sph" : "ssp07") << " --backend "
+      << method_name(o.method) << " --backend "
       << (o.backend == NBMC_BACKEND_SERIAL   ? "serial"
           : o.backend == NBMC_BACKEND_CUDA   ? "cuda"
           : o.backend == NBMC_BACKEND_OPENMP ? "openmp"
@@ -247,7 +251,7 @@ std::string child(const Options& o, int field, int threads, double cell) {
 int run_table(const Options& o) {
   const int all = o.max_threads > 0 ? o.max_threads : int(std::max(1u, std::thread::hardware_concurrency()));
   std::printf("frame: %s, spacing %g, influence radius 4r, method %s, %d hardware threads\n\n", o.file.c_str(),
-              o.spacing, o.method == NBMC_METHOD_ZB05 ? "zb05" : o.method == NBMC_METHOD_SPH ? "sph" : "ssp07", all);
+              o.spacing, method_name(o.method), all);
   for (double cell : o.cells) {
     std::printf("### cell size %g r\n\n", cell);
     std::printf("| method | threads | t_sf [s] | t_tri [s] | total [s] | nbmc peak [MiB] | process peak RSS [MiB] | "
@@ -308,7 +312,10 @@ int main(int argc, char** argv) {
     else if (a == "--field") o.field = field_of(next());
     else if (a == "--method") {
       const std::string m = next();
-      o.method = m == "zb05" ? NBMC_METHOD_ZB05 : m == "sph" ? NBMC_METHOD_SPH : NBMC_METHOD_SSP07;
+      o.method = m == "zb05"   ? NBMC_METHOD_ZB05
+                 : m == "sph"  ? NBMC_METHOD_SPH
+                 : m == "yt10" ? NBMC_METHOD_YT10
+                               : NBMC_METHOD_SSP07;
     }
     else if (a == "--backend") {
       const std::string b = next();

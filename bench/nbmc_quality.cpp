@@ -139,7 +139,10 @@ int method_id(const std::string& m) {
 #ifdef NBMC_METHOD_SPH
   if (m == "sph") return NBMC_METHOD_SPH;
 #endif
-  return -1;  // yt10 (Yu & Turk 2010) is not in nbmc; sph only where the header has it
+#ifdef NBMC_METHOD_YT10
+  if (m == "yt10") return NBMC_METHOD_YT10;
+#endif
+  return -1;  // sph and yt10 only where the header has them
 }
 
 bool ends_with(const std::string& s, const std::string& tail) {

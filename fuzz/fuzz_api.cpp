@@ -598,14 +598,37 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     prm.method = NBMC_METHOD_SPH;
     prm.iso_threshold = sph_threshold;
   }
+  // Appended draws (NBMC_METHOD_YT10), after the SPH ones: Yu & Turk's
+  // anisotropic kernels with their parameters over (and, with yt10_corrupt,
+  // just beyond) their ranges. Zeros (a used-up input): no YT10.
+  const bool yt10 = in.one_in(5);
+  const double yt10_threshold = in.range(0.05, 0.95);
+  const double aniso_kr = in.range(1.0, 8.0), aniso_ks = in.range(0.3, 3.0), aniso_kn = in.range(0.05, 1.5),
+               aniso_lambda = in.unit();
+  const int32_t aniso_neighbours = int32_t(in.small_below(61));
+  const unsigned yt10_corrupt = in.small_below(8);
+  const bool yt10_defaults = in.one_in(3);
+  const bool sph_or_yt10 = sph || yt10;
+  if (yt10) {
+    prm.method = NBMC_METHOD_YT10;
+    prm.iso_threshold = yt10_threshold;
+    if (!yt10_defaults) {
+      prm.aniso_kr = aniso_kr;
+      prm.aniso_ks = aniso_ks;
+      prm.aniso_kn = aniso_kn;
+      prm.aniso_lambda = aniso_lambda;
+      prm.aniso_neighbours = aniso_neighbours;
+    }
+  }
 
   // Keep the work small: an estimate of the field evaluations (band or dense
   // vertices times the most neighbours any particle has within R) bounds the
   // cell size from below; a dense grid that stays too large becomes a band.
   {
-    // (iso: how far the surface lies beyond the particles; R for the SPH density)
+    // (iso: how far the surface lies beyond the particles; R for the SPH
+    // density and YT10)
     const double R = prm.influence_radius / L, bw = prm.band_width / L,
-                 iso = (sph ? prm.influence_radius : prm.iso_radius) / L;  // units of r
+                 iso = (sph_or_yt10 ? prm.influence_radius : prm.iso_radius) / L;  // units of r
     std::size_t max_nb = 1;
     for (std::size_t i = 0; i < n; ++i) {
       std::size_t c = 0;
@@ -637,7 +660,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     auto too_much = [&](double c, bool dense) {
       const double v = vertices(c, dense);
       return v > (grows ? kMaxVertices / 4 : kMaxVertices) ||
-             v * double(max_nb) * (prm.method == NBMC_METHOD_SSP07 ? 2.0 : 1.0) > kMaxWork;
+             v * double(max_nb) * (prm.method == NBMC_METHOD_SSP07 || prm.method == NBMC_METHOD_YT10 ? 2.0 : 1.0) >
+                 kMaxWork;
     };
     if (prm.field == NBMC_FIELD_DENSE && too_much(cell, true)) prm.field = NBMC_FIELD_NARROW_BAND;
     for (int i = 0; i < 60 && too_much(cell, false); ++i) cell *= 1.15;
@@ -658,7 +682,17 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       case 4: prm.band_width = alt ? 0.0 : inf; break;
       case 5: prm.surface_radius = alt ? -prm.surface_radius : prm.influence_radius * (2.01 + corrupt_u); break;
       case 6:
-        if (sph && sph_corrupt == 0) {  // the SPH method ignores iso_radius: a bad threshold instead
+        if (yt10 && yt10_corrupt < 5) {  // YT10 ignores iso_radius: an anisotropy parameter out of range
+          switch (yt10_corrupt) {
+            case 0: prm.aniso_kr = alt ? std::numeric_limits<double>::quiet_NaN() : 1.0 - 0.5 * corrupt_u - 1e-9; break;
+            case 1: prm.aniso_ks = alt ? -corrupt_u : 0.0; break;
+            case 2: prm.aniso_kn = alt ? 0.0 : 1.5 + corrupt_u + 1e-9; break;
+            case 3: prm.aniso_lambda = alt ? -1e-9 - corrupt_u : 1.0 + corrupt_u + 1e-9; break;
+            default: prm.aniso_neighbours = -1 - int32_t(corrupt_b % 100); break;
+          }
+        } else if (yt10) {
+          prm.iso_threshold = alt ? std::numeric_limits<double>::quiet_NaN() : (corrupt_b & 1 ? 0.0 : 1.0 + corrupt_u);
+        } else if (sph && sph_corrupt == 0) {  // the SPH method ignores iso_radius: a bad threshold instead
           prm.iso_threshold = alt ? std::numeric_limits<double>::quiet_NaN() : (corrupt_b & 1 ? 0.0 : 1.0 + corrupt_u);
         } else {
           prm.iso_radius = prm.influence_radius * (1.0 + corrupt_u);
@@ -666,7 +700,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
         break;
       case 7: std::swap(prm.t_low, prm.t_high); break;
       case 8: prm.t_high = nan; break;
-      case 9: prm.method = alt ? 3 : -1; break;
+      case 9: prm.method = alt ? 4 : -1; break;
       case 10: prm.field = alt ? 3 : -1; break;  // not 2: the scatter baseline is valid but slow
       case 11: prm.length_unit = alt ? 2 : -7; break;
       case 12: prm.color_threshold = alt ? -0.5 : nan; break;
@@ -703,8 +737,12 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     bool ok = pos(prm.spacing) &&
               (prm.length_unit == NBMC_UNIT_SPACING || prm.length_unit == NBMC_UNIT_ABSOLUTE) &&
               (prm.method == NBMC_METHOD_SSP07 || prm.method == NBMC_METHOD_ZB05 ||
-               prm.method == NBMC_METHOD_SPH) &&
+               prm.method == NBMC_METHOD_SPH || prm.method == NBMC_METHOD_YT10) &&
               std::isfinite(eff.iso_threshold) && eff.iso_threshold > 0 && eff.iso_threshold < 1 &&
+              std::isfinite(eff.aniso_kr) && eff.aniso_kr >= 1 && std::isfinite(eff.aniso_ks) && eff.aniso_ks > 0 &&
+              std::isfinite(eff.aniso_kn) && eff.aniso_kn > 0 && eff.aniso_kn <= 1.5 &&
+              std::isfinite(eff.aniso_lambda) && eff.aniso_lambda >= 0 && eff.aniso_lambda <= 1 &&
+              eff.aniso_neighbours >= 0 &&
               (eff.isolated == NBMC_ISOLATED_KEEP || eff.isolated == NBMC_ISOLATED_DROP ||
                eff.isolated == NBMC_ISOLATED_SPHERE) &&
               eff.min_cluster >= 1 && eff.decimate_fraction > 0 && eff.decimate_fraction <= 1 &&
@@ -715,7 +753,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
               std::isfinite(prm.color_threshold) && prm.color_threshold >= 0 && prm.neighbour_threshold >= 0;
     if (ok) {
       const double f = prm.length_unit == NBMC_UNIT_SPACING ? prm.spacing : 1.0;
-      ok = (prm.method == NBMC_METHOD_SPH || prm.iso_radius * f < prm.influence_radius * f) &&
+      ok = (prm.method == NBMC_METHOD_SPH || prm.method == NBMC_METHOD_YT10 ||
+            prm.iso_radius * f < prm.influence_radius * f) &&
            prm.surface_radius * f <= 2 * (prm.influence_radius * f);
     }
     if (ok && prm.use_bbox)
@@ -725,9 +764,9 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   }
   const double f = prm.length_unit == NBMC_UNIT_SPACING ? prm.spacing : 1.0;
   // iso_abs: how far beyond the particles the surface can lie (R for the SPH
-  // density); reach_abs: how far beyond the box particles are kept (nbmc.h:
-  // R, 2R for the SPH density).
-  const bool is_sph = prm.method == NBMC_METHOD_SPH;
+  // density and YT10); reach_abs: how far beyond the box particles are kept
+  // (nbmc.h: R, 2R for the SPH density and YT10).
+  const bool is_sph = prm.method == NBMC_METHOD_SPH || prm.method == NBMC_METHOD_YT10;
   const double cell_abs = prm.cell_size * f, R_abs = prm.influence_radius * f, bw_abs = prm.band_width * f,
                iso_abs = (is_sph ? prm.influence_radius : prm.iso_radius) * f, reach_abs = is_sph ? 2 * R_abs : R_abs,
                sr_abs = prm.surface_radius * f;
@@ -772,10 +811,12 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   char desc[512];
   std::snprintf(desc, sizeof desc,
                 "n=%zu r=%g offset=%g %s stride=%llu count=%llu bad=%ld unit=%s cell=%g R=%g band=%g surf=%g iso=%g "
-                "method=%d field=%d t=[%g,%g] iso_t=%g color=%g nbr=%d normals=%d bbox=%d budget=%llu cancel=%d",
+                "method=%d field=%d t=[%g,%g] iso_t=%g aniso=[%g,%g,%g,%g,%d] color=%g nbr=%d normals=%d bbox=%d "
+                "budget=%llu cancel=%d",
                 n, r, offset, f64 ? "f64" : "f32", (unsigned long long)stride, (unsigned long long)count, bad_index,
                 absolute ? "abs" : "rel", prm.cell_size, prm.influence_radius, prm.band_width, prm.surface_radius,
-                prm.iso_radius, prm.method, prm.field, prm.t_low, prm.t_high, prm.iso_threshold, prm.color_threshold,
+                prm.iso_radius, prm.method, prm.field, prm.t_low, prm.t_high, prm.iso_threshold, prm.aniso_kr,
+                prm.aniso_ks, prm.aniso_kn, prm.aniso_lambda, int(prm.aniso_neighbours), prm.color_threshold,
                 prm.neighbour_threshold, prm.compute_normals, prm.use_bbox, (unsigned long long)budget, cancel_at);
   g_case = desc;
 
@@ -924,21 +965,30 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     for (std::size_t i = 1; i < n; ++i) radii[i] = prm.spacing * (0.5 + double(rng.next() % 1025) / 2048.0);
     set_radii(radii);
     const Run v = reconstruct(ctx, prm, -1);
-    if (v.status != NBMC_OK) die("per-particle radii: " + status_text(v.status) + ": \"" + v.message + "\"");
-    check_mesh_invariants(v, prm, cell_abs, bw_abs, iso_abs, n);
-    expect_same(v, reconstruct(ctx, prm, -1), "radii, second run", true);
-    if (n > 1) {
-      std::vector<std::size_t> perm(n);
-      for (std::size_t i = 0; i < n; ++i) perm[i] = i;
-      for (std::size_t i = n - 1; i > 0; --i) std::swap(perm[i], perm[std::size_t(rng.next() % (i + 1))]);
-      std::vector<double> shuffled(values.size()), shuffled_radii(n);
-      for (std::size_t i = 0; i < n; ++i) {
-        for (int k = 0; k < 3; ++k) shuffled[3 * i + k] = values[3 * perm[i] + k];
-        shuffled_radii[i] = radii[perm[i]];
+    // YT10 has no per-particle radii: differing ones are refused.
+    const bool refused = prm.method == NBMC_METHOD_YT10 &&
+                         std::any_of(radii.begin(), radii.end(), [&](double r) { return r != radii[0]; });
+    if (refused) {
+      if (v.status != NBMC_ERROR_INVALID_PARAMETER)
+        die("yt10 with differing radii: " + status_text(v.status) + " (expected invalid parameter): \"" + v.message +
+            "\"");
+    } else {
+      if (v.status != NBMC_OK) die("per-particle radii: " + status_text(v.status) + ": \"" + v.message + "\"");
+      check_mesh_invariants(v, prm, cell_abs, bw_abs, iso_abs, n);
+      expect_same(v, reconstruct(ctx, prm, -1), "radii, second run", true);
+      if (n > 1) {
+        std::vector<std::size_t> perm(n);
+        for (std::size_t i = 0; i < n; ++i) perm[i] = i;
+        for (std::size_t i = n - 1; i > 0; --i) std::swap(perm[i], perm[std::size_t(rng.next() % (i + 1))]);
+        std::vector<double> shuffled(values.size()), shuffled_radii(n);
+        for (std::size_t i = 0; i < n; ++i) {
+          for (int k = 0; k < 3; ++k) shuffled[3 * i + k] = values[3 * perm[i] + k];
+          shuffled_radii[i] = radii[perm[i]];
+        }
+        if (upload(ctx, pack(shuffled, f64, stride, n)) != NBMC_OK) die("radii: the shuffled upload failed");
+        set_radii(shuffled_radii);
+        expect_same(v, reconstruct(ctx, prm, -1), "radii, shuffled particle order", false);
       }
-      if (upload(ctx, pack(shuffled, f64, stride, n)) != NBMC_OK) die("radii: the shuffled upload failed");
-      set_radii(shuffled_radii);
-      expect_same(v, reconstruct(ctx, prm, -1), "radii, shuffled particle order", false);
     }
     if (nbmc_context_set_radii_f64(ctx, nullptr, 0, 0) != NBMC_OK) die("removing the radii failed");
   }

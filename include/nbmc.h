@@ -86,6 +86,8 @@ extern "C" {
 #define NBMC_METHOD_ZB05   1  /* Zhu & Bridson 2005 */
 #define NBMC_METHOD_SPH    2  /* normalised SPH density (cubic spline), splashsurf's level set;
                                  iso level nbmc_params.iso_threshold */
+#define NBMC_METHOD_YT10   3  /* Yu & Turk 2010: SPH density with anisotropic kernels (per-particle
+                                 weighted PCA, nbmc_params.aniso_*); iso level iso_threshold */
 
 /* Isolated particles (nbmc_params.isolated). */
 #define NBMC_ISOLATED_KEEP  0  /* every particle makes surface (default) */
@@ -255,8 +257,8 @@ typedef struct nbmc_params {
                                are used and the grid covers the box plus a margin of
                                max(band_width, iso_radius + cell_size) + 2 cells; the mesh is
                                not clipped to the box and may reach into that margin
-                               (NBMC_METHOD_SPH: particles within 2R, margin with R in place
-                               of iso_radius) */
+                               (NBMC_METHOD_SPH and NBMC_METHOD_YT10: particles within 2R,
+                               margin with R in place of iso_radius) */
   int32_t reserved0;
   double bbox_min[3];
   double bbox_max[3];
@@ -267,10 +269,10 @@ typedef struct nbmc_params {
                                collapses and flips; 0: the raw marching-cubes mesh */
   int32_t smooth_iterations; /* Taubin lambda|mu smoothing steps after the clean-up; default 0 */
   /* Appended with NBMC_METHOD_SPH (older callers: the default). */
-  double iso_threshold;     /* NBMC_METHOD_SPH: iso level of the normalised density, a fraction of
-                               the rest density, 0 < iso_threshold < 1; default 0.6 (splashsurf's
-                               --surface-threshold). The kernel's compact support is
-                               influence_radius. Ignored by the other methods. */
+  double iso_threshold;     /* NBMC_METHOD_SPH and NBMC_METHOD_YT10: iso level of the normalised
+                               density, a fraction of the rest density, 0 < iso_threshold < 1;
+                               default 0.6 (splashsurf's --surface-threshold). SPH: the kernel's
+                               compact support is influence_radius. Ignored by the other methods. */
   /* Appended with the isolated-particle filter (older callers: the defaults). */
   int32_t isolated;         /* NBMC_ISOLATED_KEEP (default) or NBMC_ISOLATED_DROP: a cluster is a
                                connected component of the particles linked when closer than
@@ -298,6 +300,27 @@ typedef struct nbmc_params {
                                around it (few, as on a thin sheet, a filament or a droplet:
                                near 0; the bulk: 1). Not available over MPI */
   int32_t reserved1;        /* 0 */
+  /* Appended with NBMC_METHOD_YT10 (older callers: the defaults). Yu & Turk's
+     anisotropic kernels (docs/methods.md): each particle's neighbours within
+     influence_radius R give a weighted covariance, whose principal axes
+     stretch that particle's kernel (isotropic support h = R/2). Checked
+     whatever the method; used by NBMC_METHOD_YT10 only. */
+  double aniso_kr;          /* k_r: largest ratio of a kernel's longest to its shortest axis, >= 1;
+                               default 4 (Yu & Turk) */
+  double aniso_ks;          /* k_s: scale of the kernel axes, > 0, normalised so that a particle
+                               inside a uniform fluid gets the isotropic kernel at k_s = 1 (Yu &
+                               Turk's 1400 is in their scene's units; see docs/methods.md);
+                               default 1. Axes are clamped to at most 1.5 h */
+  double aniso_kn;          /* k_n: kernel scale of a particle with aniso_neighbours or fewer
+                               neighbours (a sphere of support k_n h), 0 < k_n <= 1.5; also the
+                               smallest longest axis of any kernel; default 0.5 (Yu & Turk) */
+  double aniso_lambda;      /* lambda: Laplacian smoothing of the kernel centres towards their
+                               neighbours' weighted mean, 0 <= lambda <= 1 (0: none); default 0.3;
+                               a centre moves at most 0.2 R */
+  int32_t aniso_neighbours; /* N_eps: more neighbours than this within R (the particle itself not
+                               counted) give an anisotropic kernel, fewer a sphere; >= 0;
+                               default 25 (Yu & Turk) */
+  int32_t reserved2;        /* 0 */
 } nbmc_params;
 
 /* Fills *params with the defaults (spacing is 0 and must be set). */
@@ -677,8 +700,9 @@ NBMC_API const float* nbmc_mesh_attribute(const nbmc_mesh* mesh, const char* nam
  * the particles of the clusters of fewer than min_cluster particles make no
  * surface, and the mesh returns them as spheres, for renderers that draw
  * spheres (splashes, spray): one per particle, in the particles' order, of
- * radius iso_radius (absolute; NBMC_METHOD_SPH: half the spacing), the size
- * of the surface one particle alone makes. nbmc_stats counts them
+ * radius iso_radius (absolute; NBMC_METHOD_SPH and NBMC_METHOD_YT10: half
+ * the spacing), the size of the surface one particle alone makes.
+ * nbmc_stats counts them
  * (dropped_particle_count, dropped_cluster_count).
  * ---------------------------------------------------------------------- */
 /* Spheres of the mesh; 0 for NULL or a mesh made without NBMC_ISOLATED_SPHERE. */

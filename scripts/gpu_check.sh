@@ -176,8 +176,8 @@ if want scale; then
   done
 fi
 if want zb05; then
-  step "field methods (1.65 M frame, r/2): SSP07, ZB05, SPH on the GPU and all CPU cores; ZB05's band growth traced; ncu on the gather"
-  for m in ssp07 zb05 sph; do
+  step "field methods (1.65 M frame, r/2): SSP07, ZB05, SPH, YT10 on the GPU and all CPU cores; ZB05's band growth traced; ncu on the gather"
+  for m in ssp07 zb05 sph yt10; do
     for be in cuda openmp; do
       "$B/bench/nbmc_bench" "$BIG" --spacing 0.00484 --backend $be --method $m --repeat 3 2>&1 | grep RESULT | tail -1 |
         sed "s/^/$m /" | tee -a "$OUT/methods.txt"

@@ -279,7 +279,8 @@ Params resolve_params(const nbmc_params& in) {
   require(std::isfinite(in.spacing) && in.spacing > 0, "spacing must be a positive number (got " + num(in.spacing) + ")");
   require(in.length_unit == NBMC_UNIT_SPACING || in.length_unit == NBMC_UNIT_ABSOLUTE,
           "length_unit must be NBMC_UNIT_SPACING or NBMC_UNIT_ABSOLUTE");
-  require(in.method == NBMC_METHOD_SSP07 || in.method == NBMC_METHOD_ZB05 || in.method == NBMC_METHOD_SPH,
+  require(in.method == NBMC_METHOD_SSP07 || in.method == NBMC_METHOD_ZB05 || in.method == NBMC_METHOD_SPH ||
+              in.method == NBMC_METHOD_YT10,
           "unknown method " + std::to_string(in.method));
   require(in.field >= NBMC_FIELD_NARROW_BAND && in.field <= NBMC_FIELD_SCATTER,
           "unknown field strategy " + std::to_string(in.field));
@@ -303,6 +304,18 @@ Params resolve_params(const nbmc_params& in) {
           "isolated must be NBMC_ISOLATED_KEEP, NBMC_ISOLATED_DROP or NBMC_ISOLATED_SPHERE (got " +
               std::to_string(in.isolated) + ")");
   require(in.min_cluster >= 1, "min_cluster must be at least 1 (got " + std::to_string(in.min_cluster) + ")");
+  // Yu & Turk's anisotropy: checked whatever the method, like iso_threshold
+  // (a caller built against an older header gets the defaults).
+  require(std::isfinite(in.aniso_kr) && in.aniso_kr >= 1,
+          "aniso_kr must be at least 1, the largest ratio of a kernel's axes (got " + num(in.aniso_kr) + ")");
+  require(std::isfinite(in.aniso_ks) && in.aniso_ks > 0, "aniso_ks must be a positive number (got " +
+                                                             num(in.aniso_ks) + ")");
+  require(std::isfinite(in.aniso_kn) && in.aniso_kn > 0 && in.aniso_kn <= kYt10MaxAxis,
+          "aniso_kn must lie in (0, " + num(kYt10MaxAxis) + "], a kernel scale (got " + num(in.aniso_kn) + ")");
+  require(std::isfinite(in.aniso_lambda) && in.aniso_lambda >= 0 && in.aniso_lambda <= 1,
+          "aniso_lambda must lie in [0, 1] (got " + num(in.aniso_lambda) + ")");
+  require(in.aniso_neighbours >= 0,
+          "aniso_neighbours must be >= 0 (got " + std::to_string(in.aniso_neighbours) + ")");
   require(std::isfinite(in.color_threshold) && in.color_threshold >= 0, "color_threshold must be >= 0");
   require(in.neighbour_threshold >= 0, "neighbour_threshold must be >= 0");
   Params p;
@@ -313,8 +326,8 @@ Params resolve_params(const nbmc_params& in) {
   p.band_width = length(in, in.band_width, r);
   p.surface_radius = length(in, in.surface_radius, r);
   p.iso_radius = length(in, in.iso_radius, r);
-  // (the SPH density does not use iso_radius)
-  require(in.method == NBMC_METHOD_SPH || p.iso_radius < p.influence_radius,
+  // (the SPH density and YT10 do not use iso_radius)
+  require(is_density_field(Method(in.method)) || p.iso_radius < p.influence_radius,
           "iso_radius must be smaller than influence_radius");
   require(p.surface_radius <= 2 * p.influence_radius,
           "surface_radius may be at most twice the influence radius (got " + num(p.surface_radius) + " and " +
@@ -324,6 +337,11 @@ Params resolve_params(const nbmc_params& in) {
   p.t_low = in.t_low;
   p.t_high = in.t_high;
   p.iso_threshold = in.iso_threshold;
+  p.aniso_kr = in.aniso_kr;
+  p.aniso_ks = in.aniso_ks;
+  p.aniso_kn = in.aniso_kn;
+  p.aniso_lambda = in.aniso_lambda;
+  p.aniso_neighbours = in.aniso_neighbours;
   p.drop_isolated = in.isolated == NBMC_ISOLATED_DROP || in.isolated == NBMC_ISOLATED_SPHERE;
   p.min_cluster = std::uint32_t(in.min_cluster);
   p.color_threshold = in.color_threshold;

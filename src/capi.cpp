@@ -405,6 +405,11 @@ void nbmc_params_init(nbmc_params* p) {
   p->min_cluster = 10;
   p->decimate_fraction = 1;
   p->smooth_weighting = NBMC_SMOOTH_UNIFORM;
+  p->aniso_kr = 4;
+  p->aniso_ks = 1;
+  p->aniso_kn = 0.5;
+  p->aniso_lambda = 0.3;
+  p->aniso_neighbours = 25;
 }
 
 int32_t nbmc_context_reconstruct(nbmc_context* ctx, const nbmc_params* params, nbmc_mesh** mesh) {
@@ -465,7 +470,7 @@ int32_t nbmc_context_reconstruct(nbmc_context* ctx, const nbmc_params* params, n
     fp.spacing = p.spacing;
   }
   if (spheres && kept.size() < all_n) {
-    const float radius = float(p.method == nbmc::Method::SPH ? 0.5 * p.spacing : p.iso_radius);
+    const float radius = float(is_density_field(p.method) ? 0.5 * p.spacing : p.iso_radius);
     m->spheres.reserve(4 * (all_n - kept.size()));
     std::size_t k = 0;
     for (std::size_t i = 0; i < all_n; ++i) {

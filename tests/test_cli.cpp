@@ -291,6 +291,56 @@ TEST_F(CliTest, SphMethodLikeSplashsurf) {
   EXPECT_FALSE(fs::exists(path("bad.ply")));
 }
 
+// --method yt10 with its options: the same mesh as the C API, the method and
+// settings in the report and the JSON, a split gives the same file, and
+// values out of range are the library's errors (exit 1).
+TEST_F(CliTest, Yt10MethodAndOptions) {
+  const std::string frame = std::string(NBMC_SOURCE_DIR) + "/examples/data/double_dam_break_4732.xyz";
+  const std::string base = "reconstruct " + quote(frame) +
+                           " --particle-radius 0.025 --method yt10 --cell-size 0.75 --aniso-kr 3"
+                           " --aniso-ks 0.9 --aniso-kn 0.6 --aniso-neighbours 20 --aniso-lambda 0.5"
+                           " --iso-threshold 0.5 --progress never";
+  Result r = run(base + " -o " + quote(path("yt10.ply")) + " --json " + quote(path("yt10.json")));
+  ASSERT_EQ(r.exit_code, 0) << r.err;
+  EXPECT_TRUE(contains(r.out, "yt10 (iso threshold 0.5, k_r 3, k_s 0.9, k_n 0.6, N_eps 20, lambda 0.5)")) << r.out;
+  const std::string json = slurp(path("yt10.json"));
+  EXPECT_TRUE(contains(json, "\"method\": \"yt10\"")) << json;
+  EXPECT_TRUE(contains(json, "\"aniso_kr\": 3")) << json;
+  EXPECT_TRUE(contains(json, "\"aniso_ks\": 0.9")) << json;
+  EXPECT_TRUE(contains(json, "\"aniso_kn\": 0.6")) << json;
+  EXPECT_TRUE(contains(json, "\"aniso_lambda\": 0.5")) << json;
+  EXPECT_TRUE(contains(json, "\"aniso_neighbours\": 20")) << json;
+  const auto mesh = nbmc::io::read_mesh_ply(path("yt10.ply"));
+  const auto particles = nbmc::io::read_particles(frame);
+  nbmc_params p = nbmc_test::params(0.05);
+  p.method = NBMC_METHOD_YT10;
+  p.cell_size = 0.75;
+  p.aniso_kr = 3;
+  p.aniso_ks = 0.9;
+  p.aniso_kn = 0.6;
+  p.aniso_neighbours = 20;
+  p.aniso_lambda = 0.5;
+  p.iso_threshold = 0.5;
+  const nbmc_test::Result direct = nbmc_test::reconstruct(particles.xyz, p, NBMC_BACKEND_AUTO);
+  ASSERT_EQ(direct.status, NBMC_OK) << direct.message;
+  EXPECT_GT(mesh.triangle_count(), 0u);
+  EXPECT_EQ(mesh.triangle_count(), direct.mesh.triangle_count());
+  EXPECT_EQ(mesh.vertex_count(), direct.mesh.vertex_count());
+  Result split = run(base + " -o " + quote(path("split.ply")) + " --subdomains 2x1x2");
+  ASSERT_EQ(split.exit_code, 0) << split.err;
+  EXPECT_EQ(slurp(path("yt10.ply")), slurp(path("split.ply")));
+  const std::pair<const char*, const char*> bad[] = {{"--aniso-kr", "0.5"},      {"--aniso-ks", "0"},
+                                                     {"--aniso-kn", "2"},        {"--aniso-lambda", "1.5"},
+                                                     {"--aniso-neighbours", "-3"}};
+  for (const auto& [option, value] : bad) {
+    Result b = run("reconstruct " + quote(frame) + " -o " + quote(path("bad.ply")) +
+                   " --particle-radius 0.025 --method yt10 " + option + " " + value);
+    EXPECT_EQ(b.exit_code, 1) << option << " " << value << ": " << b.err;
+    EXPECT_TRUE(contains(b.err, std::string(option + 2).replace(5, 1, "_"))) << option << ": " << b.err;
+  }
+  EXPECT_FALSE(fs::exists(path("bad.ply")));
+}
+
 // --isolated drop: the report says what was dropped, the JSON counts it, and
 // the counts are the C API's; bad values are usage errors (exit 2) or the
 // library's (exit 1).

@@ -18,6 +18,7 @@
 #include "common.hpp"
 #include "field_sph.hpp"
 #include "field_ssp07.hpp"
+#include "field_yt10.hpp"
 #include "field_zb05.hpp"
 #include "grid.hpp"
 #include "narrow_band.hpp"
@@ -26,6 +27,7 @@
 #include "scalar_field.hpp"
 #include "sph_density.hpp"
 #include "surface_particles.hpp"
+#include "yt10_kernels.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -197,12 +199,11 @@ std::size_t reference_surface(const NeighbourView<Host>& nb, const std::vector<s
   return surface;
 }
 
-// The field at x in the GPU's order (gather_words_direct / eval_vertex_direct).
+// The sums at x in the GPU's order (gather_words_direct / eval_vertex_direct).
 template <class Method>
-float reference_field(const NeighbourView<Host>& nb, const float x[3], float S, const FieldConstants& fc,
-                      std::uint64_t& evals) {
-  float acc[Method::N];
-  for (float& a : acc) a = 0.f;
+void reference_sums(const NeighbourView<Host>& nb, const float x[3], float S, const FieldConstants& fc, float* acc,
+                    std::uint32_t& evals) {
+  for (int q = 0; q < Method::N; ++q) acc[q] = 0.f;
   std::int64_t lo[3], hi[3];
   for (int a = 0; a < 3; ++a) {
     lo[a] = std::int64_t(std::floor((x[a] - fc.R) * nb.inv_nb_cell));
@@ -232,9 +233,20 @@ float reference_field(const NeighbourView<Host>& nb, const float x[3], float S, 
           const float q = Method::radii ? nb.support(j) : fc.inv_R2;
           const float s2 = (dx * dx + dy * dy + dz * dz) * q;
           evals += s2 < 1.f ? 1 : 0;
-          Method::add(acc, dx, dy, dz, s2 < 1.f ? 1.f - s2 : 0.f, Method::weighted ? nb.weight(j) : 1.f, q);
+          Method::add(acc, dx, dy, dz, s2 < 1.f ? 1.f - s2 : 0.f,
+                      Method::P ? nb.pdata.data() + std::size_t(Method::P) * j : nullptr, q);
         }
       }
+}
+
+// The field at x in the GPU's order.
+template <class Method>
+float reference_field(const NeighbourView<Host>& nb, const float x[3], float S, const FieldConstants& fc,
+                      std::uint64_t& evals) {
+  float acc[Method::N];
+  std::uint32_t count = 0;
+  reference_sums<Method>(nb, x, S, fc, acc, count);
+  evals += count;
   return Method::value(acc, fc);
 }
 
@@ -262,11 +274,12 @@ Outcome run(const Exec& space, const Points& xyz, const Params& p, bool dense, c
   const Grid g = make_grid(lo, hi, p);
   Neighbourhood<Host> nbh;
   build_neighbourhood(space, tracker, xyz.data(), n, {}, g, nbh, Method::radii ? radii.data() : nullptr);
-  const FieldConstants fc = field_constants(p.influence_radius, p.iso_radius, p.t_low, p.t_high, p.iso_threshold);
+  FieldConstants fc = field_constants(p.influence_radius, p.iso_radius, p.t_low, p.t_high, p.iso_threshold);
   if (Method::radii)
     attach_radii(space, tracker, Kokkos::View<const double*, Host>(radii.data(), radii.size()), p, nbh);
   const bool sph = p.method == nbmc::Method::SPH;
   if (sph) compute_sph_weights<Method::radii>(space, tracker, nbh, g, fc);
+  if (std::is_same<Method, FieldYT10>::value) fc = compute_yt10_kernels(space, tracker, nbh, g, p, fc);
   const NeighbourView<Host> nb = view_of(nbh, g);
   if (sph) {
     // Each particle's weight: 1 / (its density summed in the serial order).
@@ -274,7 +287,23 @@ Outcome run(const Exec& space, const Points& xyz, const Params& p, bool dense, c
     for (std::size_t j = 0; j < n; ++j) {
       const float x[3] = {nb.pos(j), nb.pos(n + j), nb.pos(2 * n + j)};
       const float ref = 1.f / reference_field<SphDensityT<Method::radii>>(nb, x, float(g.nb_cell), fc, unused);
-      out.weight_mismatches += bits(nb.weight(j)) != bits(ref);
+      out.weight_mismatches += bits(nb.pdata(j)) != bits(ref);
+    }
+  }
+  if (std::is_same<Method, FieldYT10>::value) {
+    // Each particle's kernel from its moments summed in the serial order
+    // (over R: fc's radius is now the field's).
+    const FieldConstants fc0 = field_constants(p.influence_radius, p.iso_radius, p.t_low, p.t_high, p.iso_threshold);
+    const Yt10Constants k = yt10_constants(p);
+    for (std::size_t j = 0; j < n; ++j) {
+      const float x[3] = {nb.pos(j), nb.pos(n + j), nb.pos(2 * n + j)};
+      float a[Yt10Moments::N];
+      std::uint32_t count = 0;
+      reference_sums<Yt10Moments>(nb, x, float(g.nb_cell), fc0, a, count);
+      float kern[kYt10Floats];
+      yt10_kernel(a, count, k, kern);
+      for (int q = 0; q < kYt10Floats; ++q)
+        out.weight_mismatches += bits(nb.pdata(std::size_t(kYt10Floats) * j + q)) != bits(kern[q]);
     }
   }
 
@@ -363,7 +392,11 @@ template <class Method>
 void check(const char* name, const Points& xyz, double r, double cell, bool dense = false,
            std::size_t min_surface = 1, const std::vector<double>& radii = {}) {
   const std::string m = Method::name;
-  Params p = make_params(r, cell, m == "zb05" ? NBMC_METHOD_ZB05 : m == "sph" ? NBMC_METHOD_SPH : NBMC_METHOD_SSP07);
+  Params p = make_params(r, cell,
+                         m == "zb05"   ? NBMC_METHOD_ZB05
+                         : m == "sph"  ? NBMC_METHOD_SPH
+                         : m == "yt10" ? NBMC_METHOD_YT10
+                                       : NBMC_METHOD_SSP07);
   if (Method::radii) {
     ASSERT_EQ(radii.size(), xyz.size() / 3);
     scale_for_radii(p, *std::min_element(radii.begin(), radii.end()), *std::max_element(radii.begin(), radii.end()));
@@ -384,7 +417,7 @@ void check(const char* name, const Points& xyz, double r, double cell, bool dens
     EXPECT_EQ(o.field_mismatches, 0u) << what << ": " << o.field_mismatches << " of " << o.band_vertices
                                       << " field values differ from the serial per-vertex order; first: " << o.first;
     EXPECT_EQ(o.direct_mismatches, 0u) << what << ": eval_vertex_direct does not sum in plain serial order";
-    EXPECT_EQ(o.weight_mismatches, 0u) << what << ": SPH particle weights differ from the serial order";
+    EXPECT_EQ(o.weight_mismatches, 0u) << what << ": SPH weights or YT10 kernels differ from the serial order";
     EXPECT_EQ(o.evals, o.ref_evals) << what << ": contributing-particle count";
   }
 }
@@ -399,6 +432,7 @@ TEST(FieldOrder, RandomCloud) {
     check<FieldSSP07>("random cloud", p, kR, cell);
     check<FieldZB05>("random cloud", p, kR, cell);
     check<FieldSPH>("random cloud", p, kR, cell);
+    check<FieldYT10>("random cloud", p, kR, cell);
   }
 }
 
@@ -408,6 +442,7 @@ TEST(FieldOrder, JitteredLatticeBall) {
     check<FieldSSP07>("jittered ball", p, kR, cell);
     check<FieldZB05>("jittered ball", p, kR, cell);
     check<FieldSPH>("jittered ball", p, kR, cell);
+    check<FieldYT10>("jittered ball", p, kR, cell);
   }
 }
 
@@ -420,6 +455,7 @@ TEST(FieldOrder, LatticeBall) {
     check<FieldSSP07>("lattice ball", p, kR, cell);
     check<FieldZB05>("lattice ball", p, kR, cell);
     check<FieldSPH>("lattice ball", p, kR, cell);
+    check<FieldYT10>("lattice ball", p, kR, cell);
   }
 }
 
@@ -429,6 +465,7 @@ TEST(FieldOrder, DenseGridWithEmptyVertices) {
   check<FieldSSP07>("dense grid", p, kR, 1.0, true);
   check<FieldZB05>("dense grid", p, kR, 1.0, true);
   check<FieldSPH>("dense grid", p, kR, 1.0, true);
+  check<FieldYT10>("dense grid", p, kR, 1.0, true);
 }
 
 TEST(FieldOrder, CrowdedTile) {
@@ -439,6 +476,7 @@ TEST(FieldOrder, CrowdedTile) {
   check<FieldSSP07>("crowded tile", p, kR, 1.0);
   check<FieldZB05>("crowded tile", p, kR, 0.5);
   check<FieldSPH>("crowded tile", p, kR, 0.5);
+  check<FieldYT10>("crowded tile", p, kR, 0.5);
 }
 
 TEST(FieldOrder, CoarseCells) {
@@ -448,6 +486,7 @@ TEST(FieldOrder, CoarseCells) {
   check<FieldSSP07>("coarse cells", p, kR, 6.0);
   check<FieldZB05>("coarse cells", p, kR, 6.0);
   check<FieldSPH>("coarse cells", p, kR, 6.0);
+  check<FieldYT10>("coarse cells", p, kR, 6.0);
 }
 
 TEST(FieldOrder, RealFrame) {
@@ -456,6 +495,7 @@ TEST(FieldOrder, RealFrame) {
   if (p.empty()) GTEST_SKIP() << f << " not present";
   check<FieldSSP07>("cbd46k", p, 0.0156, 1.0, false, 1000);
   check<FieldSPH>("cbd46k", p, 0.0156, 1.0, false, 1000);
+  check<FieldYT10>("cbd46k", p, 0.0156, 1.0, false, 1000);
 }
 
 namespace {

@@ -321,12 +321,14 @@ TEST(IsolatedSpheres, DroppedParticlesBecomeSpheres) {
     for (int a = 0; a < 3; ++a) EXPECT_EQ(s.spheres[4 * i + a], float(p[3 * (body + i) + a]));
     EXPECT_FLOAT_EQ(s.spheres[4 * i + 3], float(prm.iso_radius * r));
   }
-  // SPH: half the spacing.
-  prm.method = NBMC_METHOD_SPH;
-  const Outcome sph = run(p, prm);
-  ASSERT_EQ(sph.status, NBMC_OK) << sph.message;
-  ASSERT_EQ(sph.spheres.size(), 12u);
-  EXPECT_FLOAT_EQ(sph.spheres[3], float(0.5 * r));
+  // SPH and YT10 (no iso_radius): half the spacing.
+  for (const int method : {NBMC_METHOD_SPH, NBMC_METHOD_YT10}) {
+    prm.method = method;
+    const Outcome sph = run(p, prm);
+    ASSERT_EQ(sph.status, NBMC_OK) << sph.message;
+    ASSERT_EQ(sph.spheres.size(), 12u);
+    EXPECT_FLOAT_EQ(sph.spheres[3], float(0.5 * r));
+  }
   // Keep: none.
   prm = params(r);
   const Outcome keep = run(p, prm);

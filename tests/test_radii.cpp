@@ -433,6 +433,38 @@ TEST(Radii, AttributesFollowThePerParticleKernel) {
 }
 
 // Exact statuses for bad input; the context keeps no radii after a failure.
+// YT10 has no per-particle radii: differing radii are refused with
+// INVALID_PARAMETER; equal radii are a uniform frame (equal to the spacing:
+// the mesh without radii); without the radii the same context reconstructs.
+TEST(Radii, Yt10IsRefused) {
+  const Frame f = two_resolutions();
+  const std::size_t n = f.radii.size();
+  nbmc_params prm = params(kCoarse);
+  prm.method = NBMC_METHOD_YT10;
+  const Outcome differing = run(f.xyz, &f.radii, prm);
+  EXPECT_EQ(differing.status, NBMC_ERROR_INVALID_PARAMETER);
+  EXPECT_NE(differing.error.find("not supported with method yt10"), std::string::npos) << differing.error;
+  const std::vector<double> equal(n, kCoarse);
+  const Outcome same = run(f.xyz, &equal, prm);
+  ASSERT_EQ(same.status, NBMC_OK) << same.error;
+  const Outcome plain = run(f.xyz, nullptr, prm);
+  ASSERT_EQ(plain.status, NBMC_OK) << plain.error;
+  EXPECT_TRUE(same_mesh(plain.mesh, same.mesh));
+  Ctx ctx;
+  ASSERT_EQ(nbmc_context_set_particles_f64(ctx.c, f.xyz.data(), n, 0), NBMC_OK);
+  ASSERT_EQ(nbmc_context_set_radii_f64(ctx.c, f.radii.data(), n, 0), NBMC_OK);
+  nbmc_mesh* m = nullptr;
+  EXPECT_EQ(nbmc_context_reconstruct(ctx.c, &prm, &m), NBMC_ERROR_INVALID_PARAMETER);
+  EXPECT_EQ(m, nullptr);
+  ASSERT_EQ(nbmc_context_set_radii_f64(ctx.c, nullptr, 0, 0), NBMC_OK);  // removed
+  ASSERT_EQ(nbmc_context_reconstruct(ctx.c, &prm, &m), NBMC_OK) << ctx.error();
+  EXPECT_GT(nbmc_mesh_triangle_count(m), 0u);
+  nbmc_mesh_destroy(m);
+  prm.method = NBMC_METHOD_SPH;  // the other methods take them
+  const Outcome sph = run(f.xyz, &f.radii, prm);
+  EXPECT_EQ(sph.status, NBMC_OK) << sph.error;
+}
+
 TEST(Radii, Errors) {
   EXPECT_EQ(nbmc_context_set_radii_f64(nullptr, nullptr, 0, 0), NBMC_ERROR_INVALID_ARGUMENT);
   EXPECT_EQ(nbmc_context_set_radii_f32(nullptr, nullptr, 0, 0), NBMC_ERROR_INVALID_ARGUMENT);

@@ -245,7 +245,7 @@ TEST(Sph, ThresholdOutOfRangeIsAnInvalidParameter) {
     }
   }
   nbmc_params prm = sph_params(r, 2, 0.6);
-  prm.method = 3;
+  prm.method = 4;  // 3 is NBMC_METHOD_YT10
   EXPECT_EQ(reconstruct(p, prm).status, NBMC_ERROR_INVALID_PARAMETER);
 }
 

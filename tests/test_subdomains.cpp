@@ -175,6 +175,29 @@ TEST(Subdomains, SphDensity) {
   expect_identical(nbmc_test::box(lo, hi, r), prm, 4, 3, 2);
 }
 
+// YT10's kernels need each particle's neighbours within R (its covariance,
+// density and smoothed centre): the ghost layer is 2R wide, and a split
+// gives the same mesh, though each subdomain narrows the field's radius to
+// its own largest kernel (field_yt10.hpp). Also with a small kernel, with
+// strong smoothing, and on a lattice (neighbours at exactly R).
+TEST(Subdomains, Yt10AnisotropicKernels) {
+  const double r = 0.05;
+  const Points p = jittered_blob(4, r);
+  nbmc_params prm = nbmc_test::params(r);
+  prm.method = NBMC_METHOD_YT10;
+  for (const auto& s : std::vector<std::array<int, 3>>{{2, 1, 1}, {1, 3, 1}, {2, 2, 2}}) {
+    SCOPED_TRACE(std::to_string(s[0]) + "x" + std::to_string(s[1]) + "x" + std::to_string(s[2]));
+    expect_identical(p, prm, s[0], s[1], s[2]);
+  }
+  prm.influence_radius = 3;
+  prm.aniso_lambda = 1;
+  prm.aniso_neighbours = 10;
+  expect_identical(p, prm, 3, 2, 2);
+  const double lo[3] = {0, 0, 0}, hi[3] = {0.8, 0.6, 0.7};
+  prm.cell_size = 1;
+  expect_identical(nbmc_test::box(lo, hi, r), prm, 4, 3, 2);
+}
+
 // Isolated particles dropped before the split: the same mesh for any split.
 TEST(Subdomains, IsolatedDropped) {
   const double r = 0.05;

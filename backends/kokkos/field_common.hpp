@@ -5,21 +5,22 @@
 //
 // A method is a type with
 //   static constexpr int N;                       // accumulator size (floats, zero-initialised)
-//   static constexpr bool weighted;               // reads a per-particle weight (below)
+//   static constexpr int P;                       // floats of per-particle data it reads (below)
 //   static constexpr bool radii;                  // per-particle kernel support (below)
-//   static void add(float* a, dx, dy, dz, k, w, q) // contribution of one particle, d = x_j - x,
+//   static void add(float* a, dx, dy, dz, k, pd, q) // contribution of one particle, d = x_j - x,
 //                                                 // k = max(0, 1 - |d|^2/R_j^2) (0: no contribution),
-//                                                 // w = weight of particle j (1 if not weighted),
+//                                                 // pd = particle j's P floats (nullptr if P = 0),
 //                                                 // q = 1/R_j^2 (radii methods; else 1, unused)
-//   static uint32_t accumulate(a, X, Y, Z, W, Q, b, e, x0, x1, x2, inv_R2)
+//   static uint32_t accumulate(a, X, Y, Z, PD, Q, b, e, x0, x1, x2, inv_R2)
 //                                                 // the same for particles [b, e), in order
-//                                                 // (W: the weights, nullptr if not weighted;
+//                                                 // (PD: the data, P floats per particle, nullptr if P = 0;
 //                                                 // Q: the 1/R_j^2, nullptr if not radii)
 //   static float value(const float* a, const FieldConstants&)  // phi(x); negative inside
 // so the gather (narrow band, dense) and the scatter drivers are written once.
-// A weighted method's weights come from a pass over the particles before the
-// field (NeighbourView::weight; see field_sph.hpp); a particle that
-// contributes nothing (k = 0) must add exactly +0 whatever its weight.
+// A method's per-particle data come from a pass over the particles before the
+// field (NeighbourView::pdata, P floats per particle in the sorted order; SPH:
+// a weight, field_sph.hpp; YT10: a kernel, field_yt10.hpp); a particle that
+// contributes nothing (k = 0) must add exactly +0 whatever its data.
 //
 // Per-particle radii (nbmc_context_set_radii_*, radii.hpp): each method has
 // a variant (radii = true) in which particle j has its own kernel support
@@ -45,6 +46,13 @@
 
 namespace nbmc {
 namespace Details {
+
+// v in every lane of T (a float, or a host SIMD vector of floats); v - (+0)
+// is v for every v, -0 included.
+template <class T>
+KOKKOS_INLINE_FUNCTION T lanes_of(float v) {
+  return v - T{};
+}
 
 #if !defined(__CUDA_ARCH__)
 // Host SIMD vectors (GCC/Clang vector extensions), one lane per vertex or
@@ -86,11 +94,6 @@ struct HostSimd<8> {
   typedef float F __attribute__((vector_size(32)));
   typedef std::int32_t I __attribute__((vector_size(32)));
 };
-// v in every lane (v - (+0) is v, -0 included).
-template <class V>
-inline V host_splat_of(float v) {
-  return v - V{};
-}
 template <class M>
 inline bool host_any_of(M m) {
   std::uint64_t u[sizeof(M) / 8];
@@ -123,7 +126,7 @@ struct FieldConstants {
   float inv_R2 = 0;      // 1 / R^2
   float iso_radius = 0;  // r-bar
   float t_low = 0.4f, t_high = 3.5f;
-  float iso_threshold = 0.6f;  // SPH: iso level of the normalised density
+  float iso_threshold = 0.6f;  // SPH, YT10: iso level of the normalised density
   float outside = 0;     // phi where no particle contributes
 };
 

@@ -10,7 +10,7 @@
 // with W~ = W / sigma and D_j = sum_k W~(x_j - x_k) (k = j included, so
 // D_j >= W~(0) = 1). phi(x) = iso_threshold - rho(x): negative inside.
 //
-// The particles' 1 / D_j are their weights (NeighbourView::weight), computed
+// The particles' 1 / D_j are their weights (NeighbourView::pdata), computed
 // before the field by compute_sph_weights (sph_density.hpp) with the same
 // kernel and the same summation order as a vertex's field value.
 //
@@ -30,47 +30,86 @@
 #if !defined(__CUDA_ARCH__) && defined(__SSE__)
 #include <xmmintrin.h>
 #endif
+#if !defined(__CUDA_ARCH__) && !defined(__CUDACC__) && defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#include <immintrin.h>
+#define NBMC_HOST_AVX_SQRT 1
+#endif
 
 namespace nbmc {
 namespace Details {
 
-// W / sigma as a function of k = 1 - q^2 (what the drivers pass; k = 0 gives
-// exactly 0). One expression for the device, the scalar host code and, lane
-// by lane, the host SIMD vectors.
-KOKKOS_INLINE_FUNCTION float sph_kernel(float k) {
-  const float q2 = 1.f - k;
-  const float q = Kokkos::Experimental::sqrt(q2);
+// The IEEE square root, of a float or lane by lane of a host SIMD vector.
+KOKKOS_INLINE_FUNCTION float sqrt_lanes(float x) { return Kokkos::Experimental::sqrt(x); }
+
+// W / sigma at q = |d| / h from q and q^2, 0 <= q <= 1 (exactly 0 at q = 1):
+// 1 - 6 q^2 + 6 q^3 up to 1/2, 2 (1 - q)^3 beyond. One expression for the
+// device, the scalar host code and, lane by lane, the host SIMD vectors.
+KOKKOS_INLINE_FUNCTION float cubic_spline(float q, float q2) {
   const float inner = (1.f - 6.f * q2) + (6.f * q2) * q;
   const float u = 1.f - q;
   const float outer = 2.f * (u * u * u);
   return q <= 0.5f ? inner : outer;
 }
 
+// W / sigma as a function of k = 1 - q^2 (what the drivers pass; k = 0 gives
+// exactly 0).
+KOKKOS_INLINE_FUNCTION float sph_kernel(float k) {
+  const float q2 = 1.f - k;
+  return cubic_spline(sqrt_lanes(q2), q2);
+}
+
 #if !defined(__CUDA_ARCH__)
+#if defined(NBMC_HOST_AVX_SQRT)
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wpsabi"  // 32-byte vectors never cross a call that is not inlined
+#endif
+// 8 lanes only run inside the AVX2 kernels (scalar_field.hpp), which inline
+// this: one 256-bit IEEE square root instead of two 128-bit ones.
+__attribute__((target("avx"))) inline HostSimd<8>::F sqrt_lanes(HostSimd<8>::F x) {
+  __m256 v;
+  std::memcpy(&v, &x, 32);
+  v = _mm256_sqrt_ps(v);
+  HostSimd<8>::F q;
+  std::memcpy(&q, &v, 32);
+  return q;
+}
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic pop
+#endif
+#endif
 // Host SIMD vectors of any lane count (4, or 8 in the AVX2 tile kernel).
 template <class V>
-inline V sph_kernel_lanes(V k) {
-  const V one = host_splat_of<V>(1.f), six = host_splat_of<V>(6.f);
-  const V q2 = one - k;
+inline V sqrt_lanes(V x) {
   V q;
 #if defined(__SSE__)
   // IEEE square roots, 4 lanes per SSE instruction (the same results as the
   // scalar std::sqrt and the device's sqrt; SSE is part of x86-64).
   for (std::size_t l = 0; l < sizeof(V) / 16; ++l) {
-    __m128 x;
-    std::memcpy(&x, reinterpret_cast<const char*>(&q2) + 16 * l, 16);
-    x = _mm_sqrt_ps(x);
-    std::memcpy(reinterpret_cast<char*>(&q) + 16 * l, &x, 16);
+    __m128 v;
+    std::memcpy(&v, reinterpret_cast<const char*>(&x) + 16 * l, 16);
+    v = _mm_sqrt_ps(v);
+    std::memcpy(reinterpret_cast<char*>(&q) + 16 * l, &v, 16);
   }
 #else
-  for (int l = 0; l < int(sizeof(V) / sizeof(float)); ++l) q[l] = std::sqrt(q2[l]);  // IEEE sqrt, as on the device
+  for (int l = 0; l < int(sizeof(V) / sizeof(float)); ++l) q[l] = std::sqrt(x[l]);  // IEEE sqrt, as on the device
 #endif
+  return q;
+}
+template <class V>
+inline V cubic_spline(V q, V q2) {
+  const V one = lanes_of<V>(1.f), six = lanes_of<V>(6.f);
   const V inner = (one - six * q2) + (six * q2) * q;
   const V u = one - q;
-  const V outer = host_splat_of<V>(2.f) * (u * u * u);
-  const auto m = q <= host_splat_of<V>(0.5f);
+  const V outer = lanes_of<V>(2.f) * (u * u * u);
+  const auto m = q <= lanes_of<V>(0.5f);
   using I = decltype(m);
   return (V)(((I)inner & m) | ((I)outer & ~m));
+}
+template <class V>
+inline V sph_kernel_lanes(V k) {
+  const V q2 = lanes_of<V>(1.f) - k;
+  return cubic_spline(sqrt_lanes(q2), q2);
 }
 inline HostVecF sph_kernel(HostVecF k) { return sph_kernel_lanes(k); }
 inline HostSimd<8>::F sph_kernel(HostSimd<8>::F k) { return sph_kernel_lanes(k); }
@@ -79,14 +118,15 @@ inline HostSimd<8>::F sph_kernel(HostSimd<8>::F k) { return sph_kernel_lanes(k);
 template <bool Radii>
 struct FieldSPHT {
   static constexpr const char* name = "sph";
-  static constexpr bool weighted = true;
+  static constexpr int P = 1;  // the weight 1 / D_j
   static constexpr bool radii = Radii;
   // a[0] = sum_j W~_j / D_j
   static constexpr int N = 1;
   // T is float, or a host SIMD vector of floats (same formula, lane-wise).
   template <class T>
-  KOKKOS_INLINE_FUNCTION static void add(T* a, T /*dx*/, T /*dy*/, T /*dz*/, T k, T w, T /*q: in k already*/) {
-    a[0] += sph_kernel(k) * w;
+  KOKKOS_INLINE_FUNCTION static void add(T* a, T /*dx*/, T /*dy*/, T /*dz*/, T k, const float* w,
+                                         T /*q: in k already*/) {
+    a[0] += sph_kernel(k) * lanes_of<T>(w[0]);
   }
   // Adds particles [b, e) (SoA coordinates, weights W) at vertex x, one after
   // the other (see field_common.hpp); returns how many contribute. Same
@@ -119,11 +159,11 @@ using FieldSPH = FieldSPHT<false>;
 template <bool Radii>
 struct SphDensityT {
   static constexpr const char* name = "sph-density";
-  static constexpr bool weighted = false;
+  static constexpr int P = 0;
   static constexpr bool radii = Radii;
   static constexpr int N = 1;
   template <class T>
-  KOKKOS_INLINE_FUNCTION static void add(T* a, T, T, T, T k, T, T) {
+  KOKKOS_INLINE_FUNCTION static void add(T* a, T, T, T, T k, const float*, T) {
     a[0] += sph_kernel(k);
   }
   KOKKOS_INLINE_FUNCTION static std::uint32_t accumulate(float* a, const float* X, const float* Y, const float* Z,

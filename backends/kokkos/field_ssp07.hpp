@@ -44,12 +44,12 @@ struct FieldSSP07T {
   static constexpr const char* name = "ssp07";
   // a[0] = W = sum k^3, a[1..3] = sum k^3 d, a[4..6] = sum k^2 d (grad k without 6/R^2),
   // a[7..15] = sum d_a k^2 d_b (row-major); radii: a[4..15] times q_j, a[16] = sum k^3 r_j
-  static constexpr bool weighted = Radii;
+  static constexpr int P = Radii ? 1 : 0;  // radii: the particle's radius r_j
   static constexpr bool radii = Radii;
   static constexpr int N = Radii ? 17 : 16;
   // T is float, or a host SIMD vector of floats (same formula, lane-wise).
   template <class T>
-  KOKKOS_INLINE_FUNCTION static void add(T* a, T dx, T dy, T dz, T k, T rj, T q) {
+  KOKKOS_INLINE_FUNCTION static void add(T* a, T dx, T dy, T dz, T k, const float* pd, T q) {
     T k2 = k * k;
     const T w = k2 * k;
     a[0] += w;
@@ -57,10 +57,10 @@ struct FieldSSP07T {
     a[2] += w * dy;
     a[3] += w * dz;
     if constexpr (Radii) {
-      a[16] += w * rj;
+      a[16] += w * lanes_of<T>(pd[0]);
       k2 = k2 * q;
     } else {
-      (void)rj;
+      (void)pd;
       (void)q;
     }
     const T gx = k2 * dx, gy = k2 * dy, gz = k2 * dz;

@@ -16,19 +16,19 @@ template <bool Radii>
 struct FieldZB05T {
   static constexpr const char* name = "zb05";
   // a[0] = sum k^3, a[1..3] = sum k^3 d; radii: a[4] = sum k^3 r_j
-  static constexpr bool weighted = Radii;  // the weights are the radii r_j
+  static constexpr int P = Radii ? 1 : 0;  // radii: the particle's radius r_j
   static constexpr bool radii = Radii;
   static constexpr int N = Radii ? 5 : 4;
   // T is float, or a host SIMD vector of floats (same formula, lane-wise).
   template <class T>
-  KOKKOS_INLINE_FUNCTION static void add(T* a, T dx, T dy, T dz, T k, T rj, T /*q: in k already*/) {
+  KOKKOS_INLINE_FUNCTION static void add(T* a, T dx, T dy, T dz, T k, const float* pd, T /*q: in k already*/) {
     const T w = k * k * k;
     a[0] += w;
     a[1] += w * dx;
     a[2] += w * dy;
     a[3] += w * dz;
-    if constexpr (Radii) a[4] += w * rj;
-    else (void)rj;
+    if constexpr (Radii) a[4] += w * lanes_of<T>(pd[0]);
+    else (void)pd;
   }
   // Adds particles [b, e) (SoA coordinates) at vertex x, one after the other (the
   // order of the sums is part of the result: see field_common.hpp); returns how

@@ -28,7 +28,11 @@ struct Neighbourhood {
   Buffer<std::uint64_t, MemSpace> cell_keys;
   Buffer<std::uint32_t, MemSpace> cell_start;  // n_cells + 1
   HashMapStorage<MemSpace> cells;              // Morton key -> cell index
-  Buffer<float, MemSpace> weight;              // n, sorted order: weighted methods only (field_sph.hpp)
+  // Per-particle data of a field method with a pass over the particles (P
+  // floats per particle, sorted order: SPH's weight, YT10's kernel; with
+  // per-particle radii, SSP07's and ZB05's radius r_j, radii.hpp); empty
+  // for the others.
+  Buffer<float, MemSpace> pdata;
   // Per-particle radii (radii.hpp), sorted order; empty without them.
   Buffer<float, MemSpace> scale;    // t_j = r_j / r_max, in (0, 1]
   Buffer<float, MemSpace> support;  // 1 / R_j^2, R_j = R t_j
@@ -43,9 +47,9 @@ struct NeighbourView {
   HashMap<MemSpace> cells;
   std::int64_t nb_dims[3];
   float inv_nb_cell;
-  // Per-particle weights of a weighted field method (sorted order); empty
-  // for the others.
-  Kokkos::View<const float*, MemSpace> weight;
+  // Per-particle data of the field method (Neighbourhood::pdata): particle
+  // j's P floats at pdata(P j), ..., pdata(P j + P - 1); empty if P = 0.
+  Kokkos::View<const float*, MemSpace> pdata;
   // Per-particle radii (radii.hpp; sorted order, empty without them): the
   // radius relative to the largest, t_j, and the kernel's 1 / R_j^2.
   Kokkos::View<const float*, MemSpace> scale, support;
@@ -70,7 +74,7 @@ NeighbourView<MemSpace> view_of(const Neighbourhood<MemSpace>& nb, const Grid& g
   v.cells = nb.cells.map;
   for (int a = 0; a < 3; ++a) v.nb_dims[a] = g.nb_dims[a];
   v.inv_nb_cell = float(1.0 / g.nb_cell);
-  v.weight = nb.weight.view();
+  v.pdata = nb.pdata.view();
   v.scale = nb.scale.view();
   v.support = nb.support.view();
   return v;

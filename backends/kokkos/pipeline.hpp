@@ -12,6 +12,7 @@
 #include "radii.hpp"
 #include "scalar_field.hpp"
 #include "sph_density.hpp"
+#include "yt10_kernels.hpp"
 #include "surface_particles.hpp"
 #include "../../src/core/piece.hpp"
 
@@ -99,7 +100,7 @@ struct RunStats {
 
 namespace Details {
 
-// The bounding box extended by particle_reach (R; 2R for the SPH density):
+// The bounding box extended by particle_reach (R; 2R for SPH and YT10):
 // the particles a clipped reconstruction keeps (host and device paths).
 struct ExtendedBox {
   double lo[3], hi[3];
@@ -330,12 +331,15 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
     tracker.require(need, "the field and triangulation of " + std::to_string(band.n_vertices) +
                               " band vertices (estimated)");
   }
-  const FieldConstants fc = field_constants(p.influence_radius, p.iso_radius, p.t_low, p.t_high, p.iso_threshold);
-  // The SPH density's per-particle weights (its pass over the particles).
+  FieldConstants fc = field_constants(p.influence_radius, p.iso_radius, p.t_low, p.t_high, p.iso_threshold);
+  // The passes over the particles: the SPH density's weights, YT10's kernels
+  // (which also narrow the radius the field visits; YT10 has no radii
+  // variant, params.hpp refuses it with per-particle radii).
   if (p.method == Method::SPH) {
     if (radii) compute_sph_weights<true>(space, tracker, nbh, g, fc);
     else compute_sph_weights<false>(space, tracker, nbh, g, fc);
   }
+  if (p.method == Method::YT10) fc = compute_yt10_kernels(space, tracker, nbh, g, p, fc);
   const NeighbourView<MemSpace> nbf = view_of(nbh, g);
   Buffer<float, MemSpace> phi(tracker, "scalar_field::values", band.n_vertices);
   const BandView<MemSpace> bv0 = view_of(band, g);
@@ -345,7 +349,7 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
     if (p.field == FieldKind::Scatter) {
       if constexpr (Kokkos::SpaceAccessibility<Kokkos::HostSpace, MemSpace>::accessible) {
         return scatter_field<Method>(space, tracker, Kokkos::View<const float*, Kokkos::HostSpace>(nbh.pos.view()),
-                                     Kokkos::View<const float*, Kokkos::HostSpace>(nbh.weight.view()),
+                                     Kokkos::View<const float*, Kokkos::HostSpace>(nbh.pdata.view()),
                                      Kokkos::View<const float*, Kokkos::HostSpace>(nbh.support.view()), nbh.n, bv0,
                                      n_words0, g, fc, phi.view(), progress);
       } else {

@@ -8,7 +8,7 @@
 //     particle's, so every search and pruning by R stays exact);
 //   - for the distance fields (SSP07, ZB05), each particle's radius
 //     iso_radius t_j, the weight whose kernel-weighted mean is rbar of eq. (1)
-//     (Neighbourhood::weight; the SPH density computes its own weights);
+//     (Neighbourhood::pdata, P = 1; the SPH density computes its own weights);
 //   - t_j itself, which scales the surface-particle test and the band box.
 // Every value is computed from t_j (a float) with the same double operations
 // on every backend, and t_j from the particle's own radius and the frame's
@@ -56,9 +56,9 @@ void attach_radii(const ExecSpace& space, MemoryTracker& tracker,
   nbh.scale = Buffer<float, MemSpace>(tracker, "radii::scale", n);
   nbh.support = Buffer<float, MemSpace>(tracker, "radii::support", n);
   const bool iso = p.method != Method::SPH;
-  if (iso) nbh.weight = Buffer<float, MemSpace>(tracker, "radii::iso_radii", n);
+  if (iso) nbh.pdata = Buffer<float, MemSpace>(tracker, "radii::iso_radii", n);
   const auto perm = nbh.perm.view();
-  const auto scale = nbh.scale.view(), support = nbh.support.view(), weight = nbh.weight.view();
+  const auto scale = nbh.scale.view(), support = nbh.support.view(), weight = nbh.pdata.view();
   const double ref = p.radius_ref, R = p.influence_radius, iso_radius = p.iso_radius;
   Kokkos::parallel_for(
       "nbmc::radii::sort", Kokkos::RangePolicy<ExecSpace>(space, 0, n), KOKKOS_LAMBDA(const std::size_t j) {

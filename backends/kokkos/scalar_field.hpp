@@ -99,17 +99,16 @@ KOKKOS_INLINE_FUNCTION int tile_order(int o) {
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wpsabi"  // 32-byte vectors never cross a call that is not inlined
 #endif
-template <class Method, int L, class MemSpace>
-KOKKOS_INLINE_FUNCTION bool eval_tile_host_lanes(const NeighbourView<MemSpace>& nb, const std::int64_t lo[3],
-                                                 const std::int64_t hi[3], float S, const FieldConstants& fc,
-                                                 std::uint64_t word, std::uint64_t full, std::size_t w,
-                                                 const BandView<MemSpace>& band, float c,
-                                                 const Kokkos::View<float*, MemSpace>& phi, std::uint64_t& evals) {
-#if defined(__CUDA_ARCH__)
-  (void)nb; (void)lo; (void)hi; (void)S; (void)fc; (void)word; (void)full; (void)w; (void)band; (void)c; (void)phi;
-  (void)evals;
-  return false;  // device code uses gather_words_direct / gather_words_team
-#else
+// The lane kernel of the host tiles, for any points: points 0..n_points-1
+// (point(i, x) gives point i), in groups of L lanes, each point's sums in
+// the order of eval_vertex_direct; sink(i, a, count) receives point i's
+// Method::N sums and how many particles contributed. lo, hi: a cell span
+// that contains every point's own cell_span. Host code only.
+#if !defined(__CUDA_ARCH__)
+template <class Method, int L, class MemSpace, class PointFn, class SinkFn>
+inline bool eval_points_host_lanes(const NeighbourView<MemSpace>& nb, const std::int64_t lo[3],
+                                   const std::int64_t hi[3], float S, const FieldConstants& fc, int n_points,
+                                   PointFn&& point, SinkFn&& sink) {
   using HostVecF = typename HostSimd<L>::F;
   using HostVecI = typename HostSimd<L>::I;
   const std::int64_t span[3] = {hi[0] - lo[0] + 1, hi[1] - lo[1] + 1, hi[2] - lo[2] + 1};
@@ -132,24 +131,20 @@ KOKKOS_INLINE_FUNCTION bool eval_tile_host_lanes(const NeighbourView<MemSpace>& 
   const int base[3] = {0, int(span[0]), int(span[0] + span[1])};
   const float R2 = fc.R * fc.R;
   const float inf = std::numeric_limits<float>::infinity();
-  const HostVecF one = host_splat_of<HostVecF>(1.f), inv_R2 = host_splat_of<HostVecF>(fc.inv_R2), R2v = host_splat_of<HostVecF>(R2);
-  const HostVecF zero = host_splat_of<HostVecF>(0.f);
+  const HostVecF one = lanes_of<HostVecF>(1.f), inv_R2 = lanes_of<HostVecF>(fc.inv_R2), R2v = lanes_of<HostVecF>(R2);
+  const HostVecF zero = lanes_of<HostVecF>(0.f);
   const HostVecI izero = (HostVecI)zero;
   const float* X = nb.pos.data();
   const float* Y = X + nb.n;
   const float* Z = Y + nb.n;
-  const float* Wt = nb.weight.data();  // weighted methods only
+  const float* PD = nb.pdata.data();  // methods with particle data only
   const float* Qt = nb.support.data();  // radii methods only: 1/R_j^2
-  int bits[64], n_bits = 0;
-  for (int o = 0; o < 64; ++o)
-    if ((word >> tile_order(o)) & 1) bits[n_bits++] = tile_order(o);
-  for (int g0 = 0; g0 < n_bits; g0 += L) {
-    const int m = n_bits - g0 < L ? n_bits - g0 : L;  // lanes in use; the others repeat lane 0, all masked
+  for (int g0 = 0; g0 < n_points; g0 += L) {
+    const int m = n_points - g0 < L ? n_points - g0 : L;  // lanes in use; the others repeat lane 0, all masked
     HostVecF vx, vy, vz;
     for (int l = 0; l < L; ++l) {
-      std::int64_t i, j, k;
-      band.vertex(w, bits[g0 + (l < m ? l : 0)], i, j, k);
-      const float x[3] = {float(i) * c, float(j) * c, float(k) * c};
+      float x[3];
+      point(g0 + (l < m ? l : 0), x);
       vx[l] = x[0];
       vy[l] = x[1];
       vz[l] = x[2];
@@ -194,27 +189,58 @@ KOKKOS_INLINE_FUNCTION bool eval_tile_host_lanes(const NeighbourView<MemSpace>& 
       while (pb < pe && X[pb] < xmin && beyond(X[pb] - xmin)) ++pb;
       while (pe > pb && X[pe - 1] > xmax && beyond(X[pe - 1] - xmax)) --pe;
       for (std::uint32_t p = pb; p < pe; ++p) {
-        const HostVecF dx = host_splat_of<HostVecF>(X[p]) - vx;
-        const HostVecF dy = host_splat_of<HostVecF>(Y[p]) - vy;
-        const HostVecF dz = host_splat_of<HostVecF>(Z[p]) - vz;
+        const HostVecF dx = lanes_of<HostVecF>(X[p]) - vx;
+        const HostVecF dy = lanes_of<HostVecF>(Y[p]) - vy;
+        const HostVecF dz = lanes_of<HostVecF>(Z[p]) - vz;
         HostVecF q = inv_R2;
-        if constexpr (Method::radii) q = host_splat_of<HostVecF>(Qt[p]);
+        if constexpr (Method::radii) q = lanes_of<HostVecF>(Qt[p]);
         const HostVecF s2 = (dx * dx + dy * dy + dz * dz) * q;
         const HostVecI inside = (s2 < one) & visit;  // -1 where the particle contributes
         const HostVecF k = (HostVecF)((HostVecI)(one - s2) & inside);
         count -= inside;
-        Method::add(acc, dx, dy, dz, k, Method::weighted ? host_splat_of<HostVecF>(Wt[p]) : one, q);
+        Method::add(acc, dx, dy, dz, k, Method::P ? PD + std::size_t(Method::P) * p : nullptr, q);
       }
     }
     for (int l = 0; l < m; ++l) {
       float a[Method::N];
       for (int q = 0; q < Method::N; ++q) a[q] = acc[q][l];
-      evals += std::uint64_t(count[l]);
-      const int bit = bits[g0 + l];
-      phi(band.word_offset(w) + popcount64(full & ((std::uint64_t(1) << bit) - 1))) = Method::value(a, fc);
+      sink(g0 + l, a, std::uint32_t(count[l]));
     }
   }
   return true;
+}
+#endif
+
+// One band word's vertices (a 4x4x4 tile) with eval_points_host_lanes,
+// bit for bit the per-vertex order of eval_vertex_direct (the GPU's).
+template <class Method, int L, class MemSpace>
+KOKKOS_INLINE_FUNCTION bool eval_tile_host_lanes(const NeighbourView<MemSpace>& nb, const std::int64_t lo[3],
+                                                 const std::int64_t hi[3], float S, const FieldConstants& fc,
+                                                 std::uint64_t word, std::uint64_t full, std::size_t w,
+                                                 const BandView<MemSpace>& band, float c,
+                                                 const Kokkos::View<float*, MemSpace>& phi, std::uint64_t& evals) {
+#if defined(__CUDA_ARCH__)
+  (void)nb; (void)lo; (void)hi; (void)S; (void)fc; (void)word; (void)full; (void)w; (void)band; (void)c; (void)phi;
+  (void)evals;
+  return false;  // device code uses gather_words_direct / gather_words_team
+#else
+  int bits[64], n_bits = 0;
+  for (int o = 0; o < 64; ++o)
+    if ((word >> tile_order(o)) & 1) bits[n_bits++] = tile_order(o);
+  return eval_points_host_lanes<Method, L>(
+      nb, lo, hi, S, fc, n_bits,
+      [&](int i, float x[3]) {
+        std::int64_t vi, vj, vk;
+        band.vertex(w, bits[i], vi, vj, vk);
+        x[0] = float(vi) * c;
+        x[1] = float(vj) * c;
+        x[2] = float(vk) * c;
+      },
+      [&](int i, const float* a, std::uint32_t count) {
+        evals += count;
+        const int bit = bits[i];
+        phi(band.word_offset(w) + popcount64(full & ((std::uint64_t(1) << bit) - 1))) = Method::value(a, fc);
+      });
 #endif
 }
 
@@ -262,13 +288,15 @@ KOKKOS_INLINE_FUNCTION bool eval_tile_host(const NeighbourView<MemSpace>& nb, co
 #pragma GCC diagnostic pop
 #endif
 
-// Field value at x visiting the neighbour cells directly (no cell list):
-// the fallback for cells so coarse that a tile's cell list would not fit.
+// The sums of Method's accumulators at x (acc, N floats, starting from +0)
+// visiting the neighbour cells directly, in the order every backend uses:
+// cells in z, y, x order, skipping those whose box is R or farther, their
+// particles in sorted order. Returns how many particles contribute.
 template <class Method, class MemSpace>
-KOKKOS_INLINE_FUNCTION float eval_vertex_direct(const NeighbourView<MemSpace>& nb, const float x[3], float S,
-                                                const FieldConstants& fc, std::uint64_t& evals) {
-  float acc[Method::N];
+KOKKOS_INLINE_FUNCTION std::uint32_t sum_vertex_direct(const NeighbourView<MemSpace>& nb, const float x[3], float S,
+                                                       const FieldConstants& fc, float* acc) {
   for (int q = 0; q < Method::N; ++q) acc[q] = 0.f;
+  std::uint32_t evals = 0;
   std::int64_t lo[3], hi[3];
   cell_span(nb, x, x, fc.R, lo, hi);
   const float* X = nb.pos.data();
@@ -279,9 +307,20 @@ KOKKOS_INLINE_FUNCTION float eval_vertex_direct(const NeighbourView<MemSpace>& n
         if (!nb.cell_range(xx, y, z, b, e)) continue;
         const float clo[3] = {float(xx) * S, float(y) * S, float(z) * S};
         if (box_distance2(clo, S, x) >= fc.R * fc.R) continue;
-        evals += Method::accumulate(acc, X, X + nb.n, X + 2 * nb.n, Method::weighted ? nb.weight.data() : nullptr,
+        evals += Method::accumulate(acc, X, X + nb.n, X + 2 * nb.n, Method::P ? nb.pdata.data() : nullptr,
                                     Method::radii ? nb.support.data() : nullptr, b, e, x[0], x[1], x[2], fc.inv_R2);
       }
+  return evals;
+}
+
+// Field value at x visiting the neighbour cells directly (no cell list):
+// the device gather, and the host's fallback for cells so coarse that a
+// tile's cell list would not fit.
+template <class Method, class MemSpace>
+KOKKOS_INLINE_FUNCTION float eval_vertex_direct(const NeighbourView<MemSpace>& nb, const float x[3], float S,
+                                                const FieldConstants& fc, std::uint64_t& evals) {
+  float acc[Method::N];
+  evals += sum_vertex_direct<Method>(nb, x, S, fc, acc);
   return Method::value(acc, fc);
 }
 
@@ -393,9 +432,9 @@ std::uint64_t gather_words_team(const ExecSpace& space, const NeighbourView<type
   using U32 = Kokkos::View<std::uint32_t*, Scratch, Kokkos::MemoryUnmanaged>;
   using F32 = Kokkos::View<float*, Scratch, Kokkos::MemoryUnmanaged>;
   const float c = float(g.cell), S = float(g.nb_cell);
-  // x, y, z (and the weight, and 1/R_j^2 with radii) of each staged particle
-  constexpr int kWeight = 3, kSupport = Method::weighted ? 4 : 3;
-  constexpr int kStaged = 3 + (Method::weighted ? 1 : 0) + (Method::radii ? 1 : 0);
+  // x, y, z (and the particle data, and 1/R_j^2 with radii) of each staged particle
+  constexpr int kSupport = 3 + Method::P;
+  constexpr int kStaged = 3 + Method::P + (Method::radii ? 1 : 0);
   const std::size_t shmem = 3 * U32::shmem_size(kMaxTileCells + 1) + F32::shmem_size(kStaged * kTeamChunk);
   Kokkos::View<std::uint64_t, MemSpace> counter("nbmc::scalar_field::evals");
   Policy policy(space, int(w1 - w0), 64);
@@ -472,13 +511,14 @@ std::uint64_t gather_words_team(const ExecSpace& space, const NeighbourView<type
             px(e) = nb.pos(j);
             px(kTeamChunk + e) = nb.pos(nb.n + j);
             px(2 * kTeamChunk + e) = nb.pos(2 * nb.n + j);
-            if (Method::weighted) px(kWeight * kTeamChunk + e) = nb.weight(j);
+            for (int q = 0; q < Method::P; ++q)
+              px(3 * kTeamChunk + Method::P * e + q) = nb.pdata(std::size_t(Method::P) * j + q);
             if (Method::radii) px(kSupport * kTeamChunk + e) = nb.support(j);
           });
           team.team_barrier();
           if (mine)
             evals += Method::accumulate(acc, px.data(), px.data() + kTeamChunk, px.data() + 2 * kTeamChunk,
-                                        Method::weighted ? px.data() + kWeight * kTeamChunk : nullptr,
+                                        Method::P ? px.data() + 3 * kTeamChunk : nullptr,
                                         Method::radii ? px.data() + kSupport * kTeamChunk : nullptr, 0, m, x[0],
                                         x[1], x[2], fc.inv_R2);
           team.team_barrier();
@@ -571,7 +611,7 @@ std::uint64_t gather_field(const ExecSpace& space, const NeighbourView<typename 
 template <class Method, class ExecSpace>
 std::uint64_t scatter_field(const ExecSpace& space, MemoryTracker& tracker,
                             const Kokkos::View<const float*, Kokkos::HostSpace>& pos,
-                            const Kokkos::View<const float*, Kokkos::HostSpace>& weight,
+                            const Kokkos::View<const float*, Kokkos::HostSpace>& pdata,
                             const Kokkos::View<const float*, Kokkos::HostSpace>& support, std::size_t n,
                             const BandView<typename ExecSpace::memory_space>& band, std::size_t n_words,
                             const Grid& g, const FieldConstants& fc,
@@ -587,7 +627,7 @@ std::uint64_t scatter_field(const ExecSpace& space, MemoryTracker& tracker,
   std::uint64_t evals = 0;
   for (std::size_t p = 0; p < n; ++p) {
     const float px = pos(p), py = pos(n + p), pz = pos(2 * n + p);
-    const float wp = Method::weighted ? weight(p) : 1.f;
+    const float* const pd = Method::P ? pdata.data() + std::size_t(Method::P) * p : nullptr;
     const float qp = Method::radii ? support(p) : fc.inv_R2;  // the vertex range below stays R's
     const std::int64_t lo[3] = {std::max<std::int64_t>(0, std::int64_t(std::ceil((px - fc.R) / c))),
                                 std::max<std::int64_t>(0, std::int64_t(std::ceil((py - fc.R) / c))),
@@ -604,7 +644,7 @@ std::uint64_t scatter_field(const ExecSpace& space, MemoryTracker& tracker,
           const float dx = px - float(i) * float(c);
           const float s2 = (dx * dx + dy * dy + dz * dz) * qp;
           if (s2 >= 1.f) continue;
-          Method::add(row + N * i, dx, dy, dz, 1.f - s2, wp, qp);
+          Method::add(row + N * i, dx, dy, dz, 1.f - s2, pd, qp);
           ++evals;
         }
       }

@@ -25,9 +25,9 @@ void compute_sph_weights(const ExecSpace& space, MemoryTracker& tracker,
                          const FieldConstants& fc) {
   using MemSpace = typename ExecSpace::memory_space;
   ScopedRegion region("nbmc::scalar_field::sph_density");
-  nbh.weight = Buffer<float, MemSpace>(tracker, "scalar_field::sph_weights", nbh.n);
+  nbh.pdata = Buffer<float, MemSpace>(tracker, "scalar_field::sph_weights", nbh.n);
   const NeighbourView<MemSpace> nb = view_of(nbh, g);
-  const auto w = nbh.weight.view();
+  const auto w = nbh.pdata.view();
   const float S = float(g.nb_cell);
   const std::size_t n = nbh.n;
   Kokkos::parallel_for(

@@ -102,6 +102,7 @@ module nbmc
   integer(c_int32_t), parameter, public :: NBMC_METHOD_SSP07 = 0
   integer(c_int32_t), parameter, public :: NBMC_METHOD_ZB05  = 1
   integer(c_int32_t), parameter, public :: NBMC_METHOD_SPH   = 2
+  integer(c_int32_t), parameter, public :: NBMC_METHOD_YT10  = 3
 
   integer(c_int32_t), parameter, public :: NBMC_ISOLATED_KEEP = 0
   integer(c_int32_t), parameter, public :: NBMC_ISOLATED_DROP = 1
@@ -188,6 +189,12 @@ module nbmc
     real(c_double)     :: decimate_fraction = 0   ! appended (decimation, feature-weighted smoothing)
     integer(c_int32_t) :: smooth_weighting = 0
     integer(c_int32_t) :: reserved1 = 0
+    real(c_double)     :: aniso_kr = 0            ! appended (NBMC_METHOD_YT10)
+    real(c_double)     :: aniso_ks = 0
+    real(c_double)     :: aniso_kn = 0
+    real(c_double)     :: aniso_lambda = 0
+    integer(c_int32_t) :: aniso_neighbours = 0
+    integer(c_int32_t) :: reserved2 = 0
   end type nbmc_params
 
   type, bind(c), public :: nbmc_stats

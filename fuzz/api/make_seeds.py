@@ -75,6 +75,13 @@ def sph(threshold=0.6, corrupt_threshold=False):
     return flag(5, True) + rng(0.05, 0.95, threshold) + u8(0 if corrupt_threshold else 1)
 
 
+def yt10(threshold=0.6, kr=4.0, ks=1.0, kn=0.5, lam=0.3, neps=25, corrupt=7, defaults=False):
+    """The draws appended after the SPH ones: NBMC_METHOD_YT10 (no SPH)."""
+    return (flag(5, False) + rng(0.05, 0.95, 0.6) + u8(1) +
+            flag(5, True) + rng(0.05, 0.95, threshold) + rng(1.0, 8.0, kr) + rng(0.3, 3.0, ks) +
+            rng(0.05, 1.5, kn) + u16(round(lam * 65535)) + u8(neps) + u8(corrupt) + flag(3, defaults))
+
+
 def centre(c):
     return b"".join(rng(-6, 6, x) for x in c)
 
@@ -141,6 +148,19 @@ SEEDS = {
                               pieces(cloud((-2, -2, -2), 150, 5.0), ball((3, 3, 3), 1.0)) + sph(0.3),
     "sph-threshold-one": header(corrupt=(6, 0, 0)) + pieces(ball((0, 0, 0), 2.0)) + sph(0.6, True),
     "sph-threshold-nan": header(corrupt=(6, 1, 0)) + pieces(ball((0, 0, 0), 2.0)) + sph(0.6, True),
+    # NBMC_METHOD_YT10 (the draws after the SPH ones): a lattice ball with
+    # the defaults; a one-particle-thick sheet cut by a box (particles kept
+    # within 2R); a cloud with 30 coincident particles on the dense grid with
+    # every parameter at an end of its range; k_n and lambda just out of
+    # range (INVALID_PARAMETER).
+    "yt10-ball": header() + pieces(ball((0, 0, 0), 3.0)) + yt10(defaults=True),
+    "yt10-sheet-bbox": header(cell=0.6, bbox=[(0.1, 0.8), (0.0, 1.0), (-0.3, 1.3)]) +
+                       pieces(sheet((-4, -4, 0), 10, 10, 1)) + yt10(0.5),
+    "yt10-dense-extremes": header(dense=True, cell=0.8) +
+                           pieces(cloud((-2, -2, -2), 150, 5.0), duplicates(30)) +
+                           yt10(0.3, kr=8.0, ks=3.0, kn=1.5, lam=1.0, neps=0),
+    "yt10-kn-invalid": header(corrupt=(6, 0, 0)) + pieces(ball((0, 0, 0), 2.0)) + yt10(corrupt=2),
+    "yt10-lambda-invalid": header(corrupt=(6, 1, 0)) + pieces(ball((0, 0, 0), 2.0)) + yt10(corrupt=3),
     # Regression inputs for the core findings of the fuzzer (fuzz/README_api.md),
     # fixed or documented in eedcfb7.
     # 1: cancelled on the 8th progress call (stage 5 done) under a 32 KiB

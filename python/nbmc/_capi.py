@@ -40,6 +40,7 @@ BACKEND_CUDA = 3
 METHOD_SSP07 = 0
 METHOD_ZB05 = 1
 METHOD_SPH = 2
+METHOD_YT10 = 3
 
 ISOLATED_KEEP = 0
 ISOLATED_DROP = 1
@@ -121,6 +122,13 @@ class Params(Structure):
         ("decimate_fraction", c_double),
         ("smooth_weighting", c_int32),
         ("reserved1", c_int32),
+        # appended with METHOD_YT10
+        ("aniso_kr", c_double),
+        ("aniso_ks", c_double),
+        ("aniso_kn", c_double),
+        ("aniso_lambda", c_double),
+        ("aniso_neighbours", c_int32),
+        ("reserved2", c_int32),
     ]
 
 

@@ -26,7 +26,7 @@ ProgressFn = Callable[[str, float], Any]
 
 BACKENDS = {"auto": C.BACKEND_AUTO, "serial": C.BACKEND_SERIAL, "openmp": C.BACKEND_OPENMP,
             "cuda": C.BACKEND_CUDA}
-METHODS = {"ssp07": C.METHOD_SSP07, "zb05": C.METHOD_ZB05, "sph": C.METHOD_SPH}
+METHODS = {"ssp07": C.METHOD_SSP07, "zb05": C.METHOD_ZB05, "sph": C.METHOD_SPH, "yt10": C.METHOD_YT10}
 FIELDS = {"narrow-band": C.FIELD_NARROW_BAND, "dense": C.FIELD_DENSE, "scatter": C.FIELD_SCATTER}
 UNITS = {"spacing": C.UNIT_SPACING, "absolute": C.UNIT_ABSOLUTE}
 ISOLATED = {"keep": C.ISOLATED_KEEP, "drop": C.ISOLATED_DROP, "sphere": C.ISOLATED_SPHERE}
@@ -64,9 +64,11 @@ def stage_name(stage: int) -> str:
 # Keyword arguments of reconstruct() that map onto nbmc_params, named like the
 # CLI's options (--cell-size -> cell_size); 'normals' is the inverse of --no-normals.
 _LENGTHS = ("cell_size", "influence_radius", "band_width", "surface_radius", "iso_radius")
+_ANISO = ("aniso_kr", "aniso_ks", "aniso_kn", "aniso_lambda")
 _PARAM_KEYS = _LENGTHS + ("method", "field", "t_low", "t_high", "iso_threshold", "color_threshold",
                           "neighbour_threshold", "normals", "length_unit", "isolated", "min_cluster",
-                          "double_positions", "cleanup", "smooth", "smooth_weights", "decimate")
+                          "double_positions", "cleanup", "smooth", "smooth_weights", "decimate") + _ANISO + (
+                              "aniso_neighbours",)
 
 
 def defaults() -> Dict[str, Any]:
@@ -84,7 +86,8 @@ def defaults() -> Dict[str, Any]:
              isolated=_name_of(ISOLATED, p.isolated), min_cluster=p.min_cluster,
              double_positions=bool(p.double_positions), cleanup=bool(p.cleanup),
              smooth=p.smooth_iterations, smooth_weights=_name_of(SMOOTH_WEIGHTS, p.smooth_weighting),
-             decimate=p.decimate_fraction)
+             decimate=p.decimate_fraction, aniso_neighbours=p.aniso_neighbours)
+    d.update({k: p.__getattribute__(k) for k in _ANISO})
     return d
 
 
@@ -110,11 +113,13 @@ def make_params(spacing: Optional[float] = None, particle_radius: Optional[float
     p = C.Params()
     lib.nbmc_params_init(byref(p))
     p.spacing = float(spacing) if spacing is not None else 2.0 * float(particle_radius)  # type: ignore[arg-type]
-    for k in _LENGTHS + ("t_low", "t_high", "iso_threshold", "color_threshold"):
+    for k in _LENGTHS + ("t_low", "t_high", "iso_threshold", "color_threshold") + _ANISO:
         if kw.get(k) is not None:
             setattr(p, k, float(kw[k]))
     if kw.get("neighbour_threshold") is not None:
         p.neighbour_threshold = int(kw["neighbour_threshold"])
+    if kw.get("aniso_neighbours") is not None:
+        p.aniso_neighbours = int(kw["aniso_neighbours"])
     if kw.get("isolated") is not None:
         p.isolated = _enum(ISOLATED, kw["isolated"], "isolated")
     if kw.get("min_cluster") is not None:
@@ -904,6 +909,9 @@ def reconstruct(points: Any, spacing: Optional[float] = None, *,
                 double_positions: Optional[bool] = None, cleanup: Optional[bool] = None,
                 smooth: Optional[int] = None, smooth_weights: Optional[str] = None,
                 decimate: Optional[float] = None,
+                aniso_kr: Optional[float] = None, aniso_ks: Optional[float] = None,
+                aniso_kn: Optional[float] = None, aniso_neighbours: Optional[int] = None,
+                aniso_lambda: Optional[float] = None,
                 backend: Union[str, int] = "auto", threads: Optional[int] = None,
                 device_id: int = 0, memory_budget: Union[int, str, None] = None,
                 mesh_memory: str = "host", progress: Optional[ProgressFn] = None,
@@ -925,13 +933,23 @@ def reconstruct(points: Any, spacing: Optional[float] = None, *,
         units of the positions); defaults {cell_size}, {influence_radius},
         {band_width}, {surface_radius}, {iso_radius}.
     method
-        "ssp07" (Solenthaler et al. 2007), "zb05" (Zhu & Bridson 2005) or
+        "ssp07" (Solenthaler et al. 2007), "zb05" (Zhu & Bridson 2005),
         "sph" (splashsurf's normalised SPH density, cubic spline kernel of
-        support ``influence_radius``); default {method!r}.
+        support ``influence_radius``) or "yt10" (Yu & Turk 2010: that density
+        with one anisotropic kernel per particle, isotropic support
+        ``influence_radius / 2``); default {method!r}.
     iso_threshold
-        "sph" only: the iso level of the normalised density, a fraction of
-        the rest density in (0, 1) (splashsurf's ``--surface-threshold``);
+        "sph" and "yt10": the iso level of the normalised density, a fraction
+        of the rest density in (0, 1) (splashsurf's ``--surface-threshold``);
         default {iso_threshold}.
+    aniso_kr, aniso_ks, aniso_kn, aniso_neighbours, aniso_lambda
+        "yt10" only (Yu & Turk's k_r, k_s, k_n, N_eps and lambda, docs/methods.md):
+        the largest ratio of a kernel's axes (>= 1), the scale of the axes
+        (1: a particle inside a uniform fluid gets the isotropic kernel), the
+        kernel scale of particles with at most ``aniso_neighbours`` neighbours
+        within ``influence_radius`` (in (0, 1.5]), and the smoothing of the
+        kernel centres (in [0, 1]); defaults {aniso_kr}, {aniso_ks},
+        {aniso_kn}, {aniso_neighbours}, {aniso_lambda}.
     field
         "narrow-band", or the baselines "dense" and "scatter"; default {field!r}.
     t_low, t_high, color_threshold, neighbour_threshold
@@ -951,7 +969,7 @@ def reconstruct(points: Any, spacing: Optional[float] = None, *,
         {double_positions}.
     isolated="sphere"
         As "drop", and the dropped particles come back as spheres
-        (:attr:`Mesh.spheres`, radius ``iso_radius``; "sph": half the spacing).
+        (:attr:`Mesh.spheres`, radius ``iso_radius``; "sph", "yt10": half the spacing).
     cleanup
         Remove degenerate and sliver triangles (default {cleanup}).
     smooth, smooth_weights
@@ -999,7 +1017,8 @@ def reconstruct(points: Any, spacing: Optional[float] = None, *,
                                length_unit=length_unit, isolated=isolated,
                                min_cluster=min_cluster, double_positions=double_positions,
                                cleanup=cleanup, smooth=smooth, smooth_weights=smooth_weights,
-                               decimate=decimate)
+                               decimate=decimate, aniso_kr=aniso_kr, aniso_ks=aniso_ks, aniso_kn=aniso_kn,
+                               aniso_neighbours=aniso_neighbours, aniso_lambda=aniso_lambda)
 
 
 def _show_library_defaults(fn: Callable[..., Any]) -> None:

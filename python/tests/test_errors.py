@@ -73,6 +73,10 @@ def test_invalid_parameter(frame):
                      (dict(spacing=0.05, method=7), "method"),
                      (dict(spacing=0.05, method="sph", iso_threshold=1.2), "iso_threshold"),
                      (dict(spacing=0.05, method="sph", iso_threshold=float("nan")), "iso_threshold"),
+                     (dict(spacing=0.05, method="yt10", aniso_kr=0.5), "aniso_kr"),
+                     (dict(spacing=0.05, method="yt10", aniso_kn=2), "aniso_kn"),
+                     (dict(spacing=0.05, method="yt10", aniso_lambda=-1), "aniso_lambda"),
+                     (dict(spacing=0.05, method="yt10", aniso_neighbours=-1), "aniso_neighbours"),
                      (dict(spacing=0.05, bbox=(0, 0, 0, -1, 1, 1)), "")]:
         e = bad(nbmc.InvalidParameter, 4, lambda: nbmc.reconstruct(frame, **kw), word)
         assert isinstance(e, ValueError)

@@ -54,7 +54,8 @@ struct Named {
   const char* name;
   std::int32_t value;
 };
-const Named kMethods[] = {{"ssp07", NBMC_METHOD_SSP07}, {"zb05", NBMC_METHOD_ZB05}, {"sph", NBMC_METHOD_SPH}};
+const Named kMethods[] = {
+    {"ssp07", NBMC_METHOD_SSP07}, {"zb05", NBMC_METHOD_ZB05}, {"sph", NBMC_METHOD_SPH}, {"yt10", NBMC_METHOD_YT10}};
 const Named kIsolated[] = {
     {"keep", NBMC_ISOLATED_KEEP}, {"drop", NBMC_ISOLATED_DROP}, {"sphere", NBMC_ISOLATED_SPHERE}};
 const Named kSmoothWeights[] = {{"uniform", NBMC_SMOOTH_UNIFORM}, {"feature", NBMC_SMOOTH_FEATURE}};
@@ -1141,16 +1142,36 @@ int main(int argc, char** argv) {
   rec->add_option("--iso-radius", p.iso_radius, "Iso radius (SSP07) or particle radius (ZB05) of the field")
       ->capture_default_str();
   rec->add_option("--method", o.method,
-                  "Scalar field: ssp07, zb05, or sph (splashsurf's normalised SPH density, cubic spline of "
-                  "support --influence-radius, surface at --iso-threshold)")
+                  "Scalar field: ssp07, zb05, sph (splashsurf's normalised SPH density, cubic spline of "
+                  "support --influence-radius, surface at --iso-threshold), or yt10 (Yu & Turk 2010: the same "
+                  "density with one anisotropic kernel per particle, --aniso-*; isotropic support "
+                  "--influence-radius / 2)")
       ->check(CLI::IsMember(names(kMethods), CLI::ignore_case))
       ->capture_default_str();
   rec->add_option("--field", o.field, "Field evaluation: on the band only, or baselines")
       ->check(CLI::IsMember(names(kFields), CLI::ignore_case))
       ->capture_default_str();
   rec->add_option("--iso-threshold", p.iso_threshold,
-                  "SPH: iso level of the normalised density, a fraction of the rest density in (0, 1) "
+                  "SPH, YT10: iso level of the normalised density, a fraction of the rest density in (0, 1) "
                   "(splashsurf's --surface-threshold)")
+      ->capture_default_str();
+  rec->add_option("--aniso-kr", p.aniso_kr,
+                  "YT10: k_r, largest ratio of a kernel's longest to its shortest axis (>= 1; Yu & Turk: 4)")
+      ->capture_default_str();
+  rec->add_option("--aniso-ks", p.aniso_ks,
+                  "YT10: k_s, scale of the kernel axes, normalised so that 1 gives a particle inside a uniform "
+                  "fluid the isotropic kernel (> 0)")
+      ->capture_default_str();
+  rec->add_option("--aniso-kn", p.aniso_kn,
+                  "YT10: k_n, kernel scale of a particle with few neighbours, in (0, 1.5] (Yu & Turk: 0.5)")
+      ->capture_default_str();
+  rec->add_option("--aniso-neighbours", p.aniso_neighbours,
+                  "YT10: N_eps, more neighbours than this within --influence-radius give an anisotropic "
+                  "kernel (Yu & Turk: 25)")
+      ->capture_default_str();
+  rec->add_option("--aniso-lambda", p.aniso_lambda,
+                  "YT10: lambda, smoothing of the kernel centres towards their neighbours' weighted mean, "
+                  "in [0, 1]")
       ->capture_default_str();
   rec->add_option("--isolated", o.isolated,
                   "keep: every particle makes surface; drop: clusters (particles linked closer than "

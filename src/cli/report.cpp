@@ -94,10 +94,18 @@ std::vector<std::pair<const char*, std::uint64_t>> check_counts(const nbmc_mesh_
           {"component_count", c.component_count}};
 }
 
+// " (iso threshold t, k_r ..., lambda ...)" of --method yt10.
+std::string yt10_settings(const nbmc_params& q) {
+  char b[192];
+  std::snprintf(b, sizeof b, " (iso threshold %g, k_r %g, k_s %g, k_n %g, N_eps %d, lambda %g)", q.iso_threshold,
+                q.aniso_kr, q.aniso_ks, q.aniso_kn, int(q.aniso_neighbours), q.aniso_lambda);
+  return b;
+}
+
 const char* yes_no(std::int32_t v) { return v ? "yes" : "no"; }
 
 const char* method_name(std::int32_t m) {
-  return m == NBMC_METHOD_ZB05 ? "zb05" : m == NBMC_METHOD_SPH ? "sph" : "ssp07";
+  return m == NBMC_METHOD_ZB05 ? "zb05" : m == NBMC_METHOD_SPH ? "sph" : m == NBMC_METHOD_YT10 ? "yt10" : "ssp07";
 }
 const char* field_name(std::int32_t f) {
   return f == NBMC_FIELD_DENSE ? "dense" : f == NBMC_FIELD_SCATTER ? "scatter" : "narrow-band";
@@ -188,10 +196,12 @@ std::string format_report(const Report& r) {
     line("attributes", names + " (interpolated, " + printf_string("%.4f", r.interpolate_seconds) + " s)");
   }
   line("backend", r.backend);
-  line("method", std::string(method_name(r.params.method)) +
-                    (r.params.method == NBMC_METHOD_SPH ? printf_string(" (iso threshold %g)", r.params.iso_threshold)
-                                                        : std::string()) +
-                    ", " + field_name(r.params.field) + " field");
+  const nbmc_params& q = r.params;
+  line("method", std::string(method_name(q.method)) +
+                    (q.method == NBMC_METHOD_SPH    ? printf_string(" (iso threshold %g)", q.iso_threshold)
+                     : q.method == NBMC_METHOD_YT10 ? yt10_settings(q)
+                                                    : std::string()) +
+                    ", " + field_name(q.field) + " field");
   line("mesh", (r.params.cleanup ? "cleaned up (" + grouped(s.raw_triangle_count) + " triangles before)"
                                   : std::string("raw (no clean-up)")) +
                    (r.params.smooth_iterations > 0
@@ -324,11 +334,14 @@ std::string format_json(const Report& r) {
       {"spacing", p.spacing},           {"cell_size", p.cell_size},   {"influence_radius", p.influence_radius},
       {"band_width", p.band_width},     {"surface_radius", p.surface_radius},
       {"iso_radius", p.iso_radius},     {"t_low", p.t_low},           {"t_high", p.t_high},
-      {"color_threshold", p.color_threshold}, {"iso_threshold", p.iso_threshold}};
+      {"color_threshold", p.color_threshold}, {"iso_threshold", p.iso_threshold},
+      {"aniso_kr", p.aniso_kr},         {"aniso_ks", p.aniso_ks},     {"aniso_kn", p.aniso_kn},
+      {"aniso_lambda", p.aniso_lambda}};
   for (const auto& [k, v] : reals) o += std::string(", \"") + k + "\": " + json_number(v);
   o += ", \"method\": " + json_string(method_name(p.method));
   o += ", \"field\": " + json_string(field_name(p.field));
   o += ", \"neighbour_threshold\": " + std::to_string(p.neighbour_threshold);
+  o += ", \"aniso_neighbours\": " + std::to_string(p.aniso_neighbours);
   o += ", \"isolated\": " + json_string(p.isolated == NBMC_ISOLATED_SPHERE ? "sphere"
                                          : p.isolated == NBMC_ISOLATED_DROP ? "drop"
                                                                             : "keep");

@@ -50,7 +50,12 @@ struct NoInitAllocator : std::allocator<T> {
 
 // The field method (the kernel of the scalar field): one value per
 // NBMC_METHOD_*; backends/kokkos/field_methods.hpp maps it to a kernel type.
-enum class Method : int32_t { SSP07 = NBMC_METHOD_SSP07, ZB05 = NBMC_METHOD_ZB05, SPH = NBMC_METHOD_SPH };
+enum class Method : int32_t {
+  SSP07 = NBMC_METHOD_SSP07,
+  ZB05 = NBMC_METHOD_ZB05,
+  SPH = NBMC_METHOD_SPH,
+  YT10 = NBMC_METHOD_YT10
+};
 // Where the field is evaluated: the narrow band (the method of the paper) or
 // one of its baselines.
 enum class FieldKind : int32_t {
@@ -70,7 +75,10 @@ struct Params {
   Method method = Method::SSP07;
   FieldKind field = FieldKind::NarrowBand;
   double t_low = 0.4, t_high = 3.5;
-  double iso_threshold = 0.6;  // SPH: iso level of the normalised density
+  double iso_threshold = 0.6;  // SPH, YT10: iso level of the normalised density
+  // YT10: Yu & Turk's anisotropy (nbmc_params.aniso_*; backends/kokkos/field_yt10.hpp)
+  double aniso_kr = 4, aniso_ks = 1, aniso_kn = 0.5, aniso_lambda = 0.3;
+  int aniso_neighbours = 25;
   bool drop_isolated = false;  // NBMC_ISOLATED_DROP
   std::uint32_t min_cluster = 10;
   double color_threshold = 0.75;
@@ -87,6 +95,20 @@ struct Params {
   double radius_ref = 0;
 };
 
+// YT10's bounds (backends/kokkos/field_yt10.hpp): a kernel's longest axis is
+// at most kYt10MaxAxis h = 0.75 R (h = R/2, the isotropic support), and its
+// centre moves at most kYt10MaxShift R, so that every kernel lies within
+// 0.95 R of its particle: inside the influence radius that the band, the
+// neighbour search and the ghost layers use.
+constexpr double kYt10MaxAxis = 1.5;
+constexpr double kYt10MaxShift = 0.2;
+
+// The normalised-density fields (SPH, YT10): a pass over the particles
+// before the field, whose per-particle values (SPH: the density; YT10: the
+// density, the smoothed centre and the anisotropy) are sums over the
+// particles within R; they have no iso_radius.
+inline bool is_density_field(Method m) { return m == Method::SPH || m == Method::YT10; }
+
 // The largest ratio between the largest and the smallest per-particle radius.
 constexpr double kMaxRadiusRatio = 1e6;
 
@@ -98,7 +120,13 @@ constexpr double kMaxRadiusRatio = 1e6;
 // the per-particle path is on (radius_ref = r_max: particle j's lengths are
 // r_j / r_max times these). Equal radii make a uniform frame of spacing r_max,
 // which takes the path without radii (r_max == p.spacing leaves p as it is).
+// YT10 has no per-particle radii (its anisotropic kernels are fitted at one
+// support h = R/2): differing radii are refused; equal radii are a uniform
+// frame, as for every method.
 inline void scale_for_radii(Params& p, double r_min, double r_max) {
+  if (p.method == Method::YT10 && r_min < r_max)
+    throw Error(NBMC_ERROR_INVALID_PARAMETER,
+                "per-particle radii are not supported with method yt10 (use ssp07, zb05 or sph, or no radii)");
   if (!(r_min > 0) || !(r_max >= r_min))
     throw Error(NBMC_ERROR_INTERNAL, "per-particle radii: no valid smallest and largest radius");
   if (r_max > kMaxRadiusRatio * r_min) {
@@ -117,18 +145,20 @@ inline void scale_for_radii(Params& p, double r_min, double r_max) {
 }
 
 // How far from a point the particles that change its field value can lie:
-// R, or 2R for the SPH density, whose value at a point also depends on the
-// densities of the particles within R of it (each a sum over R around that
-// particle). Ghost layers and the particles kept around a clipping box are
-// this wide.
+// R, or 2R for the SPH density and YT10, whose value at a point also depends
+// on per-particle values of the particles within R of it (each a sum over R
+// around that particle). Ghost layers and the particles kept around a
+// clipping box are this wide.
 inline double particle_reach(const Params& p) {
-  return p.method == Method::SPH ? 2 * p.influence_radius : p.influence_radius;
+  return is_density_field(p.method) ? 2 * p.influence_radius : p.influence_radius;
 }
 
 // How far beyond the particles the iso-surface can lie: iso_radius for the
-// distance-like fields (SSP07, ZB05), R for the SPH density (zero beyond R).
+// distance-like fields (SSP07, ZB05), R for the SPH density (zero beyond R)
+// and YT10 (a kernel's support, plus its centre's displacement, is at most
+// 0.95 R: field_yt10.hpp).
 inline double surface_reach(const Params& p) {
-  return p.method == Method::SPH ? p.influence_radius : p.iso_radius;
+  return is_density_field(p.method) ? p.influence_radius : p.iso_radius;
 }
 
 }  // namespace nbmc

@@ -21,6 +21,13 @@ NBMC_ABI_STATIC_ASSERT(NBMC_STAGE_COUNT <= NBMC_STAGE_SLOTS, stage_slots);
 NBMC_ABI_STATIC_ASSERT(offsetof(nbmc_context_desc, struct_size) == 0, desc_size_first);
 NBMC_ABI_STATIC_ASSERT(offsetof(nbmc_params, struct_size) == 0, params_size_first);
 NBMC_ABI_STATIC_ASSERT(offsetof(nbmc_stats, struct_size) == 0, stats_size_first);
+/* The NBMC_METHOD_YT10 block starts where the struct before it ended (its
+   sizeof, tail padding included): a caller built against that header passes
+   struct_size = that sizeof, and none of its bytes reach the new fields. */
+NBMC_ABI_STATIC_ASSERT(offsetof(nbmc_params, aniso_kr) ==
+                           (offsetof(nbmc_params, reserved1) + 4 + sizeof(double) - 1) / sizeof(double) *
+                               sizeof(double),
+                       params_yt10_after_old_size);
 /* The structs are made of fixed-width members with no hidden padding
  * differences between compilers: sizes are multiples of 8. */
 NBMC_ABI_STATIC_ASSERT(sizeof(nbmc_context_desc) % 8 == 0, desc_size);
@@ -94,6 +101,8 @@ int main(void) {
   CHECK(params.isolated == NBMC_ISOLATED_KEEP && params.min_cluster == 10 && NBMC_ISOLATED_DROP == 1);
   CHECK(params.decimate_fraction == 1.0 && params.smooth_weighting == NBMC_SMOOTH_UNIFORM && params.reserved1 == 0);
   CHECK(NBMC_ISOLATED_SPHERE == 2 && NBMC_SMOOTH_FEATURE == 1);
+  CHECK(NBMC_METHOD_YT10 == 3 && params.aniso_kr == 4.0 && params.aniso_ks == 1.0 && params.aniso_kn == 0.5);
+  CHECK(params.aniso_lambda == 0.3 && params.aniso_neighbours == 25 && params.reserved2 == 0);
   memset(&stats, 0xff, sizeof stats);
   nbmc_stats_init(&stats);
   CHECK(stats.struct_size == sizeof(nbmc_stats) && stats.triangle_count == 0);

@@ -616,6 +616,9 @@ int main(int argc, char** argv) {
   sph.method = NBMC_METHOD_SPH;
   sph.influence_radius = 2;
   check_case("sph", b, sph, "random", 0, 0, 0);
+  nbmc_params yt10 = prm;  // per-particle anisotropic kernels: ghosts 2R wide
+  yt10.method = NBMC_METHOD_YT10;
+  check_case("yt10", b, yt10, "random", 0, 0, 0);
   const char* dir = std::getenv("NBMC_DATA_DIR");
   if (dir) {
     const std::vector<double> f = read_xyz(std::string(dir) + "/xyz/splashsurf_dambreak_f23_24389.xyz");

@@ -44,6 +44,7 @@ pub const NBMC_BACKEND_CUDA: i32 = 3;
 pub const NBMC_METHOD_SSP07: i32 = 0;
 pub const NBMC_METHOD_ZB05: i32 = 1;
 pub const NBMC_METHOD_SPH: i32 = 2;
+pub const NBMC_METHOD_YT10: i32 = 3;
 
 pub const NBMC_ISOLATED_KEEP: i32 = 0;
 pub const NBMC_ISOLATED_DROP: i32 = 1;
@@ -144,6 +145,13 @@ pub struct nbmc_params {
     pub decimate_fraction: f64,
     pub smooth_weighting: i32,
     pub reserved1: i32,
+    // appended with NBMC_METHOD_YT10
+    pub aniso_kr: f64,
+    pub aniso_ks: f64,
+    pub aniso_kn: f64,
+    pub aniso_lambda: f64,
+    pub aniso_neighbours: i32,
+    pub reserved2: i32,
 }
 
 #[repr(C)]

@@ -56,6 +56,7 @@ fn rust_constants() -> BTreeMap<&'static str, i128> {
         NBMC_METHOD_SSP07,
         NBMC_METHOD_ZB05,
         NBMC_METHOD_SPH,
+        NBMC_METHOD_YT10,
         NBMC_ISOLATED_KEEP,
         NBMC_ISOLATED_DROP,
         NBMC_ISOLATED_SPHERE,
@@ -148,7 +149,13 @@ fn rust_layouts() -> Vec<Layout> {
             double_positions,
             decimate_fraction,
             smooth_weighting,
-            reserved1
+            reserved1,
+            aniso_kr,
+            aniso_ks,
+            aniso_kn,
+            aniso_lambda,
+            aniso_neighbours,
+            reserved2
         }),
         layout!(nbmc_stats {
             struct_size,

@@ -208,6 +208,10 @@ int_enum!(
         /// Normalised SPH density (cubic spline of support `influence_radius`),
         /// splashsurf's level set, at `iso_threshold`.
         Sph = sys::NBMC_METHOD_SPH,
+        /// Yu & Turk 2010: that density with one anisotropic kernel per
+        /// particle (`aniso_*`; isotropic support `influence_radius / 2`), at
+        /// `iso_threshold`.
+        Yt10 = sys::NBMC_METHOD_YT10,
     }
 );
 
@@ -322,9 +326,24 @@ pub struct Params {
     /// SSP07 eigenvalue thresholds (defaults 0.4 and 3.5).
     pub t_low: f64,
     pub t_high: f64,
-    /// `Method::Sph`: iso level of the normalised density, a fraction of the
-    /// rest density in (0, 1) (default 0.6).
+    /// `Method::Sph`, `Method::Yt10`: iso level of the normalised density, a
+    /// fraction of the rest density in (0, 1) (default 0.6).
     pub iso_threshold: f64,
+    /// `Method::Yt10` (Yu & Turk's k_r): largest ratio of a kernel's axes,
+    /// >= 1 (default 4).
+    pub aniso_kr: f64,
+    /// `Method::Yt10` (k_s): scale of the kernel axes, normalised so that 1
+    /// gives a particle inside a uniform fluid the isotropic kernel (default 1).
+    pub aniso_ks: f64,
+    /// `Method::Yt10` (k_n): kernel scale of a particle with few neighbours,
+    /// in (0, 1.5] (default 0.5).
+    pub aniso_kn: f64,
+    /// `Method::Yt10` (N_eps): more neighbours than this within the influence
+    /// radius give an anisotropic kernel (default 25).
+    pub aniso_neighbours: i32,
+    /// `Method::Yt10` (lambda): smoothing of the kernel centres, in [0, 1]
+    /// (default 0.3).
+    pub aniso_lambda: f64,
     /// Colour-field gradient threshold of the surface test (default 0.75).
     pub color_threshold: f64,
     /// Fewer neighbours than this means surface (default 25).
@@ -367,6 +386,11 @@ impl Params {
             t_low: p.t_low,
             t_high: p.t_high,
             iso_threshold: p.iso_threshold,
+            aniso_kr: p.aniso_kr,
+            aniso_ks: p.aniso_ks,
+            aniso_kn: p.aniso_kn,
+            aniso_neighbours: p.aniso_neighbours,
+            aniso_lambda: p.aniso_lambda,
             color_threshold: p.color_threshold,
             neighbour_threshold: p.neighbour_threshold,
             compute_normals: p.compute_normals != 0,
@@ -396,6 +420,11 @@ impl Params {
         p.t_low = self.t_low;
         p.t_high = self.t_high;
         p.iso_threshold = self.iso_threshold;
+        p.aniso_kr = self.aniso_kr;
+        p.aniso_ks = self.aniso_ks;
+        p.aniso_kn = self.aniso_kn;
+        p.aniso_neighbours = self.aniso_neighbours;
+        p.aniso_lambda = self.aniso_lambda;
         p.color_threshold = self.color_threshold;
         p.neighbour_threshold = self.neighbour_threshold;
         p.compute_normals = i32::from(self.compute_normals);

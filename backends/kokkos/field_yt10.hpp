@@ -1,0 +1,294 @@
+// SPDX-License-Identifier: MIT
+// Yu & Turk 2010 ("Reconstructing surfaces of particle-based fluids using
+// anisotropic kernels"; docs/methods.md has the long form): the normalised
+// SPH density of field_sph.hpp with one stretched kernel per particle,
+//   f(x) = sum_j det(h G_j) W~(|G_j (x - xbar_j)|) / D_j,   phi = iso_threshold - f,
+// W~ the cubic spline over its factor (support 1 in |G r|), h = R/2 the
+// isotropic support, D_j = sum_k W~(|x_j - x_k| / h) the isotropic density
+// (k = j included), and per particle j, from its neighbours within R with
+// the weights w_jk = 1 - (|x_j - x_k| / R)^3:
+//   x_w = sum_k w_jk x_k / sum_k w_jk                       (weighted mean)
+//   C   = sum_k w_jk (x_k - x_w)(x_k - x_w)^T / sum_k w_jk   (weighted covariance)
+//   C   = Q diag(sigma_1 >= sigma_2 >= sigma_3) Q^T          (Jacobi, below)
+//   s_1 = clamp(k_s sigma_1 / sigma_0, k_n, 1.5),  s_2,3 = clamp(k_s sigma_2,3 / sigma_0, s_1 / k_r, s_1)
+//         if the particle has more than N_eps neighbours within R, else s_1,2,3 = k_n
+//   G_j = (1/h) Q diag(1/s_1, 1/s_2, 1/s_3) Q^T
+//   xbar_j = x_j + lambda (x_w - x_j), moved at most 0.2 R
+// sigma_0 = 3 R^2 / 20 is the covariance of a uniform fluid under these
+// weights (the continuum limit; a particle deep inside gets sigma ~ sigma_0),
+// so k_s is dimensionless and k_s = 1 gives such a particle the isotropic
+// kernel, G = I / h (Yu & Turk's k_s = 1400 plays the part of 1 / sigma_0 in
+// the units of their scenes). In a uniform fluid f = 1, as for the SPH
+// density.
+//
+// Every kernel lies within 0.75 R + 0.2 R = 0.95 R of its particle
+// (kYt10MaxAxis, kYt10MaxShift in src/core/params.hpp): inside the influence
+// radius of the band, the neighbour search and the ghost layers (2R: a
+// particle's kernel depends on its neighbours within R). The field visits
+// the particles within R_f of a vertex, R_f the largest reach of any kernel
+// (plus 2%), at most R: particles farther away add exactly 0, so R_f does not
+// change a value (and subdomains, whose R_f differ, give the same field).
+// Within R_f, a particle whose own reach the vertex lies beyond is skipped
+// (it too would add exactly 0).
+//
+// The pass before the field (compute_yt10_kernels, yt10_kernels.hpp) sums
+// each particle's moments like a band vertex's field (eval order of
+// eval_vertex_direct) and decomposes C with a fixed number of cyclic Jacobi
+// sweeps: no transcendental function but the IEEE square root and division,
+// so every backend computes the same kernels bit for bit.
+#pragma once
+
+#include "field_common.hpp"
+#include "field_sph.hpp"
+
+#include <cstdint>
+
+namespace nbmc {
+namespace Details {
+
+// A particle's kernel as the field reads it (NeighbourView::pdata, P = 11
+// floats): the offset xbar_j - x_j (3), G_j's upper triangle g00 g01 g02
+// g11 g12 g22 (6), det(h G_j) / D_j (1), and the square of a bound of its
+// reach (1): a vertex at |x - x_j|^2 >= that gets exactly 0 from it, so the
+// kernel is not evaluated there (that skip changes no value).
+constexpr int kYt10Floats = 11;
+// The reach bound's margin over h s_1 + |xbar - x| (rounding of G and of
+// the distances is below 1e-5 of them).
+constexpr float kYt10ReachMargin = 1.002f;
+// Cyclic Jacobi sweeps over the three off-diagonal entries: float converges
+// in 4 or 5; a fixed count keeps every backend in step.
+constexpr int kYt10JacobiSweeps = 6;
+
+// The cubic spline over its factor (field_sph.hpp's cubic_spline) at q,
+// given q and q^2, and exactly +0 from q = 1 on and where k = 0 (a particle
+// beyond the visited radius: the drivers need +0 from a particle that does
+// not contribute). The callers have q at hand: no square root of 1 - k as in
+// sph_kernel.
+KOKKOS_INLINE_FUNCTION float yt10_spline(float q, float q2, float k) {
+  return q < 1.f && k > 0.f ? cubic_spline(q, q2) : 0.f;
+}
+#if !defined(__CUDA_ARCH__)
+template <class V>
+inline V yt10_spline(V q, V q2, V k) {
+  const auto in = (q < lanes_of<V>(1.f)) & (k > lanes_of<V>(0.f));
+  using I = decltype(in);
+  return (V)((I)cubic_spline(q, q2) & in);
+}
+#endif
+
+// Whether |d|^2 < reach2 (in any lane).
+KOKKOS_INLINE_FUNCTION bool yt10_within(float dx, float dy, float dz, float reach2) {
+  return (dx * dx + dy * dy) + dz * dz < reach2;
+}
+#if !defined(__CUDA_ARCH__)
+template <class V>
+inline bool yt10_within(V dx, V dy, V dz, float reach2) {
+  return host_any_of((dx * dx + dy * dy) + dz * dz < lanes_of<V>(reach2));
+}
+#endif
+
+struct FieldYT10 {
+  static constexpr const char* name = "yt10";
+  static constexpr int P = kYt10Floats;
+  static constexpr bool radii = false;  // no radii variant (refused, params.hpp)
+  // a[0] = sum_j det(h G_j) W~(|G_j e_j|) / D_j
+  static constexpr int N = 1;
+  // T is float, or a host SIMD vector of floats (same formula, lane-wise).
+  // d = x_j - x; e = d + (xbar_j - x_j) = xbar_j - x (|G e| = |G (x - xbar_j)|).
+  template <class T>
+  KOKKOS_INLINE_FUNCTION static void add(T* a, T dx, T dy, T dz, T k, const float* pd, T /*q: uniform*/) {
+    if (!yt10_within(dx, dy, dz, pd[10])) return;  // exactly 0 in every lane
+    const T ex = dx + lanes_of<T>(pd[0]), ey = dy + lanes_of<T>(pd[1]), ez = dz + lanes_of<T>(pd[2]);
+    const T g00 = lanes_of<T>(pd[3]), g01 = lanes_of<T>(pd[4]), g02 = lanes_of<T>(pd[5]);
+    const T g11 = lanes_of<T>(pd[6]), g12 = lanes_of<T>(pd[7]), g22 = lanes_of<T>(pd[8]);
+    const T ux = (g00 * ex + g01 * ey) + g02 * ez;
+    const T uy = (g01 * ex + g11 * ey) + g12 * ez;
+    const T uz = (g02 * ex + g12 * ey) + g22 * ez;
+    const T q2 = (ux * ux + uy * uy) + uz * uz;
+    a[0] += yt10_spline(sqrt_lanes(q2), q2, k) * lanes_of<T>(pd[9]);
+  }
+  // Adds particles [b, e) (SoA coordinates, kernels PD) at vertex x, one after
+  // the other (see field_common.hpp); returns how many lie within R. The
+  // operations of add(), which it calls.
+  KOKKOS_INLINE_FUNCTION static std::uint32_t accumulate(float* a, const float* X, const float* Y, const float* Z,
+                                                         const float* PD, const float* /*Q: uniform*/, std::uint32_t b,
+                                                         std::uint32_t e, float x0, float x1, float x2, float inv_R2) {
+    float acc[1] = {a[0]};
+    std::uint32_t count = 0;
+    for (std::uint32_t j = b; j < e; ++j) {
+      const float dx = X[j] - x0, dy = Y[j] - x1, dz = Z[j] - x2;
+      const float s2 = (dx * dx + dy * dy + dz * dz) * inv_R2;
+      const float k = s2 < 1.f ? 1.f - s2 : 0.f;
+      count += s2 < 1.f ? 1u : 0u;
+      add(acc, dx, dy, dz, k, PD + std::size_t(kYt10Floats) * j, 1.f);
+    }
+    a[0] = acc[0];
+    return count;
+  }
+  KOKKOS_INLINE_FUNCTION static float value(const float* a, const FieldConstants& c) {
+    return c.iso_threshold - a[0];
+  }
+};
+
+// The moments of one particle's neighbourhood (not a field method of its
+// own; the pass before the field sums them at every particle, d = x_k - x_j,
+// s = |d| / R):
+//   a[0] = sum w, a[1..3] = sum w d, a[4..9] = sum w d d^T (xx xy xz yy yz zz),
+//   a[10] = D = sum W~(2 s), the isotropic density with support h = R/2.
+struct Yt10Moments {
+  static constexpr const char* name = "yt10-moments";
+  static constexpr int P = 0;
+  static constexpr bool radii = false;
+  static constexpr int N = 11;
+  // T is float, or a host SIMD vector of floats (the host's pass runs
+  // across particles, like the band tiles across vertices). Everything from
+  // k: s^2 = 1 - k, which is 1 where the particle does not contribute, and
+  // then w = 1 - 1 * 1 and the density term are exactly 0.
+  template <class T>
+  KOKKOS_INLINE_FUNCTION static void add(T* a, T dx, T dy, T dz, T k, const float* /*no particle data*/,
+                                         T /*q: uniform*/) {
+    const T one = lanes_of<T>(1.f), two = lanes_of<T>(2.f);
+    const T s2 = one - k;
+    const T s = sqrt_lanes(s2);
+    const T w = one - s2 * s;
+    a[10] += yt10_spline(two * s, lanes_of<T>(4.f) * s2, k);  // q = |d| / h = 2 s
+    const T wx = w * dx, wy = w * dy, wz = w * dz;
+    a[0] += w;
+    a[1] += wx;
+    a[2] += wy;
+    a[3] += wz;
+    a[4] += wx * dx; a[5] += wx * dy; a[6] += wx * dz;
+    a[7] += wy * dy; a[8] += wy * dz;
+    a[9] += wz * dz;
+  }
+  // The same for particles [b, e), one after the other (add's operations).
+  KOKKOS_INLINE_FUNCTION static std::uint32_t accumulate(float* a, const float* X, const float* Y, const float* Z,
+                                                         const float*, const float*, std::uint32_t b, std::uint32_t e,
+                                                         float x0, float x1, float x2, float inv_R2) {
+    float acc[N];
+    for (int q = 0; q < N; ++q) acc[q] = a[q];
+    std::uint32_t count = 0;
+    for (std::uint32_t j = b; j < e; ++j) {
+      const float dx = X[j] - x0, dy = Y[j] - x1, dz = Z[j] - x2;
+      const float s2 = (dx * dx + dy * dy + dz * dz) * inv_R2;
+      const float k = s2 < 1.f ? 1.f - s2 : 0.f;
+      count += s2 < 1.f ? 1u : 0u;
+      add(acc, dx, dy, dz, k, nullptr, 1.f);
+    }
+    for (int q = 0; q < N; ++q) a[q] = acc[q];
+    return count;
+  }
+  KOKKOS_INLINE_FUNCTION static float value(const float* a, const FieldConstants&) { return a[10]; }
+};
+
+// The constants of the pass before the field (from Params; field_yt10.hpp's
+// header states the formulas).
+struct Yt10Constants {
+  float h = 0;            // isotropic support, R / 2
+  float ks = 0;           // k_s / sigma_0
+  float kr_inv = 0.25f;   // 1 / k_r
+  float kn = 0.5f;
+  float max_axis = 1.5f;  // kYt10MaxAxis
+  float lambda = 0.3f;
+  float max_shift = 0;    // kYt10MaxShift R
+  std::uint32_t neighbours = 25;  // N_eps
+};
+
+// Eigen-decomposition of the symmetric 3x3 matrix A: cyclic Jacobi
+// rotations (Numerical Recipes' form, with square roots and divisions only),
+// kYt10JacobiSweeps sweeps over (0,1), (0,2), (1,2). On return A's diagonal
+// holds the eigenvalues and V's columns the eigenvectors (V starts as I).
+KOKKOS_INLINE_FUNCTION void jacobi_eigen_sym3(float A[3][3], float V[3][3]) {
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) V[i][j] = i == j ? 1.f : 0.f;
+  for (int sweep = 0; sweep < kYt10JacobiSweeps; ++sweep)
+    for (int r = 0; r < 3; ++r) {
+      const int p = r == 2 ? 1 : 0, q = r == 0 ? 1 : 2, o = 3 - p - q;
+      const float apq = A[p][q];
+      if (apq == 0.f) continue;
+      const float theta = (A[q][q] - A[p][p]) / (2.f * apq);
+      // t = tan of the rotation angle, the smaller root; theta^2 may overflow
+      // to inf, which gives t = 0 (no rotation), as it should.
+      const float t = (theta >= 0.f ? 1.f : -1.f) /
+                      (Kokkos::Experimental::fabs(theta) + Kokkos::Experimental::sqrt(theta * theta + 1.f));
+      const float c = 1.f / Kokkos::Experimental::sqrt(t * t + 1.f), s = t * c;
+      A[p][p] = A[p][p] - t * apq;
+      A[q][q] = A[q][q] + t * apq;
+      A[p][q] = A[q][p] = 0.f;
+      const float aop = A[o][p], aoq = A[o][q];
+      A[o][p] = A[p][o] = c * aop - s * aoq;
+      A[o][q] = A[q][o] = s * aop + c * aoq;
+      for (int i = 0; i < 3; ++i) {
+        const float vp = V[i][p], vq = V[i][q];
+        V[i][p] = c * vp - s * vq;
+        V[i][q] = s * vp + c * vq;
+      }
+    }
+}
+
+// Entry (i, j) of V diag(is) V^T.
+KOKKOS_INLINE_FUNCTION float yt10_entry(const float V[3][3], const float is[3], int i, int j) {
+  return (V[i][0] * V[j][0] * is[0] + V[i][1] * V[j][1] * is[1]) + V[i][2] * V[j][2] * is[2];
+}
+
+// x clamped to [lo, hi] (lo <= hi); NaN gives lo.
+KOKKOS_INLINE_FUNCTION float yt10_clamp(float x, float lo, float hi) { return !(x >= lo) ? lo : (x > hi ? hi : x); }
+
+// One particle's kernel (kYt10Floats floats to out) from its moments a
+// (Yt10Moments) and the number of particles within R (itself included);
+// returns the kernel's reach: how far from the particle it is non-zero
+// (h s_1 + |xbar - x|, at most 0.95 R).
+KOKKOS_INLINE_FUNCTION float yt10_kernel(const float* a, std::uint32_t count, const Yt10Constants& k, float* out) {
+  const float inv = 1.f / a[0];  // a[0] >= 1: the particle itself
+  const float m0 = a[1] * inv, m1 = a[2] * inv, m2 = a[3] * inv;  // x_w - x_j
+  float s[3] = {k.kn, k.kn, k.kn};
+  float V[3][3] = {{1.f, 0.f, 0.f}, {0.f, 1.f, 0.f}, {0.f, 0.f, 1.f}};
+  if (count - 1 > k.neighbours) {
+    // The covariance about the weighted mean, times k_s / sigma_0.
+    float A[3][3];
+    A[0][0] = (a[4] * inv - m0 * m0) * k.ks;
+    A[0][1] = A[1][0] = (a[5] * inv - m0 * m1) * k.ks;
+    A[0][2] = A[2][0] = (a[6] * inv - m0 * m2) * k.ks;
+    A[1][1] = (a[7] * inv - m1 * m1) * k.ks;
+    A[1][2] = A[2][1] = (a[8] * inv - m1 * m2) * k.ks;
+    A[2][2] = (a[9] * inv - m2 * m2) * k.ks;
+    jacobi_eigen_sym3(A, V);
+    const float e[3] = {A[0][0], A[1][1], A[2][2]};
+    // The largest eigenvalue (the first of equal ones); the others are
+    // clamped alike, so their order does not matter.
+    const int big = e[0] >= e[1] ? (e[0] >= e[2] ? 0 : 2) : (e[1] >= e[2] ? 1 : 2);
+    const float s1 = yt10_clamp(e[big], k.kn, k.max_axis);
+    for (int i = 0; i < 3; ++i) s[i] = i == big ? s1 : yt10_clamp(e[i], s1 * k.kr_inv, s1);
+  }
+  // G = (1/h) V diag(1/s) V^T
+  const float is[3] = {1.f / (k.h * s[0]), 1.f / (k.h * s[1]), 1.f / (k.h * s[2])};
+  // The smoothed centre, moved at most max_shift.
+  float o0 = k.lambda * m0, o1 = k.lambda * m1, o2 = k.lambda * m2;
+  const float len2 = (o0 * o0 + o1 * o1) + o2 * o2;
+  float len = Kokkos::Experimental::sqrt(len2);
+  if (len > k.max_shift) {
+    const float f = k.max_shift / len;
+    o0 *= f;
+    o1 *= f;
+    o2 *= f;
+    len = k.max_shift;
+  }
+  out[0] = o0;
+  out[1] = o1;
+  out[2] = o2;
+  out[3] = yt10_entry(V, is, 0, 0);
+  out[4] = yt10_entry(V, is, 0, 1);
+  out[5] = yt10_entry(V, is, 0, 2);
+  out[6] = yt10_entry(V, is, 1, 1);
+  out[7] = yt10_entry(V, is, 1, 2);
+  out[8] = yt10_entry(V, is, 2, 2);
+  out[9] = 1.f / (((s[0] * s[1]) * s[2]) * a[10]);  // det(h G) / D
+  const float longest = s[0] > s[1] ? (s[0] > s[2] ? s[0] : s[2]) : (s[1] > s[2] ? s[1] : s[2]);
+  const float reach = k.h * longest + len;
+  const float bound = reach * kYt10ReachMargin;
+  out[10] = bound * bound;
+  return reach;
+}
+
+}  // namespace Details
+}  // namespace nbmc

@@ -1,0 +1,169 @@
+// SPDX-License-Identifier: MIT
+// The pass before the YT10 field (field_yt10.hpp): every particle's
+// anisotropic kernel (smoothed centre, G, det(h G) / D) from the moments of
+// its neighbours within R, in the sorted order of the neighbourhood. Each
+// particle's moments are summed like a band vertex's field
+// (sum_vertex_direct: cells in z, y, x order, particles in sorted order, the
+// same float operations), and the 3x3 decomposition is a fixed Jacobi
+// iteration, so the kernels, and the field after them, are bit-identical on
+// every backend. A particle's kernel needs the particles within R of it: a
+// subdomain's ghost layer is 2R wide for this method (particle_reach in
+// src/core/params.hpp).
+#pragma once
+
+#include "common.hpp"
+#include "field_yt10.hpp"
+#include "neighbourhood.hpp"
+#include "scalar_field.hpp"
+
+#include <algorithm>
+
+namespace nbmc {
+namespace Details {
+
+inline Yt10Constants yt10_constants(const Params& p) {
+  const double R = p.influence_radius;
+  Yt10Constants k;
+  k.h = float(0.5 * R);
+  k.ks = float(p.aniso_ks * 20.0 / (3.0 * R * R));  // k_s / sigma_0, sigma_0 = 3 R^2 / 20
+  k.kr_inv = float(1.0 / p.aniso_kr);
+  k.kn = float(p.aniso_kn);
+  k.max_axis = float(kYt10MaxAxis);
+  k.lambda = float(p.aniso_lambda);
+  k.max_shift = float(kYt10MaxShift * R);
+  k.neighbours = std::uint32_t(p.aniso_neighbours);
+  return k;
+}
+
+// The host's pass over the particles of one neighbour cell, [b, e): groups
+// of L particles as the lanes of eval_points_host_lanes (each particle's
+// moments in the order of sum_vertex_direct, bit for bit), chunks of 64
+// particles sharing one cell span. Writes their kernels and returns the
+// largest reach.
+template <int L, class MemSpace>
+KOKKOS_INLINE_FUNCTION float yt10_cell_host_lanes(const NeighbourView<MemSpace>& nb, float S, const FieldConstants& fc,
+                                                  const Yt10Constants& k, std::uint32_t b, std::uint32_t e,
+                                                  float* out) {
+#if defined(__CUDA_ARCH__)
+  (void)nb; (void)S; (void)fc; (void)k; (void)b; (void)e; (void)out;
+  return 0.f;  // device code runs one thread per particle (compute_yt10_kernels)
+#else
+  float reach = 0;
+  const float* X = nb.pos.data();
+  const float* Y = X + nb.n;
+  const float* Z = Y + nb.n;
+  for (std::uint32_t c0 = b; c0 < e; c0 += 64) {
+    const std::uint32_t c1 = e - c0 < 64 ? e : c0 + 64;
+    float xmin[3] = {X[c0], Y[c0], Z[c0]}, xmax[3] = {X[c0], Y[c0], Z[c0]};
+    for (std::uint32_t j = c0 + 1; j < c1; ++j) {
+      const float x[3] = {X[j], Y[j], Z[j]};
+      for (int a = 0; a < 3; ++a) {
+        xmin[a] = x[a] < xmin[a] ? x[a] : xmin[a];
+        xmax[a] = x[a] > xmax[a] ? x[a] : xmax[a];
+      }
+    }
+    std::int64_t lo[3], hi[3];
+    cell_span(nb, xmin, xmax, fc.R, lo, hi);  // contains each particle's own span (monotone in x)
+    auto kernel = [&](std::uint32_t j, const float* a, std::uint32_t count) {
+      const float r = yt10_kernel(a, count, k, out + std::size_t(kYt10Floats) * j);
+      reach = r > reach ? r : reach;
+    };
+    const bool tiled = eval_points_host_lanes<Yt10Moments, L>(
+        nb, lo, hi, S, fc, int(c1 - c0),
+        [&](int i, float x[3]) {
+          x[0] = X[c0 + i];
+          x[1] = Y[c0 + i];
+          x[2] = Z[c0 + i];
+        },
+        [&](int i, const float* a, std::uint32_t count) { kernel(c0 + std::uint32_t(i), a, count); });
+    if (!tiled)  // very coarse cells: one particle at a time
+      for (std::uint32_t j = c0; j < c1; ++j) {
+        const float x[3] = {X[j], Y[j], Z[j]};
+        float a[Yt10Moments::N];
+        const std::uint32_t count = sum_vertex_direct<Yt10Moments>(nb, x, S, fc, a);
+        kernel(j, a, count);
+      }
+  }
+  return reach;
+#endif
+}
+#if defined(NBMC_HOST_AVX2)
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wpsabi"  // 32-byte vectors never cross a call that is not inlined
+#endif
+// 8 lanes where the CPU has AVX2 (host_simd_lanes), as for the band tiles.
+template <class MemSpace>
+__attribute__((target("avx2"), flatten)) float yt10_cell_host_avx2(const NeighbourView<MemSpace>& nb, float S,
+                                                                   const FieldConstants& fc, const Yt10Constants& k,
+                                                                   std::uint32_t b, std::uint32_t e, float* out) {
+  return yt10_cell_host_lanes<8>(nb, S, fc, k, b, e, out);
+}
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic pop
+#endif
+#endif
+
+// Computes the kernels into nbh.pdata and returns the field's constants:
+// fc with the visited radius narrowed to R_f = 1.02 times the largest reach
+// of a kernel (at most R; field_yt10.hpp says why that changes no value).
+template <class ExecSpace>
+FieldConstants compute_yt10_kernels(const ExecSpace& space, MemoryTracker& tracker,
+                                    Neighbourhood<typename ExecSpace::memory_space>& nbh, const Grid& g,
+                                    const Params& p, const FieldConstants& fc) {
+  using MemSpace = typename ExecSpace::memory_space;
+  ScopedRegion region("nbmc::scalar_field::yt10_kernels");
+  nbh.pdata = Buffer<float, MemSpace>(tracker, "scalar_field::yt10_kernels", std::size_t(kYt10Floats) * nbh.n);
+  const NeighbourView<MemSpace> nb = view_of(nbh, g);
+  const auto out = nbh.pdata.view();
+  const Yt10Constants k = yt10_constants(p);
+  const float S = float(g.nb_cell);
+  const std::size_t n = nbh.n;
+  float reach = 0;
+  if constexpr (Kokkos::SpaceAccessibility<Kokkos::HostSpace, MemSpace>::accessible) {
+    // One work item per occupied neighbour cell, its particles as SIMD lanes.
+    const int lanes = host_simd_lanes();
+    const auto starts = nbh.cell_start.view();
+    float* const o = out.data();
+    Kokkos::parallel_reduce(
+        "nbmc::scalar_field::yt10_kernels",
+        Kokkos::RangePolicy<ExecSpace, Kokkos::Schedule<Kokkos::Dynamic>>(space, 0, nbh.n_cells),
+        KOKKOS_LAMBDA(const std::size_t c, float& r) {
+          const std::uint32_t b = starts(c), e = starts(c + 1);
+#if defined(NBMC_HOST_AVX2)
+          const float rc = lanes == 8 ? yt10_cell_host_avx2(nb, S, fc, k, b, e, o)
+                                      : yt10_cell_host_lanes<4>(nb, S, fc, k, b, e, o);
+#else
+          (void)lanes;
+          const float rc = yt10_cell_host_lanes<4>(nb, S, fc, k, b, e, o);
+#endif
+          if (rc > r) r = rc;
+        },
+        Kokkos::Max<float>(reach));
+  } else {
+    // One thread per particle.
+    Kokkos::parallel_reduce(
+        "nbmc::scalar_field::yt10_kernels", Kokkos::RangePolicy<ExecSpace>(space, 0, n),
+        KOKKOS_LAMBDA(const std::size_t j, float& r) {
+          const float x[3] = {nb.pos(j), nb.pos(n + j), nb.pos(2 * n + j)};
+          float a[Yt10Moments::N];
+          const std::uint32_t count = sum_vertex_direct<Yt10Moments>(nb, x, S, fc, a);
+          float kern[kYt10Floats];
+          const float rj = yt10_kernel(a, count, k, kern);
+          for (int q = 0; q < kYt10Floats; ++q) out(std::size_t(kYt10Floats) * j + q) = kern[q];
+          if (rj > r) r = rj;
+        },
+        Kokkos::Max<float>(reach));
+  }
+  space.fence();
+  trace("yt10 kernels", n);
+  FieldConstants f = fc;
+  const double Rf = reach > 0 ? std::min(p.influence_radius, 1.02 * double(reach)) : p.influence_radius;
+  f.R = float(Rf);
+  f.inv_R2 = float(1.0 / (Rf * Rf));
+  trace("yt10 R_f / R (per mille)", std::uint64_t(1000.0 * Rf / p.influence_radius + 0.5));
+  return f;
+}
+
+}  // namespace Details
+}  // namespace nbmc
