@@ -25,6 +25,7 @@
 #include <cstdint>
 #include <numeric>
 #include <stdexcept>
+#include <utility>
 #include <vector>
 
 namespace nbmc {
@@ -50,6 +51,38 @@ inline double norm(const Vec3& a) { return std::sqrt(dot(a, a)); }
 // Vertex v of positions in float, or in double (nbmc_params.double_positions).
 inline Vec3 load(const float* p, std::uint32_t v) { return {p[3 * std::size_t(v)], p[3 * std::size_t(v) + 1], p[3 * std::size_t(v) + 2]}; }
 inline Vec3 load(const double* p, std::uint32_t v) { return {p[3 * std::size_t(v)], p[3 * std::size_t(v) + 1], p[3 * std::size_t(v) + 2]}; }
+
+// Keeps the triangles t with alive[t] and the vertices they use, both in
+// their order (positions, and normals when not NULL, move with their
+// vertex; indices are renumbered), in place; returns the new vertex and
+// triangle counts. The clean-up's and the decimation's last step.
+template <class Real>
+std::pair<std::size_t, std::size_t> compact_mesh(Real* positions, float* normals, std::size_t nv, std::uint32_t* tri,
+                                                 std::size_t nt, const std::vector<std::uint8_t>& alive) {
+  constexpr std::uint32_t kUnused = 0xffffffffu;
+  std::vector<std::uint32_t> remap(nv, kUnused);
+  std::size_t kept_t = 0;
+  for (std::size_t t = 0; t < nt; ++t) {
+    if (!alive[t]) continue;
+    for (int k = 0; k < 3; ++k) {
+      tri[3 * kept_t + k] = tri[3 * t + k];
+      remap[tri[3 * t + k]] = 0;
+    }
+    ++kept_t;
+  }
+  std::size_t kept_v = 0;
+  for (std::size_t v = 0; v < nv; ++v) {
+    if (remap[v] == kUnused) continue;
+    remap[v] = std::uint32_t(kept_v);
+    for (int a = 0; a < 3; ++a) {
+      positions[3 * kept_v + a] = positions[3 * v + a];
+      if (normals) normals[3 * kept_v + a] = normals[3 * v + a];
+    }
+    ++kept_v;
+  }
+  for (std::size_t i = 0; i < 3 * kept_t; ++i) tri[i] = remap[tri[i]];
+  return {kept_v, kept_t};
+}
 
 // Shape of one triangle: twice its area and the sine of its smallest angle
 // (0 when two vertices coincide).

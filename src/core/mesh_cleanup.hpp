@@ -288,30 +288,7 @@ class Cleaner {
 
   // Writes the surviving triangles and vertices back, compacted; returns the
   // new counts.
-  std::pair<std::size_t, std::size_t> compact() {
-    std::vector<std::uint32_t> remap(nv_, kNone);
-    std::size_t nt = 0;
-    for (std::size_t t = 0; t < nt_; ++t) {
-      if (!alive_[t]) continue;
-      for (int k = 0; k < 3; ++k) {
-        T_[3 * nt + k] = T_[3 * t + k];
-        remap[T_[3 * t + k]] = 0;
-      }
-      ++nt;
-    }
-    std::size_t nv = 0;
-    for (std::size_t v = 0; v < nv_; ++v) {
-      if (remap[v] == kNone) continue;
-      remap[v] = std::uint32_t(nv);
-      for (int a = 0; a < 3; ++a) {
-        P_[3 * nv + a] = P_[3 * v + a];
-        if (N_) N_[3 * nv + a] = N_[3 * v + a];
-      }
-      ++nv;
-    }
-    for (std::size_t i = 0; i < 3 * nt; ++i) T_[i] = remap[T_[i]];
-    return {nv, nt};
-  }
+  std::pair<std::size_t, std::size_t> compact() { return compact_mesh(P_, N_, nv_, T_, nt_, alive_); }
 
  private:
   static constexpr std::uint32_t kNone = 0xffffffffu;

@@ -190,29 +190,7 @@ class Decimator {
   // Writes the surviving triangles and vertices back, compacted (normals,
   // when given, follow their vertices); returns the new counts.
   std::pair<std::size_t, std::size_t> compact(float* normals) {
-    constexpr std::uint32_t kNone = 0xffffffffu;
-    std::vector<std::uint32_t> remap(nv_, kNone);
-    std::size_t nt = 0;
-    for (std::size_t t = 0; t < nt_; ++t) {
-      if (!alive_[t]) continue;
-      for (int k = 0; k < 3; ++k) {
-        T_[3 * nt + k] = T_[3 * t + k];
-        remap[T_[3 * t + k]] = 0;
-      }
-      ++nt;
-    }
-    std::size_t nv = 0;
-    for (std::size_t v = 0; v < nv_; ++v) {
-      if (remap[v] == kNone) continue;
-      remap[v] = std::uint32_t(nv);
-      for (int a = 0; a < 3; ++a) {
-        P_[3 * nv + a] = P_[3 * v + a];
-        if (normals) normals[3 * nv + a] = normals[3 * v + a];
-      }
-      ++nv;
-    }
-    for (std::size_t i = 0; i < 3 * nt; ++i) T_[i] = remap[T_[i]];
-    return {nv, nt};
+    return compact_mesh(P_, normals, nv_, T_, nt_, alive_);
   }
 
  private:
