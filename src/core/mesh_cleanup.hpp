@@ -55,10 +55,15 @@
 // connected components at a time (the rest of the mesh is untouched):
 //  - components made of degenerate triangles only (a speck where the field
 //    barely dips below zero at one grid vertex);
-//  - given the cell size, components that still hold a bad triangle and
-//    enclose less than kSmallComponentCells cells (cell^3): droplets the
-//    grid cannot resolve (such as a flat ZB05 droplet of 22 triangles and
-//    0.3 cell^3). CleanupResult counts their triangles.
+//  - given the cell size, components that still hold a bad triangle, have
+//    at most kSmallComponentTriangles triangles and enclose less than
+//    kSmallComponentCells cells (cell^3): droplets the grid cannot resolve
+//    (such as a flat ZB05 droplet of 22 triangles and 0.3 cell^3).
+//    CleanupResult counts their triangles.
+// Cost: the adjacency, the irregular-vertex marking and one scan of every
+// triangle run on all host threads; after that only the bad triangles and
+// what the repairs changed are looked at again (each pass), and only the
+// components of the bad triangles left are walked.
 //
 // Serial and in a fixed order (worst triangle first, then by index), so the
 // result depends only on the input mesh: the same on every backend and
@@ -90,6 +95,9 @@ constexpr int kCleanupPasses = 8;
 // Components that still hold a bad triangle after every repair are removed
 // when they enclose less than this many marching-cubes cells (cell^3).
 constexpr double kSmallComponentCells = 1.0;
+// ... and hold at most this many triangles (a droplet of one cell^3 has a few
+// dozen; a larger component, such as a thin sheet with little volume, stays).
+constexpr std::size_t kSmallComponentTriangles = 4096;
 
 struct CleanupResult {
   std::uint64_t collapses = 0, flips = 0, moves = 0;
@@ -145,9 +153,11 @@ class Cleaner {
   // and pinched tubes may be cut.
   bool last_resort = false;
 
+  using BadList = std::vector<std::tuple<int, double, std::uint32_t>>;
+
   // Bad triangles now: (class, sin of the smallest angle, index), worst first.
   // (A scan on all host threads; the sort makes the list independent of them.)
-  std::vector<std::tuple<int, double, std::uint32_t>> bad_triangles() const {
+  BadList bad_triangles() const {
     const std::size_t chunks = chunk_count(nt_, 16384);
     std::vector<std::vector<std::tuple<int, double, std::uint32_t>>> part(chunks);
     for_chunks(nt_, chunks, [&](std::size_t k, std::size_t b, std::size_t e) {
@@ -161,6 +171,45 @@ class Cleaner {
     std::vector<std::tuple<int, double, std::uint32_t>> bad;
     for (const auto& q : part) bad.insert(bad.end(), q.begin(), q.end());
     std::sort(bad.begin(), bad.end());
+    return bad;
+  }
+
+  // The same list as bad_triangles(), from the list before the repairs
+  // since (`before`) and what they changed: a triangle that was good and
+  // whose vertices neither moved nor were renamed is still good, so only the
+  // triangles of `before` and those around the changed vertices (and the
+  // flipped ones) are looked at again. A full scan costs about 40 ns per
+  // triangle of the mesh; this, the same per triangle of the repairs'
+  // neighbourhoods.
+  BadList bad_triangles_after(const BadList& before) {
+    std::vector<std::uint32_t> look;
+    look.reserve(before.size() + 8 * changed_vertices_.size() + changed_triangles_.size());
+    for (const auto& b : before) look.push_back(std::get<2>(b));
+    for (std::uint32_t v : changed_vertices_) {
+      fan(v, scratch_);
+      look.insert(look.end(), scratch_.begin(), scratch_.end());
+    }
+    look.insert(look.end(), changed_triangles_.begin(), changed_triangles_.end());
+    changed_vertices_.clear();
+    changed_triangles_.clear();
+    std::sort(look.begin(), look.end());
+    look.erase(std::unique(look.begin(), look.end()), look.end());
+    BadList bad;
+    for (std::uint32_t t : look) {
+      if (!alive_[t]) continue;
+      const TriangleShape s = shape(t);
+      const int c = triangle_class(s, degenerate_double_area_);
+      if (c) bad.emplace_back(-c, s.sin_min_angle, t);
+    }
+    std::sort(bad.begin(), bad.end());
+    return bad;
+  }
+  // The triangles of `before` still alive (after removals, which change no
+  // shape).
+  BadList alive_of(const BadList& before) const {
+    BadList bad;
+    for (const auto& b : before)
+      if (alive_[std::get<2>(b)]) bad.push_back(b);
     return bad;
   }
 
@@ -212,80 +261,66 @@ class Cleaner {
   // (marching cubes leaves such specks where the field barely dips below
   // zero at one grid vertex: an octahedron a millionth of a cell wide, which
   // no collapse can repair without leaving a degenerate triangle). Whole
-  // components go, so the rest of the mesh is untouched. Returns the
-  // triangles removed.
-  std::uint64_t drop_degenerate_components() {
-    std::vector<std::uint32_t> parent(nv_);
-    for (std::size_t v = 0; v < nv_; ++v) parent[v] = std::uint32_t(v);
-    auto root = [&](std::uint32_t v) {
-      while (parent[v] != v) v = parent[v] = parent[parent[v]];
-      return v;
-    };
-    for (std::size_t t = 0; t < nt_; ++t) {
-      if (!alive_[t]) continue;
-      const std::uint32_t* v = T_ + 3 * t;
-      for (int k = 1; k < 3; ++k) {
-        const std::uint32_t a = root(v[0]), b = root(v[k]);
-        if (a != b) parent[std::max(a, b)] = std::min(a, b);
-      }
-    }
-    std::vector<std::uint8_t> solid(nv_, 0);  // by root: has a non-degenerate triangle
-    for (std::size_t t = 0; t < nt_; ++t)
-      if (alive_[t] && tri_class(std::uint32_t(t)) != 2) solid[root(T_[3 * t])] = 1;
+  // components go, so the rest of the mesh is untouched. `bad`: the bad
+  // triangles now (every degenerate one is among them); each component is
+  // walked from them, and a walk stops at the first triangle that is not
+  // degenerate. Returns the triangles removed.
+  std::uint64_t drop_degenerate_components(const BadList& bad) {
     std::uint64_t removed = 0;
-    for (std::size_t t = 0; t < nt_; ++t)
-      if (alive_[t] && !solid[root(T_[3 * t])]) {
-        alive_[t] = 0;
-        ++removed;
-      }
-    return removed;
-  }
-
-  // Removes the connected components that still hold a bad triangle and
-  // enclose less than max_volume (a component's signed volume, summed in
-  // triangle order): droplets smaller than a marching-cubes cell, whose
-  // surface the grid cannot resolve (a flat lens, or a tube pinched off at a
-  // grid vertex), noise like the degenerate specks. Returns the triangles
-  // removed.
-  std::uint64_t drop_small_bad_components(double max_volume) {
-    std::vector<std::uint32_t> parent(nv_);
-    for (std::size_t v = 0; v < nv_; ++v) parent[v] = std::uint32_t(v);
-    auto root = [&](std::uint32_t v) {
-      while (parent[v] != v) v = parent[v] = parent[parent[v]];
-      return v;
-    };
-    for (std::size_t t = 0; t < nt_; ++t) {
-      if (!alive_[t]) continue;
-      const std::uint32_t* v = T_ + 3 * t;
-      for (int k = 1; k < 3; ++k) {
-        const std::uint32_t a = root(v[0]), b = root(v[k]);
-        if (a != b) parent[std::max(a, b)] = std::min(a, b);
-      }
-    }
-    std::vector<std::uint8_t> bad(nv_, 0);  // by root
-    std::vector<double> volume(nv_, 0.0);   // by root, six times
-    for (std::size_t t = 0; t < nt_; ++t) {
-      if (!alive_[t]) continue;
-      const std::uint32_t* v = T_ + 3 * t;
-      const std::uint32_t r = root(v[0]);
-      if (tri_class(std::uint32_t(t)) != 0) bad[r] = 1;
-      // Relative to the component's root vertex: no cancellation far from
-      // the origin.
-      const Vec3 o = load(P_, r);
-      volume[r] += dot(load(P_, v[0]) - o, cross(load(P_, v[1]) - o, load(P_, v[2]) - o));
-    }
-    std::uint64_t removed = 0;
-    for (std::size_t t = 0; t < nt_; ++t) {
-      if (!alive_[t]) continue;
-      const std::uint32_t r = root(T_[3 * t]);
-      if (bad[r] && std::abs(volume[r]) < 6 * max_volume) {
-        alive_[t] = 0;
-        ++removed;
-      }
+    for (const auto& b : bad) {
+      const std::uint32_t t0 = std::get<2>(b);
+      if (std::get<0>(b) != -2 || !alive_[t0] || visited(t0)) continue;
+      bool solid = false;
+      walk_component(t0, 0, [&](std::uint32_t t) {
+        if (state_[t] == kSolid || tri_class(t) != 2) solid = true;
+        return !solid;
+      });
+      settle_component(solid ? kSolid : kRemoved);
+      if (!solid) removed += component_.size();
     }
     return removed;
   }
 
+  // Removes the connected components that still hold a bad triangle, have
+  // at most kSmallComponentTriangles triangles and enclose less than
+  // max_volume (a component's signed volume, summed in triangle order about
+  // its lowest-numbered vertex): droplets smaller than a marching-cubes
+  // cell, whose surface the grid cannot resolve (a flat lens, or a tube
+  // pinched off at a grid vertex), noise like the degenerate specks. Each
+  // component is walked from its bad triangles (`bad`: all of them), and a
+  // walk stops when it passes the size limit. Returns the triangles removed.
+  std::uint64_t drop_small_bad_components(const BadList& bad, double max_volume) {
+    state_.assign(nt_, kUnseen);  // (kSolid meant "not all degenerate" above)
+    std::uint64_t removed = 0;
+    for (const auto& b : bad) {
+      const std::uint32_t t0 = std::get<2>(b);
+      if (!alive_[t0] || visited(t0)) continue;
+      bool large = false;
+      walk_component(t0, kSmallComponentTriangles, [&](std::uint32_t t) {
+        if (state_[t] == kSolid) large = true;
+        return !large;
+      });
+      large = large || component_.size() > kSmallComponentTriangles;
+      bool drop = false;
+      if (!large) {
+        std::sort(component_.begin(), component_.end());
+        std::uint32_t o = kNone;
+        for (std::uint32_t t : component_)
+          for (int k = 0; k < 3; ++k) o = std::min(o, T_[3 * std::size_t(t) + k]);
+        // Relative to that vertex: no cancellation far from the origin.
+        const Vec3 po = load(P_, o);
+        double volume = 0;  // six times
+        for (std::uint32_t t : component_) {
+          const std::uint32_t* v = T_ + 3 * std::size_t(t);
+          volume += dot(load(P_, v[0]) - po, cross(load(P_, v[1]) - po, load(P_, v[2]) - po));
+        }
+        drop = std::abs(volume) < 6 * max_volume;
+      }
+      settle_component(drop ? kRemoved : kSolid);
+      if (drop) removed += component_.size();
+    }
+    return removed;
+  }
   // Writes the surviving triangles and vertices back, compacted; returns the
   // new counts.
   std::pair<std::size_t, std::size_t> compact() { return compact_mesh(P_, N_, nv_, T_, nt_, alive_); }
@@ -305,6 +340,47 @@ class Cleaner {
     int where = 0;  // 0 midpoint, 1 at a, 2 at b
     std::vector<std::pair<std::uint32_t, Vec3>> moved;  // move: vertices and new positions
   };
+
+  // Component walks (drop_*_components): a triangle's state.
+  static constexpr std::uint8_t kUnseen = 0, kInWalk = 1, kSolid = 2, kRemoved = 3;
+  bool visited(std::uint32_t t) const { return !state_.empty() && state_[t] != kUnseen; }
+  // Collects into component_ the alive triangles connected to t0 through
+  // shared vertices, breadth first, until `keep_going(t)` says no for a
+  // triangle reached (that one is still collected) or more than `limit`
+  // triangles are collected (0: no limit).
+  template <class F>
+  void walk_component(std::uint32_t t0, std::size_t limit, const F& keep_going) {
+    if (state_.empty()) state_.assign(nt_, kUnseen);
+    component_.clear();
+    component_.push_back(t0);
+    bool go = keep_going(t0);
+    if (state_[t0] == kUnseen) state_[t0] = kInWalk;
+    for (std::size_t i = 0; i < component_.size() && go; ++i) {
+      const std::uint32_t t = component_[i];
+      for (int k = 0; k < 3 && go; ++k) {
+        fan(T_[3 * std::size_t(t) + k], scratch_);
+        for (std::uint32_t u : scratch_) {
+          if (state_[u] == kInWalk) continue;
+          component_.push_back(u);
+          go = keep_going(u);
+          if (state_[u] == kUnseen) state_[u] = kInWalk;
+          if (!go || (limit && component_.size() > limit)) {
+            go = false;
+            break;
+          }
+        }
+      }
+    }
+  }
+  // Ends a walk: its triangles are marked (kSolid: part of a component that
+  // stays; kRemoved: removed now).
+  void settle_component(std::uint8_t to) {
+    for (std::uint32_t t : component_) {
+      if (state_[t] != kInWalk) continue;
+      state_[t] = to;
+      if (to == kRemoved) alive_[t] = 0;
+    }
+  }
 
   TriangleShape shape(std::uint32_t t) const {
     const std::uint32_t* v = T_ + 3 * std::size_t(t);
@@ -334,28 +410,45 @@ class Cleaner {
           out.push_back(nx);
           in.push_back({pv, i - b});
         }
-        if (ok) {
-          std::sort(in.begin(), in.end());
-          for (std::size_t k = 1; k < in.size() && ok; ++k) ok = in[k].first != in[k - 1].first;
-        }
-        if (ok) {
-          // Walk the fan: from a triangle to the one whose previous vertex is
-          // this one's next; one cycle through all of them.
-          std::uint32_t cur = 0, steps = 0;
-          do {
-            auto it = std::lower_bound(in.begin(), in.end(), std::make_pair(out[cur], 0u));
-            if (it == in.end() || it->first != out[cur]) {
-              ok = false;
-              break;
-            }
-            cur = it->second;
-            ++steps;
-          } while (cur != 0 && steps <= out.size());
-          ok = ok && cur == 0 && steps == out.size();
-        }
+        if (ok) ok = one_closed_fan(in, out);
         if (!ok) irregular_[v] = 1;
       }
     });
+  }
+
+  // Whether triangles with these (previous vertex, local index) and next
+  // vertices form one closed fan: the previous vertices are distinct, and
+  // walking from a triangle to the one whose previous vertex is this one's
+  // next goes once through all of them. `in` may be reordered. (Small fans,
+  // almost all of them, by linear search; large ones sorted.)
+  static bool one_closed_fan(std::vector<std::pair<std::uint32_t, std::uint32_t>>& in,
+                             const std::vector<std::uint32_t>& out) {
+    const std::size_t n = in.size();
+    if (n <= 16) {
+      for (std::size_t i = 1; i < n; ++i)
+        for (std::size_t j = 0; j < i; ++j)
+          if (in[i].first == in[j].first) return false;
+      std::uint32_t cur = 0, steps = 0;
+      do {
+        std::size_t j = 0;
+        while (j < n && in[j].first != out[cur]) ++j;
+        if (j == n) return false;
+        cur = in[j].second;
+        ++steps;
+      } while (cur != 0 && steps <= n);
+      return cur == 0 && steps == n;
+    }
+    std::sort(in.begin(), in.end());
+    for (std::size_t k = 1; k < n; ++k)
+      if (in[k].first == in[k - 1].first) return false;
+    std::uint32_t cur = 0, steps = 0;
+    do {
+      auto it = std::lower_bound(in.begin(), in.end(), std::make_pair(out[cur], 0u));
+      if (it == in.end() || it->first != out[cur]) return false;
+      cur = it->second;
+      ++steps;
+    } while (cur != 0 && steps <= n);
+    return cur == 0 && steps == n;
   }
 
   // Alive triangles around v: in its own lists and those of the vertices
@@ -534,6 +627,7 @@ class Cleaner {
       P_[3 * std::size_t(m.first)] = Real(m.second.x);
       P_[3 * std::size_t(m.first) + 1] = Real(m.second.y);
       P_[3 * std::size_t(m.first) + 2] = Real(m.second.z);
+      changed_vertices_.push_back(m.first);
     }
     ++moves;
   }
@@ -648,17 +742,7 @@ class Cleaner {
       out.push_back(w[(k + 1) % 3]);
       in.push_back({w[(k + 2) % 3], std::uint32_t(i)});
     }
-    std::sort(in.begin(), in.end());
-    for (std::size_t k = 1; k < in.size(); ++k)
-      if (in[k].first == in[k - 1].first) return false;
-    std::uint32_t cur = 0, steps = 0;
-    do {
-      auto it = std::lower_bound(in.begin(), in.end(), std::make_pair(out[cur], 0u));
-      if (it == in.end() || it->first != out[cur]) return false;
-      cur = it->second;
-      ++steps;
-    } while (cur != 0 && steps <= out.size());
-    return cur == 0 && steps == out.size();
+    return one_closed_fan(in, out);
   }
 
   void consider_cut(std::uint32_t t, CutCandidate& best) {
@@ -820,6 +904,7 @@ class Cleaner {
       P_[3 * std::size_t(x)] = Real(c.p.x);
       P_[3 * std::size_t(x) + 1] = Real(c.p.y);
       P_[3 * std::size_t(x) + 2] = Real(c.p.z);
+      changed_vertices_.push_back(x);  // (its fan holds the rewritten triangles)
     }
     ++cuts;
   }
@@ -896,6 +981,7 @@ class Cleaner {
     // b's triangles now belong to a.
     next_[tail_[a]] = b;
     tail_[a] = tail_[b];
+    changed_vertices_.push_back(a);
     ++collapses;
   }
 
@@ -908,6 +994,8 @@ class Cleaner {
     // and b keep stale entries, which fan() skips).
     add_incidence(c.d, c.t1);
     add_incidence(c.c, c.t2);
+    changed_triangles_.push_back(c.t1);
+    changed_triangles_.push_back(c.t2);
     ++flips;
   }
 
@@ -928,6 +1016,11 @@ class Cleaner {
   std::vector<std::pair<std::uint32_t, std::uint32_t>> extra_;  // (triangle, next entry)
   double degenerate_double_area_ = 0;
   std::vector<std::uint32_t> fa_, fb_, ra_, rb_, common_, scratch_, around_, cluster_;
+  // What the repairs changed since the last bad_triangles_after(): vertices
+  // moved or renamed into, triangles rewritten in place.
+  std::vector<std::uint32_t> changed_vertices_, changed_triangles_;
+  std::vector<std::uint8_t> state_;       // per triangle, of the component walks
+  std::vector<std::uint32_t> component_;  // the triangles of the current walk
 };
 
 }  // namespace detail
@@ -950,33 +1043,29 @@ CleanupResult cleanup_mesh(PosVec& positions, NormalVec& normals, IndexVec& tria
   // then, for what is still left, with the last resorts (collapses that
   // leave degenerate triangles degenerate, cuts of pinched tubes), so that
   // they never pre-empt a repair that keeps more of the mesh.
-  // (A scan costs about 40 ns per triangle: none is repeated needlessly.)
-  constexpr std::uint64_t kUnknown = ~std::uint64_t(0);
-  std::uint64_t remaining = kUnknown;
-  bool first = true;
-  for (int round = 0; round < 3; ++round) {
+  // One scan of the whole mesh; after it, each pass looks again only at what
+  // was bad and what the repairs changed (bad_triangles_after).
+  auto bad = c.bad_triangles();
+  r.bad_before = bad.size();
+  for (int round = 0; round < 3 && !bad.empty(); ++round) {
     c.cos_limit = round == 0 ? kCosMaxNormalTurn : kCosMaxNormalTurnLast;
     c.last_resort = round == 2;
-    for (int pass = 0; pass < kCleanupPasses && remaining != 0; ++pass) {
-      const auto bad = c.bad_triangles();
-      if (first) r.bad_before = bad.size();
-      first = false;
-      remaining = bad.size();
+    for (int pass = 0; pass < kCleanupPasses && !bad.empty(); ++pass) {
       std::uint64_t repaired = 0;
       for (const auto& b : bad) repaired += c.repair(std::get<2>(b)) ? 1 : 0;
+      bad = c.bad_triangles_after(bad);
       if (repaired == 0) break;
-      remaining = kUnknown;
     }
   }
   // What no repair could fix and is only noise: specks made of degenerate
   // triangles alone.
-  if (remaining != 0 && c.drop_degenerate_components() > 0) remaining = kUnknown;
+  if (!bad.empty() && c.drop_degenerate_components(bad) > 0) bad = c.alive_of(bad);
   // ... and droplets smaller than a cell that still hold a bad triangle.
-  if (remaining != 0 && cell > 0) {
-    r.small_component_triangles = c.drop_small_bad_components(kSmallComponentCells * cell * cell * cell);
-    if (r.small_component_triangles > 0) remaining = kUnknown;
+  if (!bad.empty() && cell > 0) {
+    r.small_component_triangles = c.drop_small_bad_components(bad, kSmallComponentCells * cell * cell * cell);
+    if (r.small_component_triangles > 0) bad = c.alive_of(bad);
   }
-  r.bad_after = remaining != kUnknown ? remaining : c.bad_triangles().size();
+  r.bad_after = bad.size();
   r.collapses = c.collapses;
   r.cuts = c.cuts;
   r.flips = c.flips;
