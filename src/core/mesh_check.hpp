@@ -1,7 +1,9 @@
 // SPDX-License-Identifier: MIT
 // Mesh check (nbmc_mesh_check, `nbmc reconstruct --check`): topology and
 // quality figures of a triangle mesh given as flat host arrays. Plain C++,
-// serial, so the figures are the same on every backend and thread count.
+// serial, so the figures are the same on every backend and thread count
+// (compact_mesh, for the clean-up and the decimation, runs on host threads
+// and its result does not depend on them either).
 //
 // Definitions (also in include/nbmc.h):
 //  - an edge is an unordered pair of vertices used by at least one triangle;
@@ -20,6 +22,7 @@
 #pragma once
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -27,6 +30,8 @@
 #include <stdexcept>
 #include <utility>
 #include <vector>
+
+#include "parallel.hpp"
 
 namespace nbmc {
 namespace mesh {
@@ -52,35 +57,83 @@ inline double norm(const Vec3& a) { return std::sqrt(dot(a, a)); }
 inline Vec3 load(const float* p, std::uint32_t v) { return {p[3 * std::size_t(v)], p[3 * std::size_t(v) + 1], p[3 * std::size_t(v) + 2]}; }
 inline Vec3 load(const double* p, std::uint32_t v) { return {p[3 * std::size_t(v)], p[3 * std::size_t(v) + 1], p[3 * std::size_t(v) + 2]}; }
 
+namespace detail {
+
+// Moves the items i < n (`width` elements each) of array a with keep(i) to
+// the front, in their order and in place, on host threads: item i goes to
+// the number of kept items before it, written as f(element). Chunk k's items
+// lie in [S_k, S_k+1) and go to [D_k, D_k+1) with D_k <= S_k; the chunks
+// after k write from D_k+1 on, so chunk k first puts aside its kept items
+// from D_k+1 on (few: as many as the items dropped before chunk k+1), then
+// all chunks move their items at once.
+template <class T, class Keep, class F>
+std::size_t compact_array(T* a, std::size_t width, std::size_t n, const Keep& keep, const F& f) {
+  const std::size_t chunks = chunk_count(n, 65536);
+  std::vector<std::size_t> dst(chunks + 1, 0);
+  for_chunks(n, chunks, [&](std::size_t k, std::size_t b, std::size_t e) {
+    std::size_t m = 0;
+    for (std::size_t i = b; i < e; ++i) m += keep(i) ? 1 : 0;
+    dst[k + 1] = m;
+  });
+  for (std::size_t k = 0; k < chunks; ++k) dst[k + 1] += dst[k];
+  std::vector<std::vector<T>> aside(chunks);
+  for_chunks(n, chunks, [&](std::size_t k, std::size_t b, std::size_t e) {
+    for (std::size_t i = std::max(b, dst[k + 1]); i < e; ++i)
+      if (keep(i)) aside[k].insert(aside[k].end(), a + width * i, a + width * (i + 1));
+  });
+  for_chunks(n, chunks, [&](std::size_t k, std::size_t b, std::size_t e) {
+    std::size_t to = dst[k];
+    const T* from_aside = aside[k].data();
+    for (std::size_t i = b; i < e; ++i) {
+      if (!keep(i)) continue;
+      const T* src = i >= dst[k + 1] ? (from_aside += width) - width : a + width * i;
+      for (std::size_t c = 0; c < width; ++c) a[width * to + c] = f(src[c]);
+      ++to;
+    }
+  });
+  return dst[chunks];
+}
+
+}  // namespace detail
+
 // Keeps the triangles t with alive[t] and the vertices they use, both in
 // their order (positions, and normals when not NULL, move with their
 // vertex; indices are renumbered), in place; returns the new vertex and
-// triangle counts. The clean-up's and the decimation's last step.
+// triangle counts. The clean-up's and the decimation's last step; on all
+// host threads (the result does not depend on them).
 template <class Real>
 std::pair<std::size_t, std::size_t> compact_mesh(Real* positions, float* normals, std::size_t nv, std::uint32_t* tri,
                                                  std::size_t nt, const std::vector<std::uint8_t>& alive) {
-  constexpr std::uint32_t kUnused = 0xffffffffu;
-  std::vector<std::uint32_t> remap(nv, kUnused);
-  std::size_t kept_t = 0;
-  for (std::size_t t = 0; t < nt; ++t) {
-    if (!alive[t]) continue;
-    for (int k = 0; k < 3; ++k) {
-      tri[3 * kept_t + k] = tri[3 * t + k];
-      remap[tri[3 * t + k]] = 0;
-    }
-    ++kept_t;
+  // The vertices the kept triangles use: a flag each, set by relaxed atomic
+  // stores (plain stores on x86; threads may set the same flag).
+  std::vector<std::atomic<std::uint8_t>> used(nv);
+  for_chunks(nt, chunk_count(nt, 65536), [&](std::size_t, std::size_t b, std::size_t e) {
+    for (std::size_t t = b; t < e; ++t)
+      if (alive[t])
+        for (int k = 0; k < 3; ++k) used[tri[3 * t + k]].store(1, std::memory_order_relaxed);
+  });
+  auto is_used = [&](std::size_t v) { return std::size_t(used[v].load(std::memory_order_relaxed)); };
+  // New vertex numbers: the used vertices before each one.
+  std::vector<std::uint32_t> remap(nv);
+  {
+    const std::size_t chunks = chunk_count(nv, 65536);
+    std::vector<std::size_t> first(chunks + 1, 0);
+    for_chunks(nv, chunks, [&](std::size_t k, std::size_t b, std::size_t e) {
+      std::size_t m = 0;
+      for (std::size_t v = b; v < e; ++v) m += is_used(v);
+      first[k + 1] = m;
+    });
+    for (std::size_t k = 0; k < chunks; ++k) first[k + 1] += first[k];
+    for_chunks(nv, chunks, [&](std::size_t k, std::size_t b, std::size_t e) {
+      std::size_t m = first[k];
+      for (std::size_t v = b; v < e; ++v) remap[v] = std::uint32_t(is_used(v) ? m++ : 0);
+    });
   }
-  std::size_t kept_v = 0;
-  for (std::size_t v = 0; v < nv; ++v) {
-    if (remap[v] == kUnused) continue;
-    remap[v] = std::uint32_t(kept_v);
-    for (int a = 0; a < 3; ++a) {
-      positions[3 * kept_v + a] = positions[3 * v + a];
-      if (normals) normals[3 * kept_v + a] = normals[3 * v + a];
-    }
-    ++kept_v;
-  }
-  for (std::size_t i = 0; i < 3 * kept_t; ++i) tri[i] = remap[tri[i]];
+  auto same = [](auto x) { return x; };
+  const std::size_t kept_v = detail::compact_array(positions, 3, nv, is_used, same);
+  if (normals) detail::compact_array(normals, 3, nv, is_used, same);
+  const std::size_t kept_t = detail::compact_array(
+      tri, 3, nt, [&](std::size_t t) { return alive[t] != 0; }, [&](std::uint32_t v) { return remap[v]; });
   return {kept_v, kept_t};
 }
 
