@@ -10,6 +10,7 @@
 #include "core/mesh_cleanup.hpp"
 #include "core/mesh_decimate.hpp"
 #include "core/mesh_smooth.hpp"
+#include "core/trace.hpp"
 
 #if defined(KOKKOS_ENABLE_CUDA)
 #include <cuda_runtime.h>
@@ -98,6 +99,7 @@ void postprocess_device(const nbmc_params& params, HostMesh& m, mesh::Postproces
   h.normals.resize(m.d_normals ? h.positions.size() : 0);
   h.triangles.resize(3 * m.triangle_count());
   download_mesh(m, h.positions.data(), h.normals.empty() ? nullptr : h.normals.data(), h.triangles.data());
+  host_trace("post-processing: download", m.triangle_count());
   postprocess_host(params, h, ps, fp, cell);
 #if defined(KOKKOS_ENABLE_CUDA)
   auto put = [](void* dst, const void* src, std::size_t bytes, const char* what) {
@@ -109,6 +111,7 @@ void postprocess_device(const nbmc_params& params, HostMesh& m, mesh::Postproces
   put(m.d_positions, h.positions.data(), h.positions.size() * sizeof(float), "positions");
   if (m.d_normals) put(m.d_normals, h.normals.data(), h.normals.size() * sizeof(float), "normals");
   put(m.d_triangles, h.triangles.data(), h.triangles.size() * sizeof(std::uint32_t), "triangles");
+  host_trace("post-processing: upload", h.triangles.size() / 3);
   m.d_vertices = h.positions.size() / 3;
   m.d_triangles_count = h.triangles.size() / 3;
 #else
@@ -124,6 +127,7 @@ mesh::PostprocessStats postprocess_mesh(const nbmc_params& params, HostMesh& m, 
   ps.raw_triangles = ps.pre_decimation_triangles = m.triangle_count();
   if (!params.cleanup && params.smooth_iterations <= 0 && !(params.decimate_fraction < 1)) return ps;
   const auto t0 = std::chrono::steady_clock::now();
+  host_trace("post-processing: start", m.triangle_count());
   if (m.on_device) postprocess_device(params, m, ps, fp, st.cell);
   else postprocess_host(params, m, ps, fp, st.cell);
   const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();

@@ -94,6 +94,8 @@
 
 #include "mesh_check.hpp"
 #include "parallel.hpp"
+#include "params.hpp"
+#include "trace.hpp"
 
 #include <algorithm>
 #include <array>
@@ -141,30 +143,62 @@ class Cleaner {
     for (std::size_t v = 0; v < nv; ++v) tail_[v] = std::uint32_t(v);
     const double extent = bounding_extent(positions, nv);
     degenerate_double_area_ = 2 * kDegenerateAreaFraction * extent * extent;
-    // Triangles around each vertex (CSR, ascending triangle index). Each
-    // host thread owns a range of vertices and reads every triangle: no
-    // atomics, and the lists come out in triangle order by construction.
+    host_trace("clean-up: arrays, extent", nv);
+    // Triangles around each vertex (CSR, ascending triangle index), on all
+    // host threads without atomics: each thread sorts the corners of its
+    // range of triangles by vertex range (a count, then a copy into one array
+    // ordered by vertex range, then triangle range), and each thread fills
+    // the lists of its vertex range from its part of that array, in triangle
+    // order by construction.
     {
-      const std::size_t chunks = chunk_count(nv, 16384);
-      std::vector<std::uint32_t> count(nv + 1, 0);
-      for_chunks(nv, chunks, [&](std::size_t, std::size_t b, std::size_t e) {
-        for (std::size_t i = 0; i < 3 * nt; ++i)
-          if (tri[i] >= b && tri[i] < e) ++count[tri[i] + 1];
+      // Vertex ranges of 2^shift vertices (a shift, not a division, per corner).
+      const std::size_t want = std::max(chunk_count(nt, 16384), chunk_count(nv, 16384));
+      int shift = 0;
+      while ((std::size_t(1) << shift) * want < nv) ++shift;
+      const std::size_t parts = std::max<std::size_t>(1, (nv + (std::size_t(1) << shift) - 1) >> shift);
+      const std::size_t tparts = want;  // triangle ranges
+      std::vector<std::size_t> at(parts * tparts + 1, 0);  // [vertex range][triangle range]
+      for_chunks(nt, tparts, [&](std::size_t k, std::size_t b, std::size_t e) {
+        std::vector<std::size_t> n(parts, 0);
+        for (std::size_t i = 3 * b; i < 3 * e; ++i)
+          if (tri[i] < nv) ++n[tri[i] >> shift];
+        for (std::size_t r = 0; r < parts; ++r) at[r * tparts + k + 1] = n[r];
       });
-      start_.resize(nv + 1);
-      start_[0] = 0;
-      for (std::size_t v = 0; v < nv; ++v) start_[v + 1] = start_[v] + count[v + 1];
-      incident_.resize(start_[nv]);
-      for_chunks(nv, chunks, [&](std::size_t, std::size_t b, std::size_t e) {
-        std::vector<std::uint32_t> fill(start_.begin() + std::ptrdiff_t(b), start_.begin() + std::ptrdiff_t(e));
-        for (std::size_t t = 0; t < nt; ++t)
-          for (int k = 0; k < 3; ++k) {
-            const std::uint32_t v = tri[3 * t + k];
-            if (v >= b && v < e) incident_[fill[v - b]++] = std::uint32_t(t);
+      for (std::size_t i = 0; i < parts * tparts; ++i) at[i + 1] += at[i];
+      struct Corner {
+        std::uint32_t v, t;
+      };
+      std::vector<Corner, NoInitAllocator<Corner>> corners(at[parts * tparts]);
+      for_chunks(nt, tparts, [&](std::size_t k, std::size_t b, std::size_t e) {
+        std::vector<std::size_t> w(parts);
+        for (std::size_t r = 0; r < parts; ++r) w[r] = at[r * tparts + k];
+        for (std::size_t t = b; t < e; ++t)
+          for (int c = 0; c < 3; ++c) {
+            const std::uint32_t v = tri[3 * t + c];
+            if (v < nv) corners[w[v >> shift]++] = Corner{v, std::uint32_t(t)};
           }
       });
+      host_trace("clean-up: incidence corners", nt);
+      start_.assign(nv + 1, 0);
+      incident_.resize(corners.size());
+      on_threads(parts, [&](std::size_t r) {
+        const std::size_t vb = r << shift, ve = std::min(nv, (r + 1) << shift);
+        const std::size_t cb = at[r * tparts], ce = at[(r + 1) * tparts];
+        for (std::size_t i = cb; i < ce; ++i) ++start_[corners[i].v + 1];
+        // (start_[vb] belongs to the range before: its lists start at cb.)
+        std::vector<std::uint32_t> fill(ve - vb);
+        std::size_t pos = cb;
+        for (std::size_t v = vb; v < ve; ++v) {
+          fill[v - vb] = std::uint32_t(pos);
+          pos += start_[v + 1];
+          start_[v + 1] = std::uint32_t(pos);
+        }
+        for (std::size_t i = cb; i < ce; ++i) incident_[fill[corners[i].v - vb]++] = corners[i].t;
+      });
+      host_trace("clean-up: incidence lists", nt);
     }
     mark_irregular();
+    host_trace("clean-up: irregular vertices", nv);
   }
 
   std::uint64_t collapses = 0, flips = 0, moves = 0, cuts = 0;
@@ -246,14 +280,11 @@ class Cleaner {
     Candidate best;
     // The shortest move of each vertex that works (a quarter, half or all
     // the way), the best of the three vertices.
-    for (int k = 0; k < 3; ++k)
-      for (double f : {0.25, 0.5, 1.0}) {
-        Candidate c;
-        consider_move(t, v[k], f, c);
-        if (!c.valid) continue;
-        if (c.score > best.score) best = std::move(c);
-        break;
-      }
+    for (int k = 0; k < 3; ++k) {
+      Candidate c;
+      consider_move(t, v[k], c);
+      if (c.valid && c.score > best.score) best = std::move(c);
+    }
     consider_flip(t, best);
     if (!best.valid) consider_push(t, best);
     if (best.valid) {
@@ -263,9 +294,11 @@ class Cleaner {
     }
     for (int k = 0; k < 3; ++k) {
       const std::uint32_t a = v[k], b = v[(k + 1) % 3];
+      CollapseSite site;
+      if (!collapse_site(a, b, site)) continue;
       const Vec3 pa = load(P_, a), pb = load(P_, b);
       const Vec3 targets[3] = {0.5 * (pa + pb), pa, pb};
-      for (int w = 0; w < 3; ++w) consider_collapse(a, b, targets[w], w, best);
+      for (int w = 0; w < 3; ++w) consider_collapse(site, targets[w], w, best);
     }
     if (best.valid) {
       apply_collapse(best);
@@ -514,38 +547,57 @@ class Cleaner {
   }
   static bool contains(const std::uint32_t* v, std::uint32_t x) { return v[0] == x || v[1] == x || v[2] == x; }
 
-  void consider_collapse(std::uint32_t a, std::uint32_t b, const Vec3& p, int where, Candidate& best) {
+  // An edge (a, b) that may be collapsed (the topology; consider_collapse
+  // then judges each target position): fa_ and fb_ hold the fans of a and b.
+  struct CollapseSite {
+    std::uint32_t a = 0, b = 0;
+    std::uint32_t shared[2] = {0, 0};  // the two triangles of the edge
+    Vec3 ref;                          // reference normal for triangles that are bad now
+  };
+  bool collapse_site(std::uint32_t a, std::uint32_t b, CollapseSite& site) {
     fan(a, fa_);
     fan(b, fb_);
-    std::uint32_t shared[2], n_shared = 0;
+    std::uint32_t* shared = site.shared;
+    std::uint32_t n_shared = 0;
     for (std::uint32_t t : fa_)
       if (contains(T_ + 3 * std::size_t(t), b)) {
-        if (n_shared == 2) return;
+        if (n_shared == 2) return false;
         shared[n_shared++] = t;
       }
-    if (n_shared != 2) return;
+    if (n_shared != 2) return false;
     std::uint32_t opposite[2];
     for (int s = 0; s < 2; ++s) {
       const std::uint32_t* v = T_ + 3 * std::size_t(shared[s]);
       opposite[s] = v[0] != a && v[0] != b ? v[0] : v[1] != a && v[1] != b ? v[1] : v[2];
     }
-    if (opposite[0] == opposite[1]) return;
+    if (opposite[0] == opposite[1]) return false;
     ring(a, fa_, ra_);
     ring(b, fb_, rb_);
     // Link condition: a and b share exactly the two opposite vertices.
     common_.clear();
     std::set_intersection(ra_.begin(), ra_.end(), rb_.begin(), rb_.end(), std::back_inserter(common_));
-    if (common_.size() != 2) return;
-    if (ra_.size() + rb_.size() < 4 + 3) return;  // the merged vertex keeps three neighbours
+    if (common_.size() != 2) return false;
+    if (ra_.size() + rb_.size() < 4 + 3) return false;  // the merged vertex keeps three neighbours
     for (std::uint32_t o : opposite)
-      if (degree(o) < 4) return;
+      if (degree(o) < 4) return false;
     // A reference normal for triangles that are bad now (theirs is noise).
-    Vec3 ref;
+    site.ref = Vec3();
     for (const auto* f : {&fa_, &fb_})
       for (std::uint32_t t : *f) {
         const std::uint32_t* v = T_ + 3 * std::size_t(t);
-        ref = ref + cross(load(P_, v[1]) - load(P_, v[0]), load(P_, v[2]) - load(P_, v[0]));
+        site.ref = site.ref + cross(load(P_, v[1]) - load(P_, v[0]), load(P_, v[2]) - load(P_, v[0]));
       }
+    site.a = a;
+    site.b = b;
+    return true;
+  }
+
+  // Collapsing site's edge to p (where: 0 midpoint, 1 at a, 2 at b), with
+  // fa_ and fb_ as collapse_site left them.
+  void consider_collapse(const CollapseSite& site, const Vec3& p, int where, Candidate& best) {
+    const std::uint32_t a = site.a, b = site.b;
+    const std::uint32_t* shared = site.shared;
+    const Vec3& ref = site.ref;
     double score = 2;
     for (const auto* f : {&fa_, &fb_})
       for (std::uint32_t t : *f) {
@@ -588,7 +640,8 @@ class Cleaner {
 
   // Moves v by f times the way to the centroid of its neighbours, within
   // its tangent plane (the normal of its fan): the fan keeps its triangles.
-  void consider_move(std::uint32_t t, std::uint32_t v, double f, Candidate& best) {
+  // (The shortest of a quarter, half or all the way that works, in `out`.)
+  void consider_move(std::uint32_t t, std::uint32_t v, Candidate& out) {
     if (irregular_[v]) return;
     fan(v, fa_);
     ring(v, fa_, ra_);
@@ -606,7 +659,10 @@ class Cleaner {
     n = (1.0 / ln) * n;
     Vec3 d = centroid - pv;
     d = d - dot(d, n) * n;
-    consider_positions(t, {{v, pv + f * d}}, best);
+    for (double f : {0.25, 0.5, 1.0}) {
+      consider_positions(t, {{v, pv + f * d}}, out);
+      if (out.valid) return;
+    }
   }
 
   // Moving vertices (v, p): valid when the bad triangle t becomes good, no
@@ -1437,7 +1493,8 @@ class Cleaner {
   std::uint32_t* T_;
   std::size_t nt_;
   std::vector<std::uint8_t> alive_, irregular_;
-  std::vector<std::uint32_t> start_, incident_, next_, tail_;
+  std::vector<std::uint32_t> start_, next_, tail_;
+  std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>> incident_;
   std::vector<std::uint32_t> extra_head_;                       // per vertex, into extra_ (after flips)
   std::vector<std::pair<std::uint32_t, std::uint32_t>> extra_;  // (triangle, next entry)
   double degenerate_double_area_ = 0;
@@ -1463,6 +1520,7 @@ CleanupResult cleanup_mesh(PosVec& positions, NormalVec& normals, IndexVec& tria
   const std::size_t nv = positions.size() / 3, nt = triangles.size() / 3;
   if (nt == 0) return r;
   const bool has_normals = !normals.empty() && normals.size() == positions.size();
+  host_trace("clean-up: start", nt);
   detail::Cleaner<typename PosVec::value_type> c(positions.data(), has_normals ? normals.data() : nullptr, nv, triangles.data(), nt);
   // Passes until nothing more can be repaired; then again with a looser
   // limit on the normals' turn for what is left (folds stay excluded);
@@ -1473,6 +1531,7 @@ CleanupResult cleanup_mesh(PosVec& positions, NormalVec& normals, IndexVec& tria
   // was bad and what the repairs changed (bad_triangles_after).
   auto bad = c.bad_triangles();
   r.bad_before = bad.size();
+  host_trace("clean-up: scan", bad.size());
   auto passes = [&] {
     for (int pass = 0; pass < kCleanupPasses && !bad.empty(); ++pass) {
       std::uint64_t repaired = 0;
@@ -1486,6 +1545,7 @@ CleanupResult cleanup_mesh(PosVec& positions, NormalVec& normals, IndexVec& tria
     c.last_resort = round == 2;
     passes();
   }
+  host_trace("clean-up: repairs", c.collapses + c.flips + c.moves + c.cuts);
   // What no repair could fix and is only noise: specks made of degenerate
   // triangles alone.
   if (!bad.empty() && c.drop_degenerate_components(bad) > 0) bad = c.alive_of(bad);
@@ -1508,7 +1568,9 @@ CleanupResult cleanup_mesh(PosVec& positions, NormalVec& normals, IndexVec& tria
   r.cuts = c.cuts;
   r.flips = c.flips;
   r.moves = c.moves;
+  host_trace("clean-up: noise components", bad.size());
   const auto counts = c.compact();
+  host_trace("clean-up: compaction", counts.second);
   positions.resize(3 * counts.first);
   if (has_normals) normals.resize(3 * counts.first);
   triangles.resize(3 * counts.second);
