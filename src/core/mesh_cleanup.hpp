@@ -1009,14 +1009,15 @@ class Cleaner {
   // times it, is merged: the triangles with two or three vertices in K go;
   // those with one form closed loops of their opposite edges around K, and
   // each loop gets one vertex of K (the lowest-numbered among its
-  // triangles'), all at K's centre. One loop: a collapse of K (the surface
+  // triangles' not taken by an earlier loop), all at K's centre or all at
+  // one of K's vertices (the best). One loop: a collapse of K (the surface
   // keeps its topology); two or more: a cut, the parts touching at a point.
   // Every vertex around keeps one closed fan of at least three triangles,
   // and the geometry is checked as for the other repairs.
   struct ClusterCandidate {
     bool valid = false;
     Vec3 p;
-    std::vector<Vec3> positions;  // of loop_vertices (when the strip is merged at both ends)
+    std::vector<Vec3> positions;  // of loop_vertices, when a strip's two ends are merged (else all at p)
     std::vector<std::uint32_t> cluster, removed, loop_vertices;
     std::vector<std::pair<std::uint32_t, std::array<std::uint32_t, 3>>> rewritten;  // kept triangles, new vertices
   };
@@ -1199,11 +1200,14 @@ class Cleaner {
   // The needle's short edge (a, b) and its far end: the shared neighbours
   // of a and b beyond kClusterReach lie next to one of the needle's
   // opposite vertices o (a strip of slivers between two pinches, as on
-  // YT10's sheets thinner than a cell). Both ends are merged at once, each
-  // into one vertex at its centre: `near_end` (a, b and the shared
-  // neighbours close to them) and o with the far ones; the triangles with
-  // two vertices in one end go. Every vertex around, the two merged ones
-  // included, must keep one closed fan; the geometry is checked as above.
+  // YT10's sheets thinner than a cell). Both ends are merged at once, all
+  // of an end's vertices at its centre: `near_end` (a, b and the shared
+  // neighbours close to them) and o with the far ones (each with what is
+  // joined to it by edges shorter than sin(1 degree) times the long edge);
+  // the triangles with two vertices in one end go, and each end keeps one
+  // vertex per loop of the triangles around it. Every vertex around, the
+  // kept ones included, must keep one closed fan; the geometry is checked
+  // as above.
   void consider_strip(std::vector<std::uint32_t> near_end, const std::vector<std::uint32_t>& far,
                       const std::vector<std::uint32_t>& opposite, double l_long, ClusterCandidate& best) {
     const double reach = kClusterReach * l_long, near = kSinOneDegree * l_long;
