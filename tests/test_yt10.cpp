@@ -543,7 +543,7 @@ TEST(Yt10, RealFrameIsClosed) {
 // The creases' slivers: on the 292 k frame at cell r/2, one needle on a
 // crease (its short edge's ends share a cap vertex of degree three and a
 // third vertex beyond the pinched-tube cut's reach), on the 1.65 M frame at
-// cell r 11 needles in 4 pinches (their ends share two vertices 0.1 long
+// cell r 11 needles in 4 pinches (their ends share two vertices up to 0.13 long
 // edge away) were left under 1 degree by the clean-up; the cluster merges
 // repair them (one loop, then two loops: a cut). The meshes stay closed,
 // manifold and oriented, and no triangle has an angle below 1 degree.
