@@ -401,6 +401,53 @@ TEST(MeshCleanup, PinchedCapIsCut) {
   EXPECT_EQ(out.components, 1u);
 }
 
+// The same cap, but the hole's third vertex c 1e-2 off the needle's short
+// edge (a, b) (beyond the cut's reach of sin(1 degree) times the needle's
+// long edge) and the apex x of degree three 2e-3 outward: YT10's pinch at a
+// crease (cbd292k at cell r/2). The short edge fails the link condition (a
+// and b share c and x besides the needle's far vertex), no move, flip or
+// widening works, and the cut does not apply: before the cluster merge, one
+// sliver stayed. The cluster {a, b, c} is merged into one vertex (one loop
+// around it: a collapse), x and the six triangles with two cluster vertices
+// go.
+TEST(MeshCleanup, PinchedCapBeyondTheCutIsMerged) {
+  TestMesh m = icosphere(2);
+  const std::uint32_t v = vertex_of_degree_6(m);
+  const float* n = &m.n[3 * v];
+  float t1[3] = {n[1], -n[0], 0.f};
+  const float l = std::sqrt(t1[0] * t1[0] + t1[1] * t1[1]);
+  for (float& q : t1) q /= l;
+  const float t2[3] = {n[1] * t1[2] - n[2] * t1[1], n[2] * t1[0] - n[0] * t1[2], n[0] * t1[1] - n[1] * t1[0]};
+  float off[4][3];
+  for (int d = 0; d < 3; ++d) {
+    off[0][d] = 0;
+    off[1][d] = 1e-4f * t1[d];
+    off[2][d] = 0.5e-4f * t1[d] + 1e-2f * t2[d];
+    off[3][d] = 0.5e-4f * t1[d] + 2e-3f * n[d];
+  }
+  split_vertex(m, v, off, true);
+  const CheckResult in = m.check();
+  ASSERT_TRUE(in.closed && in.manifold && in.oriented);
+  ASSERT_EQ(in.euler_characteristic, 2);
+  ASSERT_GT(in.sliver_triangles, 0u);
+  const std::size_t nt = m.t.size() / 3, nv = m.p.size() / 3;
+  TestMesh again = m;
+  const auto r = nbmc::mesh::cleanup_mesh(m.p, m.n, m.t);
+  const CheckResult out = m.check();
+  EXPECT_TRUE(out.closed && out.manifold && out.oriented);
+  EXPECT_EQ(out.euler_characteristic, 2);
+  EXPECT_EQ(out.components, 1u);
+  EXPECT_EQ(out.degenerate_triangles + out.sliver_triangles, 0u);
+  EXPECT_EQ(r.bad_after, 0u);
+  EXPECT_EQ(r.cuts, 0u);
+  EXPECT_EQ(m.t.size() / 3, nt - 6);
+  EXPECT_EQ(m.p.size() / 3, nv - 3);
+  // (a function of its input)
+  nbmc::mesh::cleanup_mesh(again.p, again.n, again.t);
+  EXPECT_EQ(again.p, m.p);
+  EXPECT_EQ(again.t, m.t);
+}
+
 // Random holes as above (closed by a triangle or a cap, their vertices 1e-7
 // to 1e-4 apart in random directions) at several vertices of a sphere: the
 // clean-up, its last round included, keeps the mesh closed, manifold,

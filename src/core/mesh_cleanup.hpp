@@ -43,16 +43,37 @@
 //    (or loses a handle) that touch at one point, as the zero set does. Six
 //    triangles fewer; the Euler characteristic is kept for a cap and grows by
 //    2 otherwise.
+// After the noise removal below (so that a component that is noise still
+// goes whole, and meshes the rounds above leave clean are not touched), the
+// needles left in the larger components may merge their cluster:
+//  - 5. a needle whose short edge (a, b) fails the link condition because a
+//    and b share neighbours besides the two opposite vertices, a fraction of
+//    a cell away (beyond the cut's reach: YT10's pinches at creases, where
+//    the anisotropic kernels' sharp edges meet a grid vertex, often with a
+//    cap of degree three). The cluster (a, b, the shared neighbours within
+//    a quarter of the needle's long edge, and what is joined to them by
+//    edges below sin(1 degree) times it) is merged: the triangles with two
+//    or three vertices in it go; those with one form loops of their
+//    opposite edges around it, and each loop keeps one of its vertices, all
+//    at the cluster's centre or at one of its vertices (the best). One
+//    loop: a collapse of several vertices (the topology is kept); more: a
+//    cut, the parts touching at a point. When the shared neighbours lie
+//    near the needle's far vertex instead (a strip of slivers between two
+//    pinches, YT10's sheets thinner than a cell), both ends are merged at
+//    once, each at its centre. As in the last round, a triangle that was
+//    bad may stay bad (its normal is noise) and one that was degenerate may
+//    stay degenerate; every vertex around keeps one closed fan.
 // Every repair must make the bad triangle good (or remove it), keep every
 // good triangle good, create no degenerate triangle (but for the last
-// resort in 3.), and turn no triangle's normal beyond the round's limit.
+// resorts in 3. and 5.), and turn no triangle's normal beyond the round's limit.
 // Vertices on a boundary, non-manifold or misoriented edge are left alone, so
 // an open or broken input is never made worse. Orientation is kept by
 // construction (collapses and cuts rename vertices, flips keep the quad's
 // boundary direction).
 //
-// Last, what no repair could fix and is only noise is removed, whole
-// connected components at a time (the rest of the mesh is untouched):
+// What no repair of the three rounds could fix and is only noise is
+// removed, whole connected components at a time (the rest of the mesh is
+// untouched), before 5.:
 //  - components made of degenerate triangles only (a speck where the field
 //    barely dips below zero at one grid vertex);
 //  - given the cell size, components that still hold a bad triangle, have
@@ -186,6 +207,9 @@ class Cleaner {
   // The last round: a collapse may leave degenerate triangles degenerate,
   // and pinched tubes may be cut.
   bool last_resort = false;
+  // After the last round: needles whose short edge fails the link
+  // condition may merge their cluster (consider_cluster).
+  bool merge_clusters = false;
 
   using BadList = std::vector<std::tuple<int, double, std::uint32_t>>;
 
@@ -285,8 +309,17 @@ class Cleaner {
     if (!last_resort) return false;
     CutCandidate cut;
     consider_cut(t, cut);
-    if (!cut.valid) return false;
-    apply_cut(cut);
+    if (cut.valid) {
+      apply_cut(cut);
+      return true;
+    }
+    // After that round, a needle in a pinched cluster: merge the cluster,
+    // one vertex per loop around it.
+    if (!merge_clusters) return false;
+    ClusterCandidate m;
+    consider_cluster(t, m);
+    if (!m.valid) return false;
+    apply_cluster(m);
     return true;
   }
 
@@ -965,6 +998,403 @@ class Cleaner {
     ++cuts;
   }
 
+  // A needle t whose short edge (a, b) cannot be collapsed because a and b
+  // share neighbours besides the two opposite vertices (the link condition
+  // fails), and that no cut can repair: YT10's sharp creases make these
+  // where the zero set pinches near a grid vertex, the shared neighbours a
+  // fraction of a cell away (3-cycles through (a, b) that are no triangle,
+  // or a vertex of degree three capping the edge). The cluster K = {a, b},
+  // the shared neighbours closer than kClusterReach times the needle's long
+  // edge, and what is joined to them by edges shorter than sin(1 degree)
+  // times it, is merged: the triangles with two or three vertices in K go;
+  // those with one form closed loops of their opposite edges around K, and
+  // each loop gets one vertex of K (the lowest-numbered among its
+  // triangles' not taken by an earlier loop), all at K's centre or all at
+  // one of K's vertices (the best). One loop: a collapse of K (the surface
+  // keeps its topology); two or more: a cut, the parts touching at a point.
+  // Every vertex around keeps one closed fan of at least three triangles,
+  // and the geometry is checked as for the other repairs.
+  struct ClusterCandidate {
+    bool valid = false;
+    Vec3 p;
+    std::vector<Vec3> positions;  // of loop_vertices, when a strip's two ends are merged (else all at p)
+    std::vector<std::uint32_t> cluster, removed, loop_vertices;
+    std::vector<std::pair<std::uint32_t, std::array<std::uint32_t, 3>>> rewritten;  // kept triangles, new vertices
+  };
+  static constexpr double kClusterReach = 0.25;
+  static constexpr std::size_t kClusterMax = 8;
+
+  void consider_cluster(std::uint32_t t, ClusterCandidate& best) {
+    const std::uint32_t* v = T_ + 3 * std::size_t(t);
+    int k_short = 0;
+    double l_short = 0, l_long = 0;
+    for (int k = 0; k < 3; ++k) {
+      const double l = norm(load(P_, v[(k + 1) % 3]) - load(P_, v[k]));
+      if (k == 0 || l < l_short) l_short = l, k_short = k;
+      l_long = std::max(l_long, l);
+    }
+    const double near = kSinOneDegree * l_long;
+    const std::uint32_t a = v[k_short], b = v[(k_short + 1) % 3];
+    const Vec3 pa = load(P_, a);
+    fan(a, fa_);
+    ring(a, fa_, ra_);
+    fan(b, fb_);
+    ring(b, fb_, rb_);
+    common_.clear();
+    std::set_intersection(ra_.begin(), ra_.end(), rb_.begin(), rb_.end(), std::back_inserter(common_));
+    // The opposite vertices of (a, b).
+    std::vector<std::uint32_t> opposite;
+    for (std::uint32_t u : fa_) {
+      const std::uint32_t* w = T_ + 3 * std::size_t(u);
+      if (contains(w, b)) opposite.push_back(w[0] != a && w[0] != b ? w[0] : w[1] != a && w[1] != b ? w[1] : w[2]);
+    }
+    if (opposite.size() != 2 || common_.size() <= 2) return;
+    std::vector<std::uint32_t> K = {a, b}, far;
+    for (std::uint32_t x : common_)
+      if (x != opposite[0] && x != opposite[1]) {
+        if (norm(load(P_, x) - pa) < kClusterReach * l_long) K.push_back(x);
+        else far.push_back(x);
+      }
+    if (!far.empty()) {
+      consider_strip(K, far, opposite, l_long, best);
+      return;
+    }
+    for (std::size_t i = 0; i < K.size() && K.size() <= kClusterMax; ++i) {
+      fan(K[i], fb_);
+      ring(K[i], fb_, rb_);
+      for (std::uint32_t u : rb_)
+        if (norm(load(P_, u) - load(P_, K[i])) < near && std::find(K.begin(), K.end(), u) == K.end()) K.push_back(u);
+    }
+    if (K.size() > kClusterMax) return;
+    std::sort(K.begin(), K.end());
+    auto in_k = [&](std::uint32_t x) { return std::binary_search(K.begin(), K.end(), x); };
+    // The star of K: triangles with two or three vertices in K go; each of
+    // the others, (k, x, y) with k in K, leaves the edge x -> y.
+    std::vector<std::uint32_t> star;
+    for (std::uint32_t x : K) {
+      if (irregular_[x]) return;
+      fan(x, scratch_);
+      star.insert(star.end(), scratch_.begin(), scratch_.end());
+    }
+    std::sort(star.begin(), star.end());
+    star.erase(std::unique(star.begin(), star.end()), star.end());
+    ClusterCandidate cand;
+    std::vector<std::array<std::uint32_t, 3>> edges;  // (x, y, triangle) of the kept triangles
+    for (std::uint32_t u : star) {
+      const std::uint32_t* w = T_ + 3 * std::size_t(u);
+      int on = 0, k_on = 0;
+      for (int k = 0; k < 3; ++k) {
+        if (irregular_[w[k]]) return;
+        if (in_k(w[k])) ++on, k_on = k;
+      }
+      if (on >= 2) cand.removed.push_back(u);
+      else edges.push_back({w[(k_on + 1) % 3], w[(k_on + 2) % 3], u});
+    }
+    if (edges.size() < 3) return;
+    // The loops: from each edge to the one starting where it ends.
+    std::sort(edges.begin(), edges.end());
+    for (std::size_t i = 1; i < edges.size(); ++i)
+      if (edges[i][0] == edges[i - 1][0]) return;
+    std::vector<std::uint8_t> taken(edges.size(), 0);
+    for (std::size_t i0 = 0; i0 < edges.size(); ++i0) {
+      if (taken[i0]) continue;
+      std::vector<std::uint32_t> loop;  // triangles
+      std::uint32_t owner = kNone;
+      for (std::size_t i = i0; !taken[i];) {
+        taken[i] = 1;
+        loop.push_back(edges[i][2]);
+        // (the reverse edge around K too: two triangles would fold onto one)
+        const std::array<std::uint32_t, 3> rev = {edges[i][1], edges[i][0], 0};
+        const auto r = std::lower_bound(edges.begin(), edges.end(), rev);
+        if (r != edges.end() && (*r)[0] == rev[0] && (*r)[1] == rev[1]) return;
+        for (int k = 0; k < 3; ++k) {
+          const std::uint32_t x = T_[3 * std::size_t(edges[i][2]) + k];
+          if (in_k(x) && x < owner &&
+              std::find(cand.loop_vertices.begin(), cand.loop_vertices.end(), x) == cand.loop_vertices.end())
+            owner = x;
+        }
+        const std::array<std::uint32_t, 3> key = {edges[i][1], 0, 0};
+        const auto it = std::lower_bound(edges.begin(), edges.end(), key);
+        if (it == edges.end() || (*it)[0] != edges[i][1]) return;  // an open chain
+        i = std::size_t(it - edges.begin());
+        if (taken[i] && i != i0) return;
+      }
+      if (loop.size() < 3 || owner == kNone) return;
+      cand.loop_vertices.push_back(owner);
+      for (std::uint32_t u : loop) {
+        std::array<std::uint32_t, 3> w;
+        for (int k = 0; k < 3; ++k) {
+          w[k] = T_[3 * std::size_t(u) + k];
+          if (in_k(w[k])) w[k] = owner;
+        }
+        cand.rewritten.push_back({u, w});
+      }
+    }
+    std::sort(cand.removed.begin(), cand.removed.end());
+    std::sort(cand.rewritten.begin(), cand.rewritten.end());
+    // Topology: every vertex outside K around the changed triangles keeps
+    // one closed fan (or loses all of its triangles).
+    std::vector<std::uint32_t> touched;
+    for (std::uint32_t u : star) touched.insert(touched.end(), T_ + 3 * std::size_t(u), T_ + 3 * std::size_t(u) + 3);
+    std::sort(touched.begin(), touched.end());
+    touched.erase(std::unique(touched.begin(), touched.end()), touched.end());
+    std::vector<std::array<std::uint32_t, 3>> f;
+    for (std::uint32_t x : touched) {
+      if (in_k(x)) continue;
+      f.clear();
+      fan(x, scratch_);
+      for (std::uint32_t u : scratch_) {
+        if (std::binary_search(cand.removed.begin(), cand.removed.end(), u)) continue;
+        const auto it = std::lower_bound(cand.rewritten.begin(), cand.rewritten.end(),
+                                         std::make_pair(u, std::array<std::uint32_t, 3>{0, 0, 0}));
+        if (it != cand.rewritten.end() && it->first == u) f.push_back(it->second);
+        else f.push_back({T_[3 * std::size_t(u)], T_[3 * std::size_t(u) + 1], T_[3 * std::size_t(u) + 2]});
+      }
+      if (!f.empty() && !closed_fan(x, f)) return;
+    }
+    // Geometry: as for the other repairs, every vertex of K at one point:
+    // K's centre or one of K's vertices, the best.
+    Vec3 ref;
+    for (const auto& r : cand.rewritten) {
+      const std::uint32_t* w = T_ + 3 * std::size_t(r.first);
+      ref = ref + cross(load(P_, w[1]) - load(P_, w[0]), load(P_, w[2]) - load(P_, w[0]));
+    }
+    Vec3 centre;
+    for (std::uint32_t x : K) centre = centre + load(P_, x);
+    centre = (1.0 / double(K.size())) * centre;
+    double best_score = -1;
+    for (std::size_t i = 0; i <= K.size(); ++i) {
+      const Vec3 c = i == 0 ? centre : load(P_, K[i - 1]);
+      const Vec3 p = Vec3{double(Real(c.x)), double(Real(c.y)), double(Real(c.z))};
+      double score = 2;
+      for (const auto& r : cand.rewritten) {
+        Vec3 q[3], o[3];
+        for (int k = 0; k < 3; ++k) {
+          o[k] = load(P_, T_[3 * std::size_t(r.first) + k]);
+          q[k] = in_k(r.second[k]) ? p : o[k];
+        }
+        const TriangleShape s_old = triangle_shape(o[0], o[1], o[2]);
+        const TriangleShape s_new = triangle_shape(q[0], q[1], q[2]);
+        const int c_old = triangle_class(s_old, degenerate_double_area_);
+        const int c_new = triangle_class(s_new, degenerate_double_area_);
+        // (as for the last round's collapses: a triangle that was
+        // degenerate may stay so, one that was bad may stay bad)
+        if (c_old != 0 && c_new != 0 && (c_new != 2 || c_old == 2)) continue;
+        const Vec3 n_new = cross(q[1] - q[0], q[2] - q[0]);
+        const Vec3 n_ref = c_old == 0 ? cross(o[1] - o[0], o[2] - o[0]) : ref;
+        if (c_new == 2 || (c_old == 0 && c_new != 0) ||
+            dot(n_new, n_ref) <= cos_limit * norm(n_new) * norm(n_ref)) {
+          score = -1;
+          break;
+        }
+        score = std::min(score, s_new.sin_min_angle);
+      }
+      if (score > best_score) best_score = score, cand.p = p;
+    }
+    if (!(best_score > 0)) return;
+    cand.cluster = std::move(K);
+    cand.valid = true;
+    best = std::move(cand);
+  }
+
+  // The needle's short edge (a, b) and its far end: the shared neighbours
+  // of a and b beyond kClusterReach lie next to one of the needle's
+  // opposite vertices o (a strip of slivers between two pinches, as on
+  // YT10's sheets thinner than a cell). Both ends are merged at once, all
+  // of an end's vertices at its centre: `near_end` (a, b and the shared
+  // neighbours close to them) and o with the far ones (each with what is
+  // joined to it by edges shorter than sin(1 degree) times the long edge);
+  // the triangles with two vertices in one end go, and each end keeps one
+  // vertex per loop of the triangles around it. Every vertex around, the
+  // kept ones included, must keep one closed fan; the geometry is checked
+  // as above.
+  void consider_strip(std::vector<std::uint32_t> near_end, const std::vector<std::uint32_t>& far,
+                      const std::vector<std::uint32_t>& opposite, double l_long, ClusterCandidate& best) {
+    const double reach = kClusterReach * l_long, near = kSinOneDegree * l_long;
+    std::uint32_t o = kNone;
+    for (std::uint32_t x : far)
+      for (std::uint32_t y : opposite)
+        if (norm(load(P_, x) - load(P_, y)) < reach) {
+          if (o != kNone && o != y) return;
+          o = y;
+        }
+    if (o == kNone) return;
+    std::vector<std::uint32_t> far_end = {o};
+    for (std::uint32_t x : far) {
+      if (!(norm(load(P_, x) - load(P_, o)) < reach)) return;
+      far_end.push_back(x);
+    }
+    // Each end with what is joined to it by edges shorter than `near`.
+    std::vector<std::uint32_t>* ends[2] = {&near_end, &far_end};
+    for (auto* e : ends)
+      for (std::size_t i = 0; i < e->size() && e->size() <= kClusterMax; ++i) {
+        fan((*e)[i], fb_);
+        ring((*e)[i], fb_, rb_);
+        for (std::uint32_t u : rb_)
+          if (norm(load(P_, u) - load(P_, (*e)[i])) < near && std::find(e->begin(), e->end(), u) == e->end())
+            e->push_back(u);
+      }
+    if (near_end.size() + far_end.size() > kClusterMax) return;
+    std::vector<std::pair<std::uint32_t, int>> group;  // (vertex, end)
+    for (int g = 0; g < 2; ++g)
+      for (std::uint32_t x : *ends[g]) group.push_back({x, g});
+    std::sort(group.begin(), group.end());
+    for (std::size_t i = 1; i < group.size(); ++i)
+      if (group[i].first == group[i - 1].first) return;  // the ends touch
+    auto end_of = [&](std::uint32_t x) {
+      const auto it = std::lower_bound(group.begin(), group.end(), std::make_pair(x, -1));
+      return it != group.end() && it->first == x ? it->second : -1;
+    };
+    std::uint32_t rep[2];
+    for (int g = 0; g < 2; ++g) rep[g] = *std::min_element(ends[g]->begin(), ends[g]->end());
+    std::vector<std::uint32_t> star;
+    for (const auto& x : group) {
+      if (irregular_[x.first]) return;
+      fan(x.first, scratch_);
+      star.insert(star.end(), scratch_.begin(), scratch_.end());
+    }
+    std::sort(star.begin(), star.end());
+    star.erase(std::unique(star.begin(), star.end()), star.end());
+    ClusterCandidate cand;
+    for (std::uint32_t u : star) {
+      const std::uint32_t* w = T_ + 3 * std::size_t(u);
+      int count[2] = {0, 0};
+      std::array<std::uint32_t, 3> nw;
+      for (int k = 0; k < 3; ++k) {
+        if (irregular_[w[k]]) return;
+        const int g = end_of(w[k]);
+        nw[k] = g < 0 ? w[k] : rep[g];
+        if (g >= 0) ++count[g];
+      }
+      if (count[0] >= 2 || count[1] >= 2) cand.removed.push_back(u);
+      else cand.rewritten.push_back({u, nw});
+    }
+    std::sort(cand.removed.begin(), cand.removed.end());
+    // Topology: the merged vertices and every vertex around keep one
+    // closed fan (the others around may lose all of theirs).
+    std::vector<std::uint32_t> touched;
+    for (std::uint32_t u : star) touched.insert(touched.end(), T_ + 3 * std::size_t(u), T_ + 3 * std::size_t(u) + 3);
+    std::sort(touched.begin(), touched.end());
+    touched.erase(std::unique(touched.begin(), touched.end()), touched.end());
+    // Each end's triangles form one or more loops around it (the sheet's
+    // two sides at a pinch): one vertex of the end for each, as in
+    // consider_cluster.
+    for (int g = 0; g < 2; ++g) {
+      std::vector<std::array<std::uint32_t, 4>> edges;  // (x, y, index in rewritten, 0)
+      for (std::size_t i = 0; i < cand.rewritten.size(); ++i) {
+        const auto& w = cand.rewritten[i].second;
+        for (int k = 0; k < 3; ++k)
+          if (w[k] == rep[g]) edges.push_back({w[(k + 1) % 3], w[(k + 2) % 3], std::uint32_t(i), 0});
+      }
+      std::sort(edges.begin(), edges.end());
+      for (std::size_t i = 1; i < edges.size(); ++i)
+        if (edges[i][0] == edges[i - 1][0]) return;
+      std::vector<std::uint32_t> members = *ends[g];
+      std::sort(members.begin(), members.end());
+      std::size_t loops = 0;
+      for (std::size_t i0 = 0; i0 < edges.size(); ++i0) {
+        if (edges[i0][3]) continue;
+        if (loops == members.size()) return;
+        const std::uint32_t owner = members[loops++];
+        std::size_t len = 0;
+        for (std::size_t i = i0; !edges[i][3];) {
+          edges[i][3] = 1;
+          ++len;
+          auto& w = cand.rewritten[edges[i][2]].second;
+          for (int k = 0; k < 3; ++k)
+            if (w[k] == rep[g]) w[k] = owner;
+          const std::array<std::uint32_t, 4> key = {edges[i][1], 0, 0, 0};
+          const auto it = std::lower_bound(edges.begin(), edges.end(), key);
+          if (it == edges.end() || (*it)[0] != edges[i][1]) return;
+          i = std::size_t(it - edges.begin());
+          if (edges[i][3] && i != i0) return;
+        }
+        if (len < 3) return;
+        cand.loop_vertices.push_back(owner);
+      }
+      if (loops == 0) return;
+    }
+    std::vector<std::array<std::uint32_t, 3>> f;
+    for (std::uint32_t x : cand.loop_vertices) {
+      f.clear();
+      for (const auto& r : cand.rewritten)
+        if (contains(r.second.data(), x)) f.push_back(r.second);
+      if (!closed_fan(x, f)) return;
+    }
+    for (std::uint32_t x : touched) {
+      if (end_of(x) >= 0) continue;
+      f.clear();
+      fan(x, scratch_);
+      for (std::uint32_t u : scratch_) {
+        if (std::binary_search(cand.removed.begin(), cand.removed.end(), u)) continue;
+        const auto it = std::lower_bound(cand.rewritten.begin(), cand.rewritten.end(),
+                                         std::make_pair(u, std::array<std::uint32_t, 3>{0, 0, 0}));
+        if (it != cand.rewritten.end() && it->first == u) f.push_back(it->second);
+        else f.push_back({T_[3 * std::size_t(u)], T_[3 * std::size_t(u) + 1], T_[3 * std::size_t(u) + 2]});
+      }
+      if (!f.empty() && !closed_fan(x, f)) return;
+    }
+    // Geometry: each end at its centre.
+    Vec3 at[2];
+    for (int g = 0; g < 2; ++g) {
+      Vec3 c;
+      for (std::uint32_t x : *ends[g]) c = c + load(P_, x);
+      c = (1.0 / double(ends[g]->size())) * c;
+      at[g] = Vec3{double(Real(c.x)), double(Real(c.y)), double(Real(c.z))};
+    }
+    Vec3 ref;
+    for (const auto& r : cand.rewritten) {
+      const std::uint32_t* w = T_ + 3 * std::size_t(r.first);
+      ref = ref + cross(load(P_, w[1]) - load(P_, w[0]), load(P_, w[2]) - load(P_, w[0]));
+    }
+    for (const auto& r : cand.rewritten) {
+      Vec3 q[3], o3[3];
+      for (int k = 0; k < 3; ++k) {
+        o3[k] = load(P_, T_[3 * std::size_t(r.first) + k]);
+        const int g = end_of(T_[3 * std::size_t(r.first) + k]);
+        q[k] = g < 0 ? o3[k] : at[g];
+      }
+      const TriangleShape s_old = triangle_shape(o3[0], o3[1], o3[2]);
+      const TriangleShape s_new = triangle_shape(q[0], q[1], q[2]);
+      const int c_old = triangle_class(s_old, degenerate_double_area_);
+      const int c_new = triangle_class(s_new, degenerate_double_area_);
+      if (c_old != 0 && c_new != 0 && (c_new != 2 || c_old == 2)) continue;
+      const Vec3 n_new = cross(q[1] - q[0], q[2] - q[0]);
+      const Vec3 n_ref = c_old == 0 ? cross(o3[1] - o3[0], o3[2] - o3[0]) : ref;
+      if (c_new == 2 || (c_old == 0 && c_new != 0) || dot(n_new, n_ref) <= cos_limit * norm(n_new) * norm(n_ref))
+        return;
+    }
+    for (std::uint32_t x : cand.loop_vertices) cand.positions.push_back(at[end_of(x)]);
+    cand.cluster = near_end;
+    cand.cluster.insert(cand.cluster.end(), far_end.begin(), far_end.end());
+    cand.valid = true;
+    best = std::move(cand);
+  }
+
+  void apply_cluster(const ClusterCandidate& c) {
+    for (std::uint32_t u : c.removed) alive_[u] = 0;
+    for (const auto& r : c.rewritten) {
+      std::uint32_t owner = kNone;
+      for (int k = 0; k < 3; ++k) {
+        const std::uint32_t old = T_[3 * std::size_t(r.first) + k];
+        if (old != r.second[k]) owner = r.second[k];
+        T_[3 * std::size_t(r.first) + k] = r.second[k];
+      }
+      if (owner != kNone) add_incidence(owner, r.first);
+      changed_triangles_.push_back(r.first);
+    }
+    for (std::size_t i = 0; i < c.loop_vertices.size(); ++i) {
+      const std::uint32_t x = c.loop_vertices[i];
+      const Vec3& p = c.positions.empty() ? c.p : c.positions[i];
+      P_[3 * std::size_t(x)] = Real(p.x);
+      P_[3 * std::size_t(x) + 1] = Real(p.y);
+      P_[3 * std::size_t(x) + 2] = Real(p.z);
+      changed_vertices_.push_back(x);
+    }
+    if (c.loop_vertices.size() == 1 || !c.positions.empty()) ++collapses;
+    else ++cuts;
+  }
+
   void consider_flip(std::uint32_t t, Candidate& best) {
     const std::uint32_t* v = T_ + 3 * std::size_t(t);
     // The longest edge (a, b), in the triangle's direction; c opposite.
@@ -1106,15 +1536,18 @@ CleanupResult cleanup_mesh(PosVec& positions, NormalVec& normals, IndexVec& tria
   auto bad = c.bad_triangles();
   r.bad_before = bad.size();
   host_trace("clean-up: scan", bad.size());
-  for (int round = 0; round < 3 && !bad.empty(); ++round) {
-    c.cos_limit = round == 0 ? kCosMaxNormalTurn : kCosMaxNormalTurnLast;
-    c.last_resort = round == 2;
+  auto passes = [&] {
     for (int pass = 0; pass < kCleanupPasses && !bad.empty(); ++pass) {
       std::uint64_t repaired = 0;
       for (const auto& b : bad) repaired += c.repair(std::get<2>(b)) ? 1 : 0;
       bad = c.bad_triangles_after(bad);
       if (repaired == 0) break;
     }
+  };
+  for (int round = 0; round < 3 && !bad.empty(); ++round) {
+    c.cos_limit = round == 0 ? kCosMaxNormalTurn : kCosMaxNormalTurnLast;
+    c.last_resort = round == 2;
+    passes();
   }
   host_trace("clean-up: repairs", c.collapses + c.flips + c.moves + c.cuts);
   // What no repair could fix and is only noise: specks made of degenerate
@@ -1124,6 +1557,15 @@ CleanupResult cleanup_mesh(PosVec& positions, NormalVec& normals, IndexVec& tria
   if (!bad.empty() && cell > 0) {
     r.small_component_triangles = c.drop_small_bad_components(bad, kSmallComponentCells * cell * cell * cell);
     if (r.small_component_triangles > 0) bad = c.alive_of(bad);
+  }
+  // Then, in the larger components, the needles whose short edge fails the
+  // link condition: their clusters are merged (after the removals, so that
+  // a component that is noise goes whole as before).
+  if (!bad.empty()) {
+    c.cos_limit = kCosMaxNormalTurnLast;
+    c.last_resort = true;
+    c.merge_clusters = true;
+    passes();
   }
   r.bad_after = bad.size();
   r.collapses = c.collapses;
