@@ -364,6 +364,24 @@ typedef struct nbmc_stats {
   /* Appended with decimation (nbmc_params.decimate_fraction). */
   uint64_t pre_decimation_triangle_count; /* triangles before the decimation (after the clean-up
                                              and smoothing); triangle_count without decimation */
+  /* Appended with the clean-up's counts (nbmc_params.cleanup; all 0 with the
+     clean-up off). The clean-up runs on the marching-cubes mesh and, with
+     smoothing on, once more after it: the counts of repairs are summed over
+     both runs. Bad triangles: degenerate + sliver, as nbmc_mesh_check
+     counts them. raw_triangle_count - pre_decimation_triangle_count =
+     2 cleanup_collapses + 6 cleanup_cuts + cleanup_removed_component_triangles. */
+  uint64_t cleanup_bad_triangles_before; /* bad triangles of the marching-cubes mesh */
+  uint64_t cleanup_bad_triangles_after;  /* left after the last clean-up (none could repair them) */
+  uint64_t cleanup_moves;                /* repairs that moved vertices (one within its tangent
+                                            plane, or a needle's cluster widened) */
+  uint64_t cleanup_flips;                /* edges flipped */
+  uint64_t cleanup_collapses;            /* edges collapsed (each removes a vertex and two
+                                            triangles) */
+  uint64_t cleanup_cuts;                 /* pinched tubes cut (the last resort; each removes six
+                                            triangles) */
+  uint64_t cleanup_removed_component_triangles; /* triangles removed with whole bad components:
+                                            droplets smaller than a cell and specks of
+                                            degenerate triangles */
 } nbmc_stats;
 
 NBMC_API void nbmc_stats_init(nbmc_stats* stats);

@@ -538,6 +538,13 @@ int32_t nbmc_context_stats(const nbmc_context* ctx, nbmc_stats* s) {
   s->dropped_particle_count = st.dropped_particles;
   s->dropped_cluster_count = st.dropped_clusters;
   s->pre_decimation_triangle_count = ctx->postprocess.pre_decimation_triangles;
+  s->cleanup_bad_triangles_before = ctx->postprocess.bad_before;
+  s->cleanup_bad_triangles_after = ctx->postprocess.bad_after;
+  s->cleanup_moves = ctx->postprocess.moves;
+  s->cleanup_flips = ctx->postprocess.flips;
+  s->cleanup_collapses = ctx->postprocess.collapses;
+  s->cleanup_cuts = ctx->postprocess.cuts;
+  s->cleanup_removed_component_triangles = ctx->postprocess.removed_component_triangles;
   std::memcpy(caller, &full, caller_size);
   caller->struct_size = uint32_t(caller_size);
   return NBMC_OK;

@@ -44,13 +44,17 @@ namespace {
 template <class PosVec>
 void postprocess_positions(const nbmc_params& params, PosVec& positions, HostMesh& m, mesh::PostprocessStats& ps,
                            const FeatureParticles* fp, double cell) {
-  if (params.cleanup) {
-    const mesh::CleanupResult c = mesh::cleanup_mesh(positions, m.normals, m.triangles, cell);
-    ps.collapses = c.collapses;
-    ps.flips = c.flips;
-    ps.bad_before = c.bad_before;
-    ps.bad_after = c.bad_after;
-  }
+  auto clean = [&](bool first) {
+    const mesh::CleanupResult r = mesh::cleanup_mesh(positions, m.normals, m.triangles, cell);
+    ps.collapses += r.collapses;
+    ps.flips += r.flips;
+    ps.moves += r.moves;
+    ps.cuts += r.cuts;
+    ps.removed_component_triangles += r.small_component_triangles + r.degenerate_component_triangles;
+    if (first) ps.bad_before = r.bad_before;
+    ps.bad_after = r.bad_after;
+  };
+  if (params.cleanup) clean(true);
   if (params.smooth_iterations > 0) {
     std::vector<double> weights;
     if (params.smooth_weighting == NBMC_SMOOTH_FEATURE) {
@@ -68,12 +72,7 @@ void postprocess_positions(const nbmc_params& params, PosVec& positions, HostMes
     ps.volume_change = s.volume_before != 0 ? s.volume_after / s.volume_before - 1 : 0;
     // Smoothing can pull nearly coincident vertices together again (the
     // clusters the clean-up widened): clean what it made.
-    if (params.cleanup) {
-      const mesh::CleanupResult c = mesh::cleanup_mesh(positions, m.normals, m.triangles, cell);
-      ps.collapses += c.collapses;
-      ps.flips += c.flips;
-      ps.bad_after = c.bad_after;
-    }
+    if (params.cleanup) clean(false);
   }
   ps.pre_decimation_triangles = m.triangles.size() / 3;
   if (params.decimate_fraction < 1) {
