@@ -231,7 +231,13 @@ NBMC_API int32_t nbmc_context_set_progress(nbmc_context* ctx, nbmc_progress_fn f
  * grid, and again after finding the surface particles); over the cap it
  * returns NBMC_ERROR_MEMORY_BUDGET with the estimate in the message, and any
  * single allocation that would pass the cap fails the same way. The context
- * stays usable. The returned mesh is counted while it is being built. */
+ * stays usable. The returned mesh is counted while it is being built. The
+ * mesh post-processing (clean-up, smoothing, decimation; host memory, after
+ * the reconstruction) is counted too: before each step, its estimated peak
+ * (an upper bound from the mesh's vertex and triangle counts, docs/api.md)
+ * plus the mesh it works on must fit, else the call fails with
+ * NBMC_ERROR_MEMORY_BUDGET naming the step (no mesh is returned); while the
+ * step runs, that estimate counts towards nbmc_stats.peak_memory_bytes. */
 NBMC_API int32_t nbmc_context_set_memory_budget(nbmc_context* ctx, uint64_t bytes);
 
 /* -------------------------------------------------------------- parameters */

@@ -5,6 +5,7 @@
 // ABI's handling of structs from callers built before the fields were
 // appended.
 #include "nbmc_test.hpp"
+#include "../src/core/mesh_memory.hpp"
 
 #include <gtest/gtest.h>
 
@@ -340,6 +341,78 @@ TEST(MeshCleanupCapi, CountsSummedOverBothRuns) {
               (unsigned long long)st1.cleanup_moves, (unsigned long long)st1.cleanup_flips,
               (unsigned long long)st1.cleanup_collapses, (unsigned long long)st2.cleanup_moves,
               (unsigned long long)st2.cleanup_flips, (unsigned long long)st2.cleanup_collapses);
+}
+
+// The post-processing counts against the memory budget: a budget that admits
+// the reconstruction (its measured peak without post-processing) but not
+// the clean-up's estimate plus the mesh fails with MEMORY_BUDGET naming the
+// clean-up, and no mesh; the same budget without the clean-up succeeds, and
+// so does the context afterwards. The peak reported with the clean-up
+// includes its estimate; the decimation is refused the same way.
+TEST(MeshPostprocessBudget, CleanupAndDecimationCountedAgainstTheBudget) {
+  Context c;
+  Points p = nbmc_test::sphere(0, 0, 0, 8, 1);
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-0.2, 0.2);
+  for (double& x : p) x += u(rng);
+  nbmc_params prm = nbmc_test::params(1);
+  prm.cell_size = 1;  // a coarse grid: the mesh is large next to the band
+  prm.cleanup = 0;
+  nbmc_mesh* raw = c.run(p, prm);
+  ASSERT_NE(raw, nullptr);
+  nbmc_stats st0;
+  nbmc_stats_init(&st0);
+  ASSERT_EQ(nbmc_context_stats(c.ctx, &st0), NBMC_OK);
+  const std::uint64_t nv = nbmc_mesh_vertex_count(raw), nt = nbmc_mesh_triangle_count(raw);
+  const nbmc_test::Mesh raw_mesh = copy(raw);
+  nbmc_mesh_destroy(raw);
+  const std::uint64_t reconstruction = st0.peak_memory_bytes;
+  const std::uint64_t cleanup = nbmc::mesh::cleanup_bytes(nv, nt) + nbmc::mesh::mesh_bytes(nv, nt, false, true);
+  ASSERT_GT(cleanup, reconstruction) << "the frame does not exercise the clean-up's budget check";
+
+  // No budget: the peak includes the clean-up's estimate.
+  prm.cleanup = 1;
+  nbmc_mesh* m = c.run(p, prm);
+  ASSERT_NE(m, nullptr);
+  const std::uint64_t tris = nbmc_mesh_triangle_count(m);
+  nbmc_mesh_destroy(m);
+  nbmc_stats st1;
+  nbmc_stats_init(&st1);
+  ASSERT_EQ(nbmc_context_stats(c.ctx, &st1), NBMC_OK);
+  EXPECT_GE(st1.peak_memory_bytes, cleanup);
+  EXPECT_GT(st1.peak_memory_bytes, reconstruction);
+
+  // The reconstruction's peak as the budget: the clean-up is refused.
+  ASSERT_EQ(nbmc_context_set_memory_budget(c.ctx, reconstruction), NBMC_OK);
+  m = reinterpret_cast<nbmc_mesh*>(0x1);
+  EXPECT_EQ(nbmc_context_reconstruct(c.ctx, &prm, &m), NBMC_ERROR_MEMORY_BUDGET);
+  EXPECT_EQ(m, nullptr);
+  const std::string msg = nbmc_context_last_error(c.ctx);
+  for (const char* s : {"clean-up", "memory budget", "MiB", "--no-cleanup", "cleanup = 0"})
+    EXPECT_NE(msg.find(s), std::string::npos) << s << ": " << msg;
+  // Without the clean-up the same budget admits the run: the raw mesh again.
+  prm.cleanup = 0;
+  m = nullptr;
+  ASSERT_EQ(nbmc_context_reconstruct(c.ctx, &prm, &m), NBMC_OK) << nbmc_context_last_error(c.ctx);
+  const nbmc_test::Mesh again = copy(m);
+  EXPECT_EQ(again.positions, raw_mesh.positions);
+  EXPECT_EQ(again.triangles, raw_mesh.triangles);
+  nbmc_mesh_destroy(m);
+  // Decimation alone: refused the same way, naming it.
+  prm.decimate_fraction = 0.5;
+  m = reinterpret_cast<nbmc_mesh*>(0x1);
+  EXPECT_EQ(nbmc_context_reconstruct(c.ctx, &prm, &m), NBMC_ERROR_MEMORY_BUDGET);
+  EXPECT_EQ(m, nullptr);
+  EXPECT_NE(std::string(nbmc_context_last_error(c.ctx)).find("decimation"), std::string::npos)
+      << nbmc_context_last_error(c.ctx);
+  prm.decimate_fraction = 1;
+  // The peak with the clean-up as the budget: it fits, the same mesh.
+  prm.cleanup = 1;
+  ASSERT_EQ(nbmc_context_set_memory_budget(c.ctx, st1.peak_memory_bytes), NBMC_OK);
+  m = nullptr;
+  ASSERT_EQ(nbmc_context_reconstruct(c.ctx, &prm, &m), NBMC_OK) << nbmc_context_last_error(c.ctx);
+  EXPECT_EQ(nbmc_mesh_triangle_count(m), tris);
+  nbmc_mesh_destroy(m);
 }
 
 }  // namespace
