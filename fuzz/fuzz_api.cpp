@@ -930,6 +930,14 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       if (nt > p1.stats.pre_decimation_triangle_count) die("decimation added triangles");
       if (pp.decimate_fraction >= 1 && nt != p1.stats.pre_decimation_triangle_count)
         die("decimate_fraction 1 removed triangles");
+      // The clean-up's counts account for every triangle it removed.
+      const nbmc_stats& s1 = p1.stats;
+      if (s1.raw_triangle_count - s1.pre_decimation_triangle_count !=
+          2 * s1.cleanup_collapses + 6 * s1.cleanup_cuts + s1.cleanup_removed_component_triangles)
+        die("clean-up counts: " + std::to_string(s1.raw_triangle_count) + " -> " +
+            std::to_string(s1.pre_decimation_triangle_count) + " triangles with " +
+            std::to_string(s1.cleanup_collapses) + " collapses, " + std::to_string(s1.cleanup_cuts) + " cuts, " +
+            std::to_string(s1.cleanup_removed_component_triangles) + " removed in components");
       if (pp.isolated == NBMC_ISOLATED_SPHERE ? p1.spheres != p1.stats.dropped_particle_count : p1.spheres != 0)
         die("spheres: " + std::to_string(p1.spheres) + " for " + std::to_string(p1.stats.dropped_particle_count) +
             " dropped particles");

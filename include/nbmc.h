@@ -231,7 +231,13 @@ NBMC_API int32_t nbmc_context_set_progress(nbmc_context* ctx, nbmc_progress_fn f
  * grid, and again after finding the surface particles); over the cap it
  * returns NBMC_ERROR_MEMORY_BUDGET with the estimate in the message, and any
  * single allocation that would pass the cap fails the same way. The context
- * stays usable. The returned mesh is counted while it is being built. */
+ * stays usable. The returned mesh is counted while it is being built. The
+ * mesh post-processing (clean-up, smoothing, decimation; host memory, after
+ * the reconstruction) is counted too: before each step, its estimated peak
+ * (an upper bound from the mesh's vertex and triangle counts, docs/api.md)
+ * plus the mesh it works on must fit, else the call fails with
+ * NBMC_ERROR_MEMORY_BUDGET naming the step (no mesh is returned); while the
+ * step runs, that estimate counts towards nbmc_stats.peak_memory_bytes. */
 NBMC_API int32_t nbmc_context_set_memory_budget(nbmc_context* ctx, uint64_t bytes);
 
 /* -------------------------------------------------------------- parameters */
@@ -364,6 +370,24 @@ typedef struct nbmc_stats {
   /* Appended with decimation (nbmc_params.decimate_fraction). */
   uint64_t pre_decimation_triangle_count; /* triangles before the decimation (after the clean-up
                                              and smoothing); triangle_count without decimation */
+  /* Appended with the clean-up's counts (nbmc_params.cleanup; all 0 with the
+     clean-up off). The clean-up runs on the marching-cubes mesh and, with
+     smoothing on, once more after it: the counts of repairs are summed over
+     both runs. Bad triangles: degenerate + sliver, as nbmc_mesh_check
+     counts them. raw_triangle_count - pre_decimation_triangle_count =
+     2 cleanup_collapses + 6 cleanup_cuts + cleanup_removed_component_triangles. */
+  uint64_t cleanup_bad_triangles_before; /* bad triangles of the marching-cubes mesh */
+  uint64_t cleanup_bad_triangles_after;  /* left after the last clean-up (none could repair them) */
+  uint64_t cleanup_moves;                /* repairs that moved vertices (one within its tangent
+                                            plane, or a needle's cluster widened) */
+  uint64_t cleanup_flips;                /* edges flipped */
+  uint64_t cleanup_collapses;            /* edges collapsed (each removes a vertex and two
+                                            triangles) */
+  uint64_t cleanup_cuts;                 /* pinched tubes cut (the last resort; each removes six
+                                            triangles) */
+  uint64_t cleanup_removed_component_triangles; /* triangles removed with whole bad components:
+                                            droplets smaller than a cell and specks of
+                                            degenerate triangles */
 } nbmc_stats;
 
 NBMC_API void nbmc_stats_init(nbmc_stats* stats);

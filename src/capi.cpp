@@ -482,7 +482,9 @@ int32_t nbmc_context_reconstruct(nbmc_context* ctx, const nbmc_params* params, n
       m->spheres.push_back(radius);
     }
   }
-  ctx->postprocess = nbmc::postprocess_mesh(full, m->mesh, st, feature ? &fp : nullptr);
+  ctx->postprocess = nbmc::postprocess_mesh(full, m->mesh, st, ctx->memory, feature ? &fp : nullptr);
+  // The post-processing's estimates were counted while each step ran.
+  ctx->peak_memory = std::max(ctx->peak_memory, ctx->memory.peak.load());
   // On the final vertices, after the clean-up and smoothing.
   nbmc::interpolate_mesh_attributes(*ctx, p, *m, st);
   ctx->stats = st;
@@ -538,6 +540,13 @@ int32_t nbmc_context_stats(const nbmc_context* ctx, nbmc_stats* s) {
   s->dropped_particle_count = st.dropped_particles;
   s->dropped_cluster_count = st.dropped_clusters;
   s->pre_decimation_triangle_count = ctx->postprocess.pre_decimation_triangles;
+  s->cleanup_bad_triangles_before = ctx->postprocess.bad_before;
+  s->cleanup_bad_triangles_after = ctx->postprocess.bad_after;
+  s->cleanup_moves = ctx->postprocess.moves;
+  s->cleanup_flips = ctx->postprocess.flips;
+  s->cleanup_collapses = ctx->postprocess.collapses;
+  s->cleanup_cuts = ctx->postprocess.cuts;
+  s->cleanup_removed_component_triangles = ctx->postprocess.removed_component_triangles;
   std::memcpy(caller, &full, caller_size);
   caller->struct_size = uint32_t(caller_size);
   return NBMC_OK;

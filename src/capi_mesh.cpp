@@ -9,6 +9,7 @@
 #include "core/mesh_check.hpp"
 #include "core/mesh_cleanup.hpp"
 #include "core/mesh_decimate.hpp"
+#include "core/mesh_memory.hpp"
 #include "core/mesh_smooth.hpp"
 #include "core/trace.hpp"
 
@@ -18,10 +19,12 @@
 
 #include <chrono>
 #include <cmath>
+#include <cstdio>
 #include <cstring>
 #include <new>
 #include <stdexcept>
 #include <string>
+#include <utility>
 
 namespace nbmc {
 
@@ -40,67 +43,124 @@ void check_postprocess_params(const nbmc_params& params) {
 
 namespace {
 
+// Counts one post-processing step against the context's memory budget while
+// it runs: the step's estimate (core/mesh_memory.hpp) and the mesh it works
+// on (the host mesh, and for a mesh in GPU memory its device arrays too).
+// Over the budget it throws NBMC_ERROR_MEMORY_BUDGET before the step
+// touches the mesh (the reconstruction then returns no mesh at all).
+class StepMemory {
+ public:
+  StepMemory(MemoryTracker& tracker, std::uint64_t step_bytes, std::uint64_t mesh_bytes, const char* step,
+             const char* turn_off, std::uint64_t nv, std::uint64_t nt)
+      : t_(tracker), bytes_(step_bytes + mesh_bytes) {
+    const std::uint64_t in_use = t_.current.load();
+    if (t_.budget && in_use + bytes_ > t_.budget) {
+      const double mib = 1.0 / (1024.0 * 1024.0);
+      char msg[768];
+      std::snprintf(msg, sizeof msg,
+                    "%s of %llu vertices and %llu triangles needs an estimated %.1f MiB (%.1f MiB "
+                    "of working memory + %.1f MiB for the mesh; %.1f MiB in use), over the memory budget of %.1f "
+                    "MiB; raise the budget or turn %s off (%s)",
+                    step, (unsigned long long)nv, (unsigned long long)nt, double(bytes_) * mib,
+                    double(step_bytes) * mib, double(mesh_bytes) * mib, double(in_use) * mib,
+                    double(t_.budget) * mib, step, turn_off);
+      throw Error(NBMC_ERROR_MEMORY_BUDGET, msg);
+    }
+    t_.add(bytes_);
+  }
+  ~StepMemory() { t_.sub(bytes_); }
+  StepMemory(const StepMemory&) = delete;
+  StepMemory& operator=(const StepMemory&) = delete;
+
+ private:
+  MemoryTracker& t_;
+  std::uint64_t bytes_;
+};
+
 // The post-processing of a mesh in host memory, on its float or double
-// positions (PosVec).
+// positions (PosVec). device_bytes: the mesh's device arrays, when it lives
+// in GPU memory (counted with the host copy), else 0.
 template <class PosVec>
 void postprocess_positions(const nbmc_params& params, PosVec& positions, HostMesh& m, mesh::PostprocessStats& ps,
-                           const FeatureParticles* fp, double cell) {
-  if (params.cleanup) {
-    const mesh::CleanupResult c = mesh::cleanup_mesh(positions, m.normals, m.triangles, cell);
-    ps.collapses = c.collapses;
-    ps.flips = c.flips;
-    ps.bad_before = c.bad_before;
-    ps.bad_after = c.bad_after;
-  }
+                           const FeatureParticles* fp, double cell, MemoryTracker& tracker,
+                           std::uint64_t device_bytes) {
+  auto counts = [&] {
+    return std::make_pair(std::uint64_t(positions.size() / 3), std::uint64_t(m.triangles.size() / 3));
+  };
+  auto held = [&] {
+    const auto c = counts();
+    return mesh::mesh_bytes(c.first, c.second, m.f64, !m.normals.empty()) + device_bytes;
+  };
+  auto clean = [&](bool first) {
+    const auto c = counts();
+    const StepMemory mem(tracker, mesh::cleanup_bytes(c.first, c.second), held(), "the mesh clean-up",
+                         "nbmc_params.cleanup = 0; CLI --no-cleanup", c.first, c.second);
+    const mesh::CleanupResult r = mesh::cleanup_mesh(positions, m.normals, m.triangles, cell);
+    ps.collapses += r.collapses;
+    ps.flips += r.flips;
+    ps.moves += r.moves;
+    ps.cuts += r.cuts;
+    ps.removed_component_triangles += r.small_component_triangles + r.degenerate_component_triangles;
+    if (first) ps.bad_before = r.bad_before;
+    ps.bad_after = r.bad_after;
+  };
+  if (params.cleanup) clean(true);
   if (params.smooth_iterations > 0) {
-    std::vector<double> weights;
-    if (params.smooth_weighting == NBMC_SMOOTH_FEATURE) {
-      if (!fp || !fp->xyz)
-        throw Error(NBMC_ERROR_INTERNAL, "feature-weighted smoothing without the particles");
-      const std::size_t nv = positions.size() / 3;
-      weights = mesh::particle_density_ratio(positions.data(), nv, fp->xyz, fp->count, fp->radius, fp->spacing);
-      for (double& w : weights) w = mesh::feature_weight(w);
+    {
+      const auto c = counts();
+      const bool feature = params.smooth_weighting == NBMC_SMOOTH_FEATURE;
+      const StepMemory mem(tracker, mesh::smooth_bytes(c.first, c.second, feature && fp ? fp->count : 0), held(),
+                           "the mesh smoothing", "nbmc_params.smooth_iterations = 0; CLI --smooth 0", c.first,
+                           c.second);
+      std::vector<double> weights;
+      if (feature) {
+        if (!fp || !fp->xyz)
+          throw Error(NBMC_ERROR_INTERNAL, "feature-weighted smoothing without the particles");
+        const std::size_t nv = positions.size() / 3;
+        weights = mesh::particle_density_ratio(positions.data(), nv, fp->xyz, fp->count, fp->radius, fp->spacing);
+        for (double& w : weights) w = mesh::feature_weight(w);
+      }
+      const mesh::SmoothResult s =
+          mesh::smooth_mesh(positions, m.normals, m.triangles, params.smooth_iterations, mesh::kTaubinLambda,
+                            mesh::kTaubinMu, weights.empty() ? nullptr : &weights);
+      ps.volume_before_smoothing = s.volume_before;
+      ps.volume_after_smoothing = s.volume_after;
+      ps.volume_change = s.volume_before != 0 ? s.volume_after / s.volume_before - 1 : 0;
     }
-    const mesh::SmoothResult s =
-        mesh::smooth_mesh(positions, m.normals, m.triangles, params.smooth_iterations, mesh::kTaubinLambda,
-                          mesh::kTaubinMu, weights.empty() ? nullptr : &weights);
-    ps.volume_before_smoothing = s.volume_before;
-    ps.volume_after_smoothing = s.volume_after;
-    ps.volume_change = s.volume_before != 0 ? s.volume_after / s.volume_before - 1 : 0;
     // Smoothing can pull nearly coincident vertices together again (the
     // clusters the clean-up widened): clean what it made.
-    if (params.cleanup) {
-      const mesh::CleanupResult c = mesh::cleanup_mesh(positions, m.normals, m.triangles, cell);
-      ps.collapses += c.collapses;
-      ps.flips += c.flips;
-      ps.bad_after = c.bad_after;
-    }
+    if (params.cleanup) clean(false);
   }
   ps.pre_decimation_triangles = m.triangles.size() / 3;
   if (params.decimate_fraction < 1) {
+    const auto c = counts();
+    const StepMemory mem(tracker, mesh::decimate_bytes(c.first, c.second), held(), "the mesh decimation",
+                         "nbmc_params.decimate_fraction = 1; CLI: no --decimate", c.first, c.second);
     const mesh::DecimateResult d = mesh::decimate_mesh(positions, m.normals, m.triangles, params.decimate_fraction);
     ps.decimate_collapses = d.collapses;
   }
 }
 
 void postprocess_host(const nbmc_params& params, HostMesh& m, mesh::PostprocessStats& ps, const FeatureParticles* fp,
-                      double cell) {
-  if (m.f64) postprocess_positions(params, m.positions64, m, ps, fp, cell);
-  else postprocess_positions(params, m.positions, m, ps, fp, cell);
+                      double cell, MemoryTracker& tracker, std::uint64_t device_bytes = 0) {
+  if (m.f64) postprocess_positions(params, m.positions64, m, ps, fp, cell, tracker, device_bytes);
+  else postprocess_positions(params, m.positions, m, ps, fp, cell, tracker, device_bytes);
 }
 
 // A mesh left in GPU memory: copied to the host, post-processed there, and
 // copied back into its own device arrays (the counts only shrink).
 void postprocess_device(const nbmc_params& params, HostMesh& m, mesh::PostprocessStats& ps,
-                        const FeatureParticles* fp, double cell) {
+                        const FeatureParticles* fp, double cell, MemoryTracker& tracker) {
   if (m.triangle_count() == 0) return;
+  const std::uint64_t device_bytes =
+      mesh::mesh_bytes(m.vertex_count(), m.triangle_count(), false, m.d_normals != nullptr);
   HostMesh h;
   h.positions.resize(3 * m.vertex_count());
   h.normals.resize(m.d_normals ? h.positions.size() : 0);
   h.triangles.resize(3 * m.triangle_count());
   download_mesh(m, h.positions.data(), h.normals.empty() ? nullptr : h.normals.data(), h.triangles.data());
   host_trace("post-processing: download", m.triangle_count());
-  postprocess_host(params, h, ps, fp, cell);
+  postprocess_host(params, h, ps, fp, cell, tracker, device_bytes);
 #if defined(KOKKOS_ENABLE_CUDA)
   auto put = [](void* dst, const void* src, std::size_t bytes, const char* what) {
     if (bytes && cudaMemcpy(dst, src, bytes, cudaMemcpyHostToDevice) != cudaSuccess) {
@@ -121,15 +181,15 @@ void postprocess_device(const nbmc_params& params, HostMesh& m, mesh::Postproces
 
 }  // namespace
 
-mesh::PostprocessStats postprocess_mesh(const nbmc_params& params, HostMesh& m, RunStats& st,
+mesh::PostprocessStats postprocess_mesh(const nbmc_params& params, HostMesh& m, RunStats& st, MemoryTracker& tracker,
                                         const FeatureParticles* fp) {
   mesh::PostprocessStats ps;
   ps.raw_triangles = ps.pre_decimation_triangles = m.triangle_count();
   if (!params.cleanup && params.smooth_iterations <= 0 && !(params.decimate_fraction < 1)) return ps;
   const auto t0 = std::chrono::steady_clock::now();
   host_trace("post-processing: start", m.triangle_count());
-  if (m.on_device) postprocess_device(params, m, ps, fp, st.cell);
-  else postprocess_host(params, m, ps, fp, st.cell);
+  if (m.on_device) postprocess_device(params, m, ps, fp, st.cell, tracker);
+  else postprocess_host(params, m, ps, fp, st.cell, tracker);
   const double s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   st.vertices = m.vertex_count();
   st.triangles = m.triangle_count();

@@ -29,8 +29,11 @@ struct FeatureParticles {
 // on the particles), and updates the counts and the NBMC_STAGE_POSTPROCESS
 // time in st. A mesh left in device memory is copied to the host for it and
 // back into its device arrays. particles: needed (non-null) for
-// NBMC_SMOOTH_FEATURE with smoothing on, else unused.
-mesh::PostprocessStats postprocess_mesh(const nbmc_params& params, HostMesh& mesh, RunStats& st,
+// NBMC_SMOOTH_FEATURE with smoothing on, else unused. Each step is counted
+// in tracker while it runs (its estimate from core/mesh_memory.hpp plus the
+// mesh) and refused with NBMC_ERROR_MEMORY_BUDGET, before it changes the
+// mesh, when that would pass tracker's budget.
+mesh::PostprocessStats postprocess_mesh(const nbmc_params& params, HostMesh& mesh, RunStats& st, MemoryTracker& tracker,
                                         const FeatureParticles* particles = nullptr);
 
 }  // namespace nbmc

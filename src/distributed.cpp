@@ -880,7 +880,7 @@ void reconstruct_collective(nbmc_context& ctx, const nbmc_params& full, const nb
   ctx.postprocess = nbmc::mesh::PostprocessStats();
   step(c, [&] {
     if (output == NBMC__OUTPUT_GATHER && c.rank() == root)
-      ctx.postprocess = postprocess_mesh(full, mesh, frame);
+      ctx.postprocess = postprocess_mesh(full, mesh, frame, ctx.memory);
     else if (output == NBMC__OUTPUT_PIECES)
       ctx.postprocess.raw_triangles = ctx.postprocess.pre_decimation_triangles = mesh.triangle_count();
   });

@@ -5,6 +5,7 @@
 // ABI's handling of structs from callers built before the fields were
 // appended.
 #include "nbmc_test.hpp"
+#include "../src/core/mesh_memory.hpp"
 
 #include <gtest/gtest.h>
 
@@ -13,6 +14,7 @@
 #include <cstdint>
 #include <cstring>
 #include <random>
+#include <string>
 #include <vector>
 
 namespace {
@@ -112,7 +114,7 @@ TEST(MeshCheckCapi, Shapes) {
 // the raw mesh has, and at most 1% of the triangles.
 TEST(MeshCleanupCapi, JitteredLatticesStayClosed) {
   Context c;
-  std::uint64_t raw_bad = 0, clean_bad = 0, raw_tris = 0, clean_tris = 0;
+  std::uint64_t raw_bad = 0, clean_bad = 0, raw_tris = 0, clean_tris = 0, repairs = 0;
   for (unsigned seed = 1; seed <= 60; ++seed) {
     std::mt19937 rng(seed);
     std::uniform_real_distribution<double> u(-1, 1);
@@ -126,6 +128,13 @@ TEST(MeshCleanupCapi, JitteredLatticesStayClosed) {
       prm.cell_size = cell;
       prm.cleanup = 0;
       nbmc_mesh* raw = c.run(p, prm);
+      nbmc_stats off;
+      nbmc_stats_init(&off);
+      ASSERT_EQ(nbmc_context_stats(c.ctx, &off), NBMC_OK);
+      EXPECT_EQ(off.cleanup_bad_triangles_before + off.cleanup_bad_triangles_after + off.cleanup_moves +
+                    off.cleanup_flips + off.cleanup_collapses + off.cleanup_cuts +
+                    off.cleanup_removed_component_triangles,
+                0u);
       prm.cleanup = 1;
       nbmc_mesh* clean = c.run(p, prm);
       const nbmc_mesh_check_result a = check(raw), b = check(clean);
@@ -145,6 +154,21 @@ TEST(MeshCleanupCapi, JitteredLatticesStayClosed) {
       EXPECT_EQ(st.raw_triangle_count, a.triangle_count);
       EXPECT_EQ(st.triangle_count, b.triangle_count);
       EXPECT_EQ(st.vertex_count, b.vertex_count);
+      // The clean-up's counts: the bad triangles it found and left are those
+      // the check counts; every triangle it removed is accounted for.
+      EXPECT_EQ(st.cleanup_bad_triangles_before, a.degenerate_triangle_count + a.sliver_triangle_count)
+          << "seed " << seed << " cell " << cell;
+      EXPECT_EQ(st.cleanup_bad_triangles_after, b.degenerate_triangle_count + b.sliver_triangle_count);
+      EXPECT_EQ(a.triangle_count - b.triangle_count,
+                2 * st.cleanup_collapses + 6 * st.cleanup_cuts + st.cleanup_removed_component_triangles)
+          << "seed " << seed << " cell " << cell;
+      EXPECT_EQ(st.pre_decimation_triangle_count, st.triangle_count);
+      if (st.cleanup_bad_triangles_before > st.cleanup_bad_triangles_after)
+        EXPECT_GT(st.cleanup_moves + st.cleanup_flips + st.cleanup_collapses + st.cleanup_cuts +
+                      st.cleanup_removed_component_triangles,
+                  0u)
+            << "seed " << seed << " cell " << cell;
+      repairs += st.cleanup_moves + st.cleanup_flips + st.cleanup_collapses;
       raw_bad += a.degenerate_triangle_count + a.sliver_triangle_count;
       clean_bad += b.degenerate_triangle_count + b.sliver_triangle_count;
       raw_tris += a.triangle_count;
@@ -157,6 +181,7 @@ TEST(MeshCleanupCapi, JitteredLatticesStayClosed) {
               (unsigned long long)raw_bad, (unsigned long long)clean_bad, (unsigned long long)raw_tris,
               (unsigned long long)clean_tris);
   EXPECT_GT(raw_bad, 0u);  // the test exercises the clean-up
+  EXPECT_GT(repairs, 0u);
 }
 
 // Cleaned meshes are the same on every backend and thread count.
@@ -201,6 +226,22 @@ TEST(MeshCleanupCapi, OldStructSizes) {
   nbmc_stats_init(&full);
   ASSERT_EQ(nbmc_context_stats(c.ctx, &full), NBMC_OK);
   EXPECT_GE(full.raw_triangle_count, full.triangle_count);
+  // A caller built before the clean-up's counts were appended: it gets the
+  // fields up to pre_decimation_triangle_count, and not a byte more.
+  struct {
+    nbmc_stats s;
+    unsigned char guard[8];
+  } older;
+  std::memset(&older, 0xcd, sizeof older);
+  older.s.struct_size = uint32_t(offsetof(nbmc_stats, cleanup_bad_triangles_before));
+  ASSERT_EQ(nbmc_context_stats(c.ctx, &older.s), NBMC_OK);
+  EXPECT_EQ(older.s.struct_size, offsetof(nbmc_stats, cleanup_bad_triangles_before));
+  EXPECT_EQ(older.s.triangle_count, full.triangle_count);
+  EXPECT_EQ(older.s.raw_triangle_count, full.raw_triangle_count);
+  EXPECT_EQ(older.s.pre_decimation_triangle_count, full.pre_decimation_triangle_count);
+  const auto* bytes = reinterpret_cast<const unsigned char*>(&older);
+  for (std::size_t i = offsetof(nbmc_stats, cleanup_bad_triangles_before); i < sizeof older; ++i)
+    ASSERT_EQ(bytes[i], 0xcd) << "byte " << i << " written";
   nbmc_mesh_destroy(m);
   prm.struct_size = uint32_t(offsetof(nbmc_params, cleanup)) - 8;
   nbmc_mesh* bad = nullptr;
@@ -252,6 +293,126 @@ TEST(MeshSmoothCapi, SphereKeepsItsRadius) {
   prm.smooth_iterations = -1;
   nbmc_mesh* bad = nullptr;
   EXPECT_EQ(nbmc_context_reconstruct(c.ctx, &prm, &bad), NBMC_ERROR_INVALID_PARAMETER);
+}
+
+// With smoothing the clean-up runs twice (after marching cubes, and after
+// smoothing): its repairs are summed, "before" is the marching-cubes mesh's
+// bad triangles, "after" those the last run left, and every triangle removed
+// is still accounted for.
+TEST(MeshCleanupCapi, CountsSummedOverBothRuns) {
+  Context c;
+  Points p = nbmc_test::sphere(0, 0, 0, 6, 1);
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> u(-0.3, 0.3);
+  for (double& x : p) x += u(rng);
+  nbmc_params prm = nbmc_test::params(1);
+  prm.cleanup = 0;
+  nbmc_mesh* raw = c.run(p, prm);
+  const nbmc_mesh_check_result a = check(raw);
+  nbmc_mesh_destroy(raw);
+  prm.cleanup = 1;
+  nbmc_mesh* once = c.run(p, prm);
+  nbmc_stats st1;
+  nbmc_stats_init(&st1);
+  ASSERT_EQ(nbmc_context_stats(c.ctx, &st1), NBMC_OK);
+  nbmc_mesh_destroy(once);
+  prm.smooth_iterations = 20;
+  nbmc_mesh* twice = c.run(p, prm);
+  nbmc_stats st2;
+  nbmc_stats_init(&st2);
+  ASSERT_EQ(nbmc_context_stats(c.ctx, &st2), NBMC_OK);
+  const nbmc_mesh_check_result b = check(twice);
+  nbmc_mesh_destroy(twice);
+  ASSERT_GT(a.degenerate_triangle_count + a.sliver_triangle_count, 0u);
+  EXPECT_EQ(st2.cleanup_bad_triangles_before, a.degenerate_triangle_count + a.sliver_triangle_count);
+  EXPECT_EQ(st2.cleanup_bad_triangles_before, st1.cleanup_bad_triangles_before);
+  EXPECT_EQ(st2.cleanup_bad_triangles_after, b.degenerate_triangle_count + b.sliver_triangle_count);
+  EXPECT_LE(st2.cleanup_bad_triangles_after, st2.cleanup_bad_triangles_before);
+  // The first run is the same with or without smoothing after it: the sums
+  // hold at least its repairs.
+  EXPECT_GE(st2.cleanup_moves, st1.cleanup_moves);
+  EXPECT_GE(st2.cleanup_flips, st1.cleanup_flips);
+  EXPECT_GE(st2.cleanup_collapses, st1.cleanup_collapses);
+  EXPECT_GT(st1.cleanup_moves + st1.cleanup_flips + st1.cleanup_collapses, 0u);
+  EXPECT_EQ(st2.raw_triangle_count, a.triangle_count);
+  EXPECT_EQ(st2.raw_triangle_count - st2.triangle_count,
+            2 * st2.cleanup_collapses + 6 * st2.cleanup_cuts + st2.cleanup_removed_component_triangles);
+  std::printf("clean-up once: %llu moves, %llu flips, %llu collapses; with smoothing: %llu, %llu, %llu\n",
+              (unsigned long long)st1.cleanup_moves, (unsigned long long)st1.cleanup_flips,
+              (unsigned long long)st1.cleanup_collapses, (unsigned long long)st2.cleanup_moves,
+              (unsigned long long)st2.cleanup_flips, (unsigned long long)st2.cleanup_collapses);
+}
+
+// The post-processing counts against the memory budget: a budget that admits
+// the reconstruction (its measured peak without post-processing) but not
+// the clean-up's estimate plus the mesh fails with MEMORY_BUDGET naming the
+// clean-up, and no mesh; the same budget without the clean-up succeeds, and
+// so does the context afterwards. The peak reported with the clean-up
+// includes its estimate; the decimation is refused the same way.
+TEST(MeshPostprocessBudget, CleanupAndDecimationCountedAgainstTheBudget) {
+  Context c;
+  Points p = nbmc_test::sphere(0, 0, 0, 8, 1);
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-0.2, 0.2);
+  for (double& x : p) x += u(rng);
+  nbmc_params prm = nbmc_test::params(1);
+  prm.cell_size = 1;  // a coarse grid: the mesh is large next to the band
+  prm.cleanup = 0;
+  nbmc_mesh* raw = c.run(p, prm);
+  ASSERT_NE(raw, nullptr);
+  nbmc_stats st0;
+  nbmc_stats_init(&st0);
+  ASSERT_EQ(nbmc_context_stats(c.ctx, &st0), NBMC_OK);
+  const std::uint64_t nv = nbmc_mesh_vertex_count(raw), nt = nbmc_mesh_triangle_count(raw);
+  const nbmc_test::Mesh raw_mesh = copy(raw);
+  nbmc_mesh_destroy(raw);
+  const std::uint64_t reconstruction = st0.peak_memory_bytes;
+  const std::uint64_t cleanup = nbmc::mesh::cleanup_bytes(nv, nt) + nbmc::mesh::mesh_bytes(nv, nt, false, true);
+  ASSERT_GT(cleanup, reconstruction) << "the frame does not exercise the clean-up's budget check";
+
+  // No budget: the peak includes the clean-up's estimate.
+  prm.cleanup = 1;
+  nbmc_mesh* m = c.run(p, prm);
+  ASSERT_NE(m, nullptr);
+  const std::uint64_t tris = nbmc_mesh_triangle_count(m);
+  nbmc_mesh_destroy(m);
+  nbmc_stats st1;
+  nbmc_stats_init(&st1);
+  ASSERT_EQ(nbmc_context_stats(c.ctx, &st1), NBMC_OK);
+  EXPECT_GE(st1.peak_memory_bytes, cleanup);
+  EXPECT_GT(st1.peak_memory_bytes, reconstruction);
+
+  // The reconstruction's peak as the budget: the clean-up is refused.
+  ASSERT_EQ(nbmc_context_set_memory_budget(c.ctx, reconstruction), NBMC_OK);
+  m = reinterpret_cast<nbmc_mesh*>(0x1);
+  EXPECT_EQ(nbmc_context_reconstruct(c.ctx, &prm, &m), NBMC_ERROR_MEMORY_BUDGET);
+  EXPECT_EQ(m, nullptr);
+  const std::string msg = nbmc_context_last_error(c.ctx);
+  for (const char* s : {"clean-up", "memory budget", "MiB", "--no-cleanup", "cleanup = 0"})
+    EXPECT_NE(msg.find(s), std::string::npos) << s << ": " << msg;
+  // Without the clean-up the same budget admits the run: the raw mesh again.
+  prm.cleanup = 0;
+  m = nullptr;
+  ASSERT_EQ(nbmc_context_reconstruct(c.ctx, &prm, &m), NBMC_OK) << nbmc_context_last_error(c.ctx);
+  const nbmc_test::Mesh again = copy(m);
+  EXPECT_EQ(again.positions, raw_mesh.positions);
+  EXPECT_EQ(again.triangles, raw_mesh.triangles);
+  nbmc_mesh_destroy(m);
+  // Decimation alone: refused the same way, naming it.
+  prm.decimate_fraction = 0.5;
+  m = reinterpret_cast<nbmc_mesh*>(0x1);
+  EXPECT_EQ(nbmc_context_reconstruct(c.ctx, &prm, &m), NBMC_ERROR_MEMORY_BUDGET);
+  EXPECT_EQ(m, nullptr);
+  EXPECT_NE(std::string(nbmc_context_last_error(c.ctx)).find("decimation"), std::string::npos)
+      << nbmc_context_last_error(c.ctx);
+  prm.decimate_fraction = 1;
+  // The peak with the clean-up as the budget: it fits, the same mesh.
+  prm.cleanup = 1;
+  ASSERT_EQ(nbmc_context_set_memory_budget(c.ctx, st1.peak_memory_bytes), NBMC_OK);
+  m = nullptr;
+  ASSERT_EQ(nbmc_context_reconstruct(c.ctx, &prm, &m), NBMC_OK) << nbmc_context_last_error(c.ctx);
+  EXPECT_EQ(nbmc_mesh_triangle_count(m), tris);
+  nbmc_mesh_destroy(m);
 }
 
 }  // namespace

@@ -46,7 +46,7 @@ TEST_F(MeshCliTest, CheckCleanupSmooth) {
   // Text report: the check's section, the post-processing line and stage.
   nbmc_test::CliResult r = run(base);
   ASSERT_EQ(r.exit_code, 0) << r.err;
-  for (const char* s : {"mesh check: closed yes, manifold yes, oriented yes", "cleaned up (93,296 triangles before)",
+  for (const char* s : {"mesh check: closed yes, manifold yes, oriented yes", "cleaned up (93,296 triangles before, ",
                         "postprocess", "euler_characteristic", "min_angle_degrees", "volume"})
     EXPECT_TRUE(contains(r.out, s)) << s << "\n" << r.out;
 
@@ -72,6 +72,22 @@ TEST_F(MeshCliTest, CheckCleanupSmooth) {
   EXPECT_EQ(json_value(clean, "triangle_count", "mesh_check"), json_value(clean, "triangle_count", "counts"));
   EXPECT_EQ(json_value(raw, "triangle_count", "counts"), "93296");
   EXPECT_FALSE(contains(clean, "\"smoothing\"")) << clean;
+  // The clean-up's counts: what it found is what the check finds on the raw
+  // mesh; every removed triangle is accounted for; none without it.
+  auto count = [](const std::string& j, const char* key, const char* in = "counts") {
+    return std::stoll(json_value(j, key, in));
+  };
+  EXPECT_EQ(count(clean, "cleanup_bad_triangles_before"),
+            count(raw, "sliver_triangle_count", "mesh_check") + count(raw, "degenerate_triangle_count", "mesh_check"));
+  EXPECT_GT(count(clean, "cleanup_bad_triangles_before"), 0);
+  EXPECT_EQ(count(clean, "cleanup_bad_triangles_after"), 0);
+  EXPECT_GT(count(clean, "cleanup_moves") + count(clean, "cleanup_flips") + count(clean, "cleanup_collapses"), 0);
+  EXPECT_EQ(count(clean, "raw_triangle_count") - count(clean, "triangle_count"),
+            2 * count(clean, "cleanup_collapses") + 6 * count(clean, "cleanup_cuts") +
+                count(clean, "cleanup_removed_component_triangles"))
+      << clean;
+  for (const char* k : {"cleanup_bad_triangles_before", "cleanup_moves", "cleanup_flips", "cleanup_collapses"})
+    EXPECT_EQ(count(raw, k), 0) << k;
 
   // Smoothing: reported volume change, still a clean closed mesh.
   r = run(base + " --smooth 5 --json " + quote(path("smooth.json")) + " -q");

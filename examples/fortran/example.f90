@@ -182,6 +182,10 @@ program example
   call check(status, 'nbmc_context_stats')
   if (nbmc_mesh_triangle_count(mesh) /= stats%triangle_count .or. &
       4 * stats%triangle_count > stats%pre_decimation_triangle_count + 3) error stop 'decimation: counts'
+  ! The clean-up's counts account for every triangle it removed.
+  if (stats%raw_triangle_count - stats%pre_decimation_triangle_count /= &
+      2 * stats%cleanup_collapses + 6 * stats%cleanup_cuts + stats%cleanup_removed_component_triangles .or. &
+      stats%cleanup_bad_triangles_after > stats%cleanup_bad_triangles_before) error stop 'clean-up: counts'
   if (nbmc_mesh_sphere_count(mesh) /= stats%dropped_particle_count) error stop 'spheres: count'
   if (nbmc_mesh_sphere_count(mesh) == 0 .and. associated(nbmc_mesh_spheres(mesh))) error stop 'spheres: none expected'
   params%decimate_fraction = 1

@@ -221,6 +221,13 @@ module nbmc
     integer(c_int64_t) :: dropped_particle_count = 0  ! appended (isolated-particle filter)
     integer(c_int64_t) :: dropped_cluster_count = 0
     integer(c_int64_t) :: pre_decimation_triangle_count = 0  ! appended (decimation)
+    integer(c_int64_t) :: cleanup_bad_triangles_before = 0  ! appended (clean-up counts)
+    integer(c_int64_t) :: cleanup_bad_triangles_after = 0
+    integer(c_int64_t) :: cleanup_moves = 0
+    integer(c_int64_t) :: cleanup_flips = 0
+    integer(c_int64_t) :: cleanup_collapses = 0
+    integer(c_int64_t) :: cleanup_cuts = 0
+    integer(c_int64_t) :: cleanup_removed_component_triangles = 0
   end type nbmc_stats
 
   ! Signature of a progress callback (nbmc_progress_fn); pass c_funloc(f).

@@ -160,6 +160,14 @@ class Stats(Structure):
         ("dropped_cluster_count", c_uint64),
         # appended with decimation
         ("pre_decimation_triangle_count", c_uint64),
+        # appended with the clean-up's counts
+        ("cleanup_bad_triangles_before", c_uint64),
+        ("cleanup_bad_triangles_after", c_uint64),
+        ("cleanup_moves", c_uint64),
+        ("cleanup_flips", c_uint64),
+        ("cleanup_collapses", c_uint64),
+        ("cleanup_cuts", c_uint64),
+        ("cleanup_removed_component_triangles", c_uint64),
     ]
 
 

@@ -193,6 +193,21 @@ class Stats:
     dropped_cluster_count: int = 0
     #: triangles before ``decimate`` (``triangle_count`` without it)
     pre_decimation_triangle_count: int = 0
+    #: triangles of the marching-cubes mesh, before the clean-up
+    raw_triangle_count: int = 0
+    #: the clean-up's counts (all 0 with ``cleanup=False``; summed over its
+    #: two runs with smoothing): bad (degenerate + sliver) triangles it found
+    #: and left, its repairs, and the triangles removed with whole bad
+    #: components; ``raw_triangle_count - pre_decimation_triangle_count ==
+    #: 2 * cleanup_collapses + 6 * cleanup_cuts +
+    #: cleanup_removed_component_triangles``
+    cleanup_bad_triangles_before: int = 0
+    cleanup_bad_triangles_after: int = 0
+    cleanup_moves: int = 0
+    cleanup_flips: int = 0
+    cleanup_collapses: int = 0
+    cleanup_cuts: int = 0
+    cleanup_removed_component_triangles: int = 0
 
     @classmethod
     def _from_c(cls, s: C.Stats) -> "Stats":
@@ -207,7 +222,13 @@ class Stats:
             total_seconds=s.total_seconds, grid_origin=tuple(s.grid_origin),  # type: ignore[arg-type]
             cell_size=s.cell_size, dropped_particle_count=s.dropped_particle_count,
             dropped_cluster_count=s.dropped_cluster_count,
-            pre_decimation_triangle_count=s.pre_decimation_triangle_count)
+            pre_decimation_triangle_count=s.pre_decimation_triangle_count,
+            raw_triangle_count=s.raw_triangle_count,
+            cleanup_bad_triangles_before=s.cleanup_bad_triangles_before,
+            cleanup_bad_triangles_after=s.cleanup_bad_triangles_after,
+            cleanup_moves=s.cleanup_moves, cleanup_flips=s.cleanup_flips,
+            cleanup_collapses=s.cleanup_collapses, cleanup_cuts=s.cleanup_cuts,
+            cleanup_removed_component_triangles=s.cleanup_removed_component_triangles)
 
 
 # ---------------------------------------------------------------------- mesh

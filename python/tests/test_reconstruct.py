@@ -237,6 +237,26 @@ def test_decimate_and_spheres():
         nbmc.reconstruct(pts, spacing=1, decimate=0)
 
 
+def test_cleanup_counts():
+    rng = np.random.default_rng(3)
+    g = np.arange(-6, 7, dtype=np.float64)
+    ball = np.stack(np.meshgrid(g, g, g), -1).reshape(-1, 3)
+    ball = ball[np.linalg.norm(ball, axis=1) <= 6]
+    ball = ball + rng.uniform(-0.3, 0.3, ball.shape)
+    raw = nbmc.reconstruct(ball, spacing=1, cleanup=False)
+    s0 = raw.stats
+    assert (s0.cleanup_bad_triangles_before, s0.cleanup_moves, s0.cleanup_flips, s0.cleanup_collapses) == (0, 0, 0, 0)
+    assert s0.raw_triangle_count == raw.triangle_count
+    m = nbmc.reconstruct(ball, spacing=1)
+    s = m.stats
+    assert s.raw_triangle_count == raw.triangle_count
+    assert s.cleanup_bad_triangles_before > 0
+    assert s.cleanup_bad_triangles_after <= s.cleanup_bad_triangles_before
+    assert s.cleanup_moves + s.cleanup_flips + s.cleanup_collapses > 0
+    assert s.raw_triangle_count - s.triangle_count == (
+        2 * s.cleanup_collapses + 6 * s.cleanup_cuts + s.cleanup_removed_component_triangles)
+
+
 def test_defaults_and_signature():
     d = nbmc.defaults()
     assert d["method"] == "ssp07" and d["field"] == "narrow-band" and d["length_unit"] == "spacing"

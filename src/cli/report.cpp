@@ -74,6 +74,13 @@ std::vector<std::pair<const char*, std::uint64_t>> counts(const nbmc_stats& s) {
           {"triangle_count", s.triangle_count},
           {"raw_triangle_count", s.raw_triangle_count},
           {"pre_decimation_triangle_count", s.pre_decimation_triangle_count},
+          {"cleanup_bad_triangles_before", s.cleanup_bad_triangles_before},
+          {"cleanup_bad_triangles_after", s.cleanup_bad_triangles_after},
+          {"cleanup_moves", s.cleanup_moves},
+          {"cleanup_flips", s.cleanup_flips},
+          {"cleanup_collapses", s.cleanup_collapses},
+          {"cleanup_cuts", s.cleanup_cuts},
+          {"cleanup_removed_component_triangles", s.cleanup_removed_component_triangles},
           {"dropped_particle_count", s.dropped_particle_count},
           {"dropped_cluster_count", s.dropped_cluster_count},
           {"neighbour_evaluations", s.neighbour_evaluations}};
@@ -202,7 +209,14 @@ std::string format_report(const Report& r) {
                      : q.method == NBMC_METHOD_YT10 ? yt10_settings(q)
                                                     : std::string()) +
                     ", " + field_name(q.field) + " field");
-  line("mesh", (r.params.cleanup ? "cleaned up (" + grouped(s.raw_triangle_count) + " triangles before)"
+  line("mesh", (r.params.cleanup ? "cleaned up (" + grouped(s.raw_triangle_count) + " triangles before, " +
+                                       grouped(s.cleanup_bad_triangles_before) + " bad: " +
+                                       grouped(s.cleanup_moves) + " moves, " + grouped(s.cleanup_flips) +
+                                       " flips, " + grouped(s.cleanup_collapses) + " collapses, " +
+                                       grouped(s.cleanup_cuts) + " cuts, " +
+                                       grouped(s.cleanup_removed_component_triangles) +
+                                       " triangles in removed components; " +
+                                       grouped(s.cleanup_bad_triangles_after) + " bad left)"
                                   : std::string("raw (no clean-up)")) +
                    (r.params.smooth_iterations > 0
                         ? ", " + std::to_string(r.params.smooth_iterations) +

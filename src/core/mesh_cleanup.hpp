@@ -126,6 +126,7 @@ struct CleanupResult {
   std::uint64_t collapses = 0, flips = 0, moves = 0;
   std::uint64_t cuts = 0;  // pinched tubes cut
   std::uint64_t small_component_triangles = 0;  // in droplets below kSmallComponentCells, removed
+  std::uint64_t degenerate_component_triangles = 0;  // in specks of degenerate triangles alone, removed
   std::uint64_t removed_triangles = 0, removed_vertices = 0;
   std::uint64_t bad_before = 0;  // degenerate + sliver triangles of the input
   std::uint64_t bad_after = 0;   // of the output
@@ -1552,7 +1553,10 @@ CleanupResult cleanup_mesh(PosVec& positions, NormalVec& normals, IndexVec& tria
   host_trace("clean-up: repairs", c.collapses + c.flips + c.moves + c.cuts);
   // What no repair could fix and is only noise: specks made of degenerate
   // triangles alone.
-  if (!bad.empty() && c.drop_degenerate_components(bad) > 0) bad = c.alive_of(bad);
+  if (!bad.empty()) {
+    r.degenerate_component_triangles = c.drop_degenerate_components(bad);
+    if (r.degenerate_component_triangles > 0) bad = c.alive_of(bad);
+  }
   // ... and droplets smaller than a cell that still hold a bad triangle.
   if (!bad.empty() && cell > 0) {
     r.small_component_triangles = c.drop_small_bad_components(bad, kSmallComponentCells * cell * cell * cell);

@@ -33,6 +33,11 @@ NBMC_ABI_STATIC_ASSERT(offsetof(nbmc_params, aniso_kr) ==
 NBMC_ABI_STATIC_ASSERT(sizeof(nbmc_context_desc) % 8 == 0, desc_size);
 NBMC_ABI_STATIC_ASSERT(sizeof(nbmc_params) % 8 == 0, params_size);
 NBMC_ABI_STATIC_ASSERT(sizeof(nbmc_stats) % 8 == 0, stats_size);
+/* The clean-up's counts follow pre_decimation_triangle_count: a caller built
+   before them passes struct_size = their offset. */
+NBMC_ABI_STATIC_ASSERT(offsetof(nbmc_stats, cleanup_bad_triangles_before) ==
+                           offsetof(nbmc_stats, pre_decimation_triangle_count) + 8,
+                       stats_cleanup_after_old_size);
 NBMC_ABI_STATIC_ASSERT(sizeof(((nbmc_stats*)0)->stage_seconds) == NBMC_STAGE_SLOTS * sizeof(double), stage_array);
 
 static int failures = 0;

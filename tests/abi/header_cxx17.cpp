@@ -50,6 +50,13 @@ static_assert(std::is_same_v<decltype(&nbmc_mesh_spheres), const float* (*)(cons
 static_assert(std::is_same_v<decltype(nbmc_params::decimate_fraction), double>);
 static_assert(std::is_same_v<decltype(nbmc_params::smooth_weighting), int32_t>);
 static_assert(std::is_same_v<decltype(nbmc_stats::pre_decimation_triangle_count), uint64_t>);
+static_assert(std::is_same_v<decltype(nbmc_stats::cleanup_bad_triangles_before), uint64_t> &&
+              std::is_same_v<decltype(nbmc_stats::cleanup_removed_component_triangles), uint64_t>);
+// Appended after the last field of the struct before them, in this order.
+static_assert(offsetof(nbmc_stats, cleanup_bad_triangles_before) ==
+                  offsetof(nbmc_stats, pre_decimation_triangle_count) + 8 &&
+              offsetof(nbmc_stats, cleanup_removed_component_triangles) ==
+                  offsetof(nbmc_stats, cleanup_bad_triangles_before) + 6 * 8);
 static_assert(NBMC_ISOLATED_SPHERE == 2 && NBMC_SMOOTH_UNIFORM == 0 && NBMC_SMOOTH_FEATURE == 1);
 
 namespace {

@@ -94,11 +94,15 @@ std::vector<double> read_xyz(const std::string& path) {
   return std::vector<double>(v.begin(), v.end());
 }
 
-Mesh whole(const std::vector<double>& all, const nbmc_params& prm) {
+Mesh whole(const std::vector<double>& all, const nbmc_params& prm, nbmc_stats* stats = nullptr) {
   nbmc_context* ctx = context(false);
   CHECK(nbmc_context_set_particles_f64(ctx, all.data(), all.size() / 3, 0) == NBMC_OK, "upload");
   nbmc_mesh* m = nullptr;
   CHECK(nbmc_context_reconstruct(ctx, &prm, &m) == NBMC_OK, "%s", nbmc_context_last_error(ctx));
+  if (stats) {
+    nbmc_stats_init(stats);
+    CHECK(nbmc_context_stats(ctx, stats) == NBMC_OK, "whole: stats");
+  }
   Mesh out = take(m);
   nbmc_context_destroy(ctx);
   return out;
@@ -163,7 +167,8 @@ std::vector<Tri> triangles_by_position(const Mesh& m) {
 
 void check_case(const char* name, const std::vector<double>& all, const nbmc_params& prm, const std::string& rule,
                 int nx, int ny, int nz) {
-  const Mesh ref = whole(all, prm);
+  nbmc_stats ref_stats;
+  const Mesh ref = whole(all, prm, &ref_stats);
   const std::vector<double> mine = share(all, rule);
   // Gathered on the last rank (a root other than 0).
   {
@@ -184,6 +189,19 @@ void check_case(const char* name, const std::vector<double>& all, const nbmc_par
         nbmc_stats s;
         nbmc_stats_init(&s);
         CHECK(nbmc_context_stats(ctx, &s) == NBMC_OK && s.particle_count == all.size() / 3, "stats");
+        // The clean-up ran on the stitched mesh, which is the whole frame's:
+        // the same counts.
+        CHECK(s.raw_triangle_count == ref_stats.raw_triangle_count &&
+                  s.cleanup_bad_triangles_before == ref_stats.cleanup_bad_triangles_before &&
+                  s.cleanup_bad_triangles_after == ref_stats.cleanup_bad_triangles_after &&
+                  s.cleanup_moves == ref_stats.cleanup_moves && s.cleanup_flips == ref_stats.cleanup_flips &&
+                  s.cleanup_collapses == ref_stats.cleanup_collapses && s.cleanup_cuts == ref_stats.cleanup_cuts &&
+                  s.cleanup_removed_component_triangles == ref_stats.cleanup_removed_component_triangles,
+              "%s %s gather: clean-up counts differ (%llu/%llu bad, %llu/%llu moves, %llu/%llu collapses)", name,
+              rule.c_str(), (unsigned long long)s.cleanup_bad_triangles_before,
+              (unsigned long long)ref_stats.cleanup_bad_triangles_before, (unsigned long long)s.cleanup_moves,
+              (unsigned long long)ref_stats.cleanup_moves, (unsigned long long)s.cleanup_collapses,
+              (unsigned long long)ref_stats.cleanup_collapses);
         nbmc_subdomain_stats d;
         nbmc_subdomain_stats_init(&d);
         CHECK(nbmc_context_subdomain_stats(ctx, &d) == NBMC_OK && d.count >= std::uint64_t(g_size) - 0 &&

@@ -183,6 +183,14 @@ pub struct nbmc_stats {
     pub dropped_cluster_count: u64,
     // appended with decimation
     pub pre_decimation_triangle_count: u64,
+    // appended with the clean-up's counts
+    pub cleanup_bad_triangles_before: u64,
+    pub cleanup_bad_triangles_after: u64,
+    pub cleanup_moves: u64,
+    pub cleanup_flips: u64,
+    pub cleanup_collapses: u64,
+    pub cleanup_cuts: u64,
+    pub cleanup_removed_component_triangles: u64,
 }
 
 #[repr(C)]

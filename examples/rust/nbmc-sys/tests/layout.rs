@@ -180,7 +180,14 @@ fn rust_layouts() -> Vec<Layout> {
             smoothing_volume_change,
             dropped_particle_count,
             dropped_cluster_count,
-            pre_decimation_triangle_count
+            pre_decimation_triangle_count,
+            cleanup_bad_triangles_before,
+            cleanup_bad_triangles_after,
+            cleanup_moves,
+            cleanup_flips,
+            cleanup_collapses,
+            cleanup_cuts,
+            cleanup_removed_component_triangles
         }),
         layout!(nbmc_mesh_check_result {
             struct_size,

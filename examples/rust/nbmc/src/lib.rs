@@ -471,6 +471,21 @@ pub struct Stats {
     pub dropped_cluster_count: u64,
     /// Triangles before the decimation (`triangle_count` without it).
     pub pre_decimation_triangle_count: u64,
+    /// Triangles of the marching-cubes mesh, before the clean-up.
+    pub raw_triangle_count: u64,
+    /// The clean-up's counts (all 0 without it; summed over its two runs
+    /// with smoothing): bad (degenerate + sliver) triangles of the
+    /// marching-cubes mesh and left after the last run, vertices moved, edges
+    /// flipped and collapsed, pinched tubes cut, triangles removed with whole
+    /// bad components. `raw_triangle_count - pre_decimation_triangle_count ==
+    /// 2 * cleanup_collapses + 6 * cleanup_cuts + cleanup_removed_component_triangles`.
+    pub cleanup_bad_triangles_before: u64,
+    pub cleanup_bad_triangles_after: u64,
+    pub cleanup_moves: u64,
+    pub cleanup_flips: u64,
+    pub cleanup_collapses: u64,
+    pub cleanup_cuts: u64,
+    pub cleanup_removed_component_triangles: u64,
 }
 
 impl Stats {
@@ -995,6 +1010,14 @@ impl Context {
             dropped_particle_count: s.dropped_particle_count,
             dropped_cluster_count: s.dropped_cluster_count,
             pre_decimation_triangle_count: s.pre_decimation_triangle_count,
+            raw_triangle_count: s.raw_triangle_count,
+            cleanup_bad_triangles_before: s.cleanup_bad_triangles_before,
+            cleanup_bad_triangles_after: s.cleanup_bad_triangles_after,
+            cleanup_moves: s.cleanup_moves,
+            cleanup_flips: s.cleanup_flips,
+            cleanup_collapses: s.cleanup_collapses,
+            cleanup_cuts: s.cleanup_cuts,
+            cleanup_removed_component_triangles: s.cleanup_removed_component_triangles,
         })
     }
 }

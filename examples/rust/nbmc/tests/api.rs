@@ -498,6 +498,13 @@ fn decimation_and_spheres() {
     let stats = ctx.stats().unwrap();
     assert_eq!(stats.triangle_count as usize, mesh.triangle_count());
     assert!(4 * stats.triangle_count <= stats.pre_decimation_triangle_count + 3, "{stats:?}");
+    // The clean-up's counts account for every triangle it removed.
+    assert!(stats.cleanup_bad_triangles_after <= stats.cleanup_bad_triangles_before, "{stats:?}");
+    assert_eq!(
+        stats.raw_triangle_count - stats.pre_decimation_triangle_count,
+        2 * stats.cleanup_collapses + 6 * stats.cleanup_cuts + stats.cleanup_removed_component_triangles,
+        "{stats:?}"
+    );
     let spheres = mesh.spheres();
     assert_eq!(spheres.len() as u64, stats.dropped_particle_count);
     assert!(spheres.len() >= 2);

@@ -1,0 +1,85 @@
+// SPDX-License-Identifier: MIT
+// What the mesh post-processing steps (clean-up, smoothing, decimation: all
+// on the host, after the reconstruction) allocate at most, in bytes, from the
+// vertex and triangle counts of the mesh they start from. The C API checks
+// each step's estimate plus the mesh against the context's memory budget
+// before the step runs, and counts it for the step's duration
+// (src/capi_mesh.cpp); docs/api.md lists the formulas.
+//
+// Each estimate adds up every array the step holds at one time or another
+// (so it bounds the peak whatever overlaps), with per-vertex and
+// per-triangle sizes taken from the implementations:
+//   mesh_cleanup.hpp (Cleaner, cleanup_mesh), mesh_smooth.hpp (smooth_mesh,
+//   particle_density_ratio), mesh_decimate.hpp (Decimator, decimate_mesh),
+//   mesh_check.hpp (check_mesh, compact_mesh).
+// Lists whose length depends on the repairs (the clean-up's bad triangles,
+// the decimation's heap) are sized for their worst case in triangles of
+// the mesh (every triangle bad; every edge in the heap twice over), which
+// also covers the small scratch lists of the repairs. Keep these in step
+// with the implementations.
+#pragma once
+
+#include <cstdint>
+#include <tuple>
+
+namespace nbmc {
+namespace mesh {
+
+// The mesh itself in host memory: positions (3 floats, or 3 doubles with
+// double positions), normals (3 floats, when computed), triangles (3
+// uint32 indices).
+inline std::uint64_t mesh_bytes(std::uint64_t nv, std::uint64_t nt, bool double_positions, bool normals) {
+  return nv * 3 * (double_positions ? 8 : 4) + (normals ? nv * 3 * 4 : 0) + nt * 3 * 4;
+}
+
+// The clean-up (cleanup_mesh) of a mesh of nv vertices and nt triangles.
+//   per vertex (26 B): the triangle lists' offsets (start_) and fill
+//     cursors while they are built, the renaming chains (next_, tail_), the
+//     list heads after flips (extra_head_), compaction's renumbering (4 B
+//     each), the irregular flag and compaction's used flag (1 B each);
+//   per triangle (66 B): the lists of triangles around each vertex
+//     (incident_, 3 x 4 B), alive and walk state (1 B each), and the larger
+//     of what is held only for a while: the (vertex, triangle) corners the
+//     lists are built from (3 x 8 B, freed before the scan), or two lists of
+//     bad triangles at once (the old and the new one of a pass; a (class,
+//     sine, index) entry each) and the indices a pass looks at again (4 B).
+inline std::uint64_t cleanup_bytes(std::uint64_t nv, std::uint64_t nt) {
+  constexpr std::uint64_t bad_entry = sizeof(std::tuple<int, double, std::uint32_t>);
+  constexpr std::uint64_t corners = 3 * 8, passes = 2 * bad_entry + 4;
+  return (nv + 1) * (6 * 4 + 2) + nt * (3 * 4 + 1 + 1 + (corners > passes ? corners : passes));
+}
+// Smoothing (smooth_mesh), and with feature weights the particle density
+// around each vertex (particle_density_ratio, over `particles` particles;
+// 0 without feature weights).
+//   per vertex (136 B): neighbour lists' offsets and fill cursors (2 x 4 B),
+//     two double copies of the positions (2 x 24 B), the small components'
+//     restore (union-find and root 2 x 4 B, count and two volumes 3 x 8 B,
+//     two centroids 2 x 24 B), the normals' accumulator is freed by then;
+//     with feature weights one weight (8 B);
+//   per triangle (24 B): the neighbour lists before deduplication (6 x 4 B);
+//   per particle, with feature weights (72 B): the sorted (cell, index)
+//     records (16 B), the cell map (a bucket per two particles and a node
+//     per cell, at most one per particle: 4 + 52 B).
+inline std::uint64_t smooth_bytes(std::uint64_t nv, std::uint64_t nt, std::uint64_t particles) {
+  std::uint64_t b = (nv + 1) * (2 * 4 + 2 * 24 + 2 * 4 + 3 * 8 + 2 * 24) + nt * 6 * 4;
+  if (particles) b += nv * 8 + particles * (16 + 4 + 52);
+  return b;
+}
+
+// Decimation (decimate_mesh).
+//   per vertex (163 B): the quadric (11 doubles), the stamp (4 B), two flags,
+//     the triangle list's header (24 B) and allocation slack (32 B), the
+//     check's used flag and list offsets (1 + 2 x 4 B), compaction's
+//     renumbering (4 B); (the normals' accumulator comes after the rest is
+//     freed);
+//   per triangle (185 B): alive flag, the per-vertex triangle lists (3
+//     entries of 4 B, capacity at most doubled), the check's half edges (3 x
+//     16 B), union-find (4 B) and incidences (3 x 4 B), the heap of edge
+//     collapses (at most 2 edges per triangle plus the re-pushed ones, 16 B
+//     each, sized as 6 per triangle).
+inline std::uint64_t decimate_bytes(std::uint64_t nv, std::uint64_t nt) {
+  return (nv + 1) * (11 * 8 + 4 + 2 + 24 + 32 + 1 + 2 * 4 + 4) + nt * (1 + 2 * 3 * 4 + 3 * 16 + 4 + 3 * 4 + 6 * 16);
+}
+
+}  // namespace mesh
+}  // namespace nbmc
