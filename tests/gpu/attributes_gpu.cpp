@@ -9,7 +9,7 @@
 //    few ulps) and each equals the kernel mean at its own vertex;
 //  - errors: a host pointer, a misaligned stride, NaN on the device.
 //   nbmc_cuda_attributes
-#include "nbmc_test.hpp"
+#include "gpu_support.hpp"
 
 #include <cuda_runtime.h>
 
@@ -21,33 +21,9 @@
 #include <vector>
 
 using namespace nbmc_test;
+using namespace gpu_test;
 
 namespace {
-int failures = 0;
-
-void check(bool ok, const std::string& what) {
-  std::printf("%s %s\n", ok ? "ok  " : "FAIL", what.c_str());
-  if (!ok) ++failures;
-}
-
-struct Ctx {
-  nbmc_context* c = nullptr;
-  explicit Ctx(int32_t backend) {
-    nbmc_context_desc d;
-    nbmc_context_desc_init(&d);
-    d.backend = backend;
-    if (nbmc_context_create(&d, &c) != NBMC_OK) c = nullptr;
-  }
-  ~Ctx() { nbmc_context_destroy(c); }
-};
-
-template <class T> T* to_device(const std::vector<T>& v) {
-  T* d = nullptr;
-  if (cudaMalloc(&d, v.size() * sizeof(T)) != cudaSuccess) return nullptr;
-  cudaMemcpy(d, v.data(), v.size() * sizeof(T), cudaMemcpyHostToDevice);
-  return d;
-}
-
 std::vector<float> attr(const nbmc_mesh* m, const char* name) {
   uint32_t c = 0;
   const float* a = nbmc_mesh_attribute(m, name, &c);

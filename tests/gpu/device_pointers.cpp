@@ -8,7 +8,7 @@
 //  - errors: a host pointer, a misaligned stride, NaN on the device, the
 //    device calls on a CPU backend.
 //   nbmc_cuda_device_pointers [DATA_DIR]
-#include "nbmc_test.hpp"
+#include "gpu_support.hpp"
 
 #include <cuda_runtime.h>
 
@@ -21,44 +21,9 @@
 #include <vector>
 
 using namespace nbmc_test;
+using namespace gpu_test;
 
 namespace {
-int failures = 0;
-
-void check(bool ok, const std::string& what) {
-  std::printf("%s %s\n", ok ? "ok  " : "FAIL", what.c_str());
-  if (!ok) ++failures;
-}
-
-struct Ctx {
-  nbmc_context* c = nullptr;
-  explicit Ctx(int32_t backend) {
-    nbmc_context_desc d;
-    nbmc_context_desc_init(&d);
-    d.backend = backend;
-    if (nbmc_context_create(&d, &c) != NBMC_OK) c = nullptr;
-  }
-  ~Ctx() { nbmc_context_destroy(c); }
-};
-
-Mesh host_copy(const nbmc_mesh* m) {
-  Mesh h;
-  h.positions.resize(3 * nbmc_mesh_vertex_count(m));
-  h.normals.resize(nbmc_mesh_normals(m) ? h.positions.size() : 0);
-  h.triangles.resize(3 * nbmc_mesh_triangle_count(m));
-  if (nbmc_mesh_copy_to_host(m, h.positions.data(), h.normals.empty() ? nullptr : h.normals.data(),
-                             h.triangles.data()) != NBMC_OK)
-    h = Mesh();
-  return h;
-}
-
-bool same(const Mesh& a, const Mesh& b) {
-  return a.triangles == b.triangles && a.positions.size() == b.positions.size() &&
-         std::memcmp(a.positions.data(), b.positions.data(), a.positions.size() * sizeof(float)) == 0 &&
-         a.normals.size() == b.normals.size() &&
-         std::memcmp(a.normals.data(), b.normals.data(), a.normals.size() * sizeof(float)) == 0;
-}
-
 bool is_device_pointer(const void* p) {
   cudaPointerAttributes a;
   return p && cudaPointerGetAttributes(&a, p) == cudaSuccess && a.type == cudaMemoryTypeDevice;

@@ -12,7 +12,7 @@
 //  - errors: a host pointer, a misaligned stride, a negative radius on the
 //    device.
 //   nbmc_cuda_radii
-#include "nbmc_test.hpp"
+#include "gpu_support.hpp"
 
 #include <cuda_runtime.h>
 
@@ -24,56 +24,10 @@
 #include <vector>
 
 using namespace nbmc_test;
+using namespace gpu_test;
 
 namespace {
-int failures = 0;
-
-void check(bool ok, const std::string& what) {
-  std::printf("%s %s\n", ok ? "ok  " : "FAIL", what.c_str());
-  if (!ok) ++failures;
-}
-
-struct Ctx {
-  nbmc_context* c = nullptr;
-  explicit Ctx(int32_t backend) {
-    nbmc_context_desc d;
-    nbmc_context_desc_init(&d);
-    d.backend = backend;
-    if (nbmc_context_create(&d, &c) != NBMC_OK) c = nullptr;
-  }
-  ~Ctx() { nbmc_context_destroy(c); }
-  std::string error() const { return nbmc_context_last_error(c); }
-};
-
-template <class T> T* to_device(const std::vector<T>& v) {
-  T* d = nullptr;
-  if (cudaMalloc(&d, v.size() * sizeof(T)) != cudaSuccess) return nullptr;
-  cudaMemcpy(d, v.data(), v.size() * sizeof(T), cudaMemcpyHostToDevice);
-  return d;
-}
-
-struct Host {
-  std::vector<float> pos, nrm;
-  std::vector<std::uint32_t> tri;
-};
-
-// The mesh (any memory) copied to the host; destroys it.
-Host take(nbmc_mesh* m) {
-  Host h;
-  if (!m) return h;
-  h.pos.resize(3 * nbmc_mesh_vertex_count(m));
-  h.nrm.resize(3 * nbmc_mesh_vertex_count(m));
-  h.tri.resize(3 * nbmc_mesh_triangle_count(m));
-  nbmc_mesh_copy_to_host(m, h.pos.data(), h.nrm.data(), h.tri.data());
-  nbmc_mesh_destroy(m);
-  return h;
-}
-
-bool same(const Host& a, const Host& b) {
-  return !a.tri.empty() && a.pos == b.pos && a.nrm == b.nrm && a.tri == b.tri;
-}
-
-Host run(int32_t backend, const Points& p, const std::vector<double>& radii, const nbmc_params& prm,
+Mesh run(int32_t backend, const Points& p, const std::vector<double>& radii, const nbmc_params& prm,
          const int split[3] = nullptr) {
   Ctx ctx(backend);
   if (!ctx.c) return {};
@@ -88,7 +42,7 @@ Host run(int32_t backend, const Points& p, const std::vector<double>& radii, con
     check(false, "reconstruct: " + ctx.error());
     return {};
   }
-  return take(m);
+  return take_host(m);
 }
 }  // namespace
 
@@ -119,32 +73,32 @@ int main() {
   for (int32_t method : {NBMC_METHOD_SSP07, NBMC_METHOD_ZB05, NBMC_METHOD_SPH}) {
     nbmc_params q = prm;
     q.method = method;
-    const Host cpu = run(NBMC_BACKEND_OPENMP, p, radii, q), gpu = run(NBMC_BACKEND_CUDA, p, radii, q);
+    const Mesh cpu = run(NBMC_BACKEND_OPENMP, p, radii, q), gpu = run(NBMC_BACKEND_CUDA, p, radii, q);
     const std::string name = method == NBMC_METHOD_SSP07 ? "ssp07" : method == NBMC_METHOD_ZB05 ? "zb05" : "sph";
     Mesh gm;
-    gm.positions = gpu.pos;
-    gm.triangles = gpu.tri;
+    gm.positions = gpu.positions;
+    gm.triangles = gpu.triangles;
     const MeshReport rep = check_mesh(gm);
     check(rep.closed && rep.oriented && rep.vertex_manifold && rep.components == 2,
           name + ": GPU mesh closed, two components (" + rep.summary() + ")");
     // As tests/gpu/cuda_equivalence.cpp: identical topology with positions
     // within 1e-3 of a cell, or (a value within rounding of zero) the same
     // triangle count with at most 0.01% of the triangles different.
-    const bool topology = !cpu.tri.empty() && cpu.tri == gpu.tri;
+    const bool topology = !cpu.triangles.empty() && cpu.triangles == gpu.triangles;
     double worst = 0;
     std::size_t diff = 0;
     if (topology) {
-      for (std::size_t i = 0; i < cpu.pos.size(); ++i)
-        worst = std::max(worst, double(std::fabs(cpu.pos[i] - gpu.pos[i])));
+      for (std::size_t i = 0; i < cpu.positions.size(); ++i)
+        worst = std::max(worst, double(std::fabs(cpu.positions[i] - gpu.positions[i])));
     } else {
-      for (std::size_t t = 0; t < std::min(cpu.tri.size(), gpu.tri.size()); ++t) diff += cpu.tri[t] != gpu.tri[t];
+      for (std::size_t t = 0; t < std::min(cpu.triangles.size(), gpu.triangles.size()); ++t) diff += cpu.triangles[t] != gpu.triangles[t];
     }
     const double cell = rf;
     if (method == NBMC_METHOD_SPH)
       check(same(cpu, gpu), name + ": OpenMP and CUDA meshes bit for bit");
     else
       check(topology ? worst <= 1e-3 * cell
-                     : cpu.tri.size() == gpu.tri.size() && double(diff) <= 1e-4 * double(cpu.tri.size()),
+                     : cpu.triangles.size() == gpu.triangles.size() && double(diff) <= 1e-4 * double(cpu.triangles.size()),
             name + ": OpenMP and CUDA topology " + (topology ? "identical" : "differs in " + std::to_string(diff) +
                                                                                   " indices") +
                 ", max |dpos| " + std::to_string(worst / cell) + " cell");
@@ -157,13 +111,13 @@ int main() {
     nbmc_mesh* m = nullptr;
     const int32_t st = nbmc_context_reconstruct(gpu.c, &prm, &m);
     if (st != NBMC_OK) check(false, "reconstruct: " + gpu.error());
-    return take(m);
+    return take_host(m);
   };
-  // Host particles, host radii: the reference.
+  // Mesh particles, host radii: the reference.
   nbmc_context_set_particles_f64(gpu.c, p.data(), n, 0);
   check(nbmc_context_set_radii_f64(gpu.c, radii.data(), n, 0) == NBMC_OK, "host radii: " + gpu.error());
-  const Host ref = reconstruct();
-  check(!ref.tri.empty(), "reference mesh (" + std::to_string(ref.tri.size() / 3) + " triangles)");
+  const Mesh ref = reconstruct();
+  check(!ref.triangles.empty(), "reference mesh (" + std::to_string(ref.triangles.size() / 3) + " triangles)");
 
   // Device radii: float, every other float (byte_stride 8); double, packed.
   std::vector<float> strided(2 * n, -1.f);
@@ -178,7 +132,7 @@ int main() {
     // The float radii from the host give the same mesh.
     std::vector<float> rf32(n);
     for (std::size_t i = 0; i < n; ++i) rf32[i] = float(radii[i]);
-    const Host dev = reconstruct();
+    const Mesh dev = reconstruct();
     check(nbmc_context_set_radii_f32(gpu.c, rf32.data(), n, 0) == NBMC_OK, "host f32 radii");
     check(same(dev, reconstruct()), "device f32 strided radii == host f32 radii");
   }
