@@ -60,6 +60,17 @@ nbmc_test::Mesh copy(const nbmc_mesh* m) {
 
 bool good(const nbmc_mesh_check_result& c) { return c.closed && c.manifold && c.oriented; }
 
+
+// A lattice sphere of radius `radius` (spacing 1) with every coordinate moved
+// by up to +-`jitter`, from seed `seed`: marching cubes leaves slivers on it.
+Points jittered_sphere(int radius, double jitter, unsigned seed) {
+  Points p = nbmc_test::sphere(0, 0, 0, radius, 1);
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(-jitter, jitter);
+  for (double& x : p) x += u(rng);
+  return p;
+}
+
 TEST(MeshCheckCapi, Errors) {
   nbmc_mesh_check_result r;
   nbmc_mesh_check_result_init(&r);
@@ -186,10 +197,7 @@ TEST(MeshCleanupCapi, JitteredLatticesStayClosed) {
 
 // Cleaned meshes are the same on every backend and thread count.
 TEST(MeshCleanupCapi, Deterministic) {
-  Points p = nbmc_test::sphere(0, 0, 0, 6, 1);
-  std::mt19937 rng(7);
-  std::uniform_real_distribution<double> u(-0.2, 0.2);
-  for (double& x : p) x += u(rng);
+  const Points p = jittered_sphere(6, 0.2, 7);
   nbmc_params prm = nbmc_test::params(1);
   const nbmc_test::Result ref = nbmc_test::reconstruct(p, prm, NBMC_BACKEND_SERIAL, 1);
   ASSERT_EQ(ref.status, NBMC_OK);
@@ -301,10 +309,7 @@ TEST(MeshSmoothCapi, SphereKeepsItsRadius) {
 // is still accounted for.
 TEST(MeshCleanupCapi, CountsSummedOverBothRuns) {
   Context c;
-  Points p = nbmc_test::sphere(0, 0, 0, 6, 1);
-  std::mt19937 rng(11);
-  std::uniform_real_distribution<double> u(-0.3, 0.3);
-  for (double& x : p) x += u(rng);
+  const Points p = jittered_sphere(6, 0.3, 11);
   nbmc_params prm = nbmc_test::params(1);
   prm.cleanup = 0;
   nbmc_mesh* raw = c.run(p, prm);
@@ -351,10 +356,7 @@ TEST(MeshCleanupCapi, CountsSummedOverBothRuns) {
 // includes its estimate; the decimation is refused the same way.
 TEST(MeshPostprocessBudget, CleanupAndDecimationCountedAgainstTheBudget) {
   Context c;
-  Points p = nbmc_test::sphere(0, 0, 0, 8, 1);
-  std::mt19937 rng(5);
-  std::uniform_real_distribution<double> u(-0.2, 0.2);
-  for (double& x : p) x += u(rng);
+  const Points p = jittered_sphere(8, 0.2, 5);
   nbmc_params prm = nbmc_test::params(1);
   prm.cell_size = 1;  // a coarse grid: the mesh is large next to the band
   prm.cleanup = 0;

@@ -361,18 +361,14 @@ TEST(MeshCleanup, CoincidentVerticesAreMerged) {
   EXPECT_GE(m.t.size() / 3, nt - 4);
 }
 
-// The same hole, its three vertices 1e-5 apart and nearly on a line, closed
-// by a cap around a fourth vertex just outside (ZB05's pinch at a grid
-// vertex): the cycle a-b-c is no triangle, every short edge fails the link
-// condition, and collapsing the cap's apex leaves the sliver (a, b, c). The
-// clean-up cuts the cycle: the cap goes, the hole's side closes in one
-// vertex.
-TEST(MeshCleanup, PinchedCapIsCut) {
+// An icosphere with a vertex of degree six split into a pinched cap: a at
+// the vertex, b `ab` along a tangent, c halfway between them and `c_off`
+// off their line (within the tangent plane), and the cap's apex x halfway
+// and `apex` outward (split_vertex with a cap).
+TestMesh pinched_cap(float ab, float c_off, float apex) {
   TestMesh m = icosphere(2);
   const std::uint32_t v = vertex_of_degree_6(m);
   const float* n = &m.n[3 * v];
-  // a at v, b 1e-5 along a tangent, c halfway and 1e-8 off the line, x
-  // 1e-5 outward.
   float t1[3] = {n[1], -n[0], 0.f};
   const float l = std::sqrt(t1[0] * t1[0] + t1[1] * t1[1]);
   for (float& q : t1) q /= l;
@@ -380,11 +376,24 @@ TEST(MeshCleanup, PinchedCapIsCut) {
   float off[4][3];
   for (int d = 0; d < 3; ++d) {
     off[0][d] = 0;
-    off[1][d] = 1e-5f * t1[d];
-    off[2][d] = 0.5e-5f * t1[d] + 1e-8f * t2[d];
-    off[3][d] = 0.5e-5f * t1[d] + 1e-5f * n[d];
+    off[1][d] = ab * t1[d];
+    off[2][d] = 0.5f * ab * t1[d] + c_off * t2[d];
+    off[3][d] = 0.5f * ab * t1[d] + apex * n[d];
   }
   split_vertex(m, v, off, true);
+  return m;
+}
+
+// The same hole, its three vertices 1e-5 apart and nearly on a line, closed
+// by a cap around a fourth vertex just outside (ZB05's pinch at a grid
+// vertex): the cycle a-b-c is no triangle, every short edge fails the link
+// condition, and collapsing the cap's apex leaves the sliver (a, b, c). The
+// clean-up cuts the cycle: the cap goes, the hole's side closes in one
+// vertex.
+TEST(MeshCleanup, PinchedCapIsCut) {
+  // a at v, b 1e-5 along a tangent, c halfway and 1e-8 off the line, x
+  // 1e-5 outward.
+  TestMesh m = pinched_cap(1e-5f, 1e-8f, 1e-5f);
   const CheckResult in = m.check();
   ASSERT_TRUE(in.closed && in.manifold && in.oriented);
   ASSERT_EQ(in.euler_characteristic, 2);
@@ -411,21 +420,7 @@ TEST(MeshCleanup, PinchedCapIsCut) {
 // around it: a collapse), x and the six triangles with two cluster vertices
 // go.
 TEST(MeshCleanup, PinchedCapBeyondTheCutIsMerged) {
-  TestMesh m = icosphere(2);
-  const std::uint32_t v = vertex_of_degree_6(m);
-  const float* n = &m.n[3 * v];
-  float t1[3] = {n[1], -n[0], 0.f};
-  const float l = std::sqrt(t1[0] * t1[0] + t1[1] * t1[1]);
-  for (float& q : t1) q /= l;
-  const float t2[3] = {n[1] * t1[2] - n[2] * t1[1], n[2] * t1[0] - n[0] * t1[2], n[0] * t1[1] - n[1] * t1[0]};
-  float off[4][3];
-  for (int d = 0; d < 3; ++d) {
-    off[0][d] = 0;
-    off[1][d] = 1e-4f * t1[d];
-    off[2][d] = 0.5e-4f * t1[d] + 1e-2f * t2[d];
-    off[3][d] = 0.5e-4f * t1[d] + 2e-3f * n[d];
-  }
-  split_vertex(m, v, off, true);
+  TestMesh m = pinched_cap(1e-4f, 1e-2f, 2e-3f);
   const CheckResult in = m.check();
   ASSERT_TRUE(in.closed && in.manifold && in.oriented);
   ASSERT_EQ(in.euler_characteristic, 2);
