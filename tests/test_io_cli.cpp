@@ -86,6 +86,36 @@ TEST_F(CliIo, AFailedFrameIsReportedAndTheRestGoOn) {
   EXPECT_TRUE(contains(r.out, "\"written\": 2")) << r.out;
 }
 
+// A sequence reads the next frame and writes the previous one while it
+// reconstructs a frame; --sequential-io does one thing at a time. Same files
+// byte for byte, same report (a failed frame, a skipped one, spheres too).
+TEST_F(CliIo, OverlappedAndSequentialIoGiveTheSameFiles) {
+  for (int i = 0; i < 5; ++i) frame("frames/f_" + std::to_string(i) + ".xyz", 0.25 + 0.05 * i);
+  std::ofstream(path("frames/f_2.xyz")) << "1234567890123";  // 13 bytes: fails
+  const std::string common = " --spacing 0.1 --isolated sphere --min-cluster 1 --json";
+  fs::create_directories(path("a"));
+  fs::copy_file(path("frames/f_0.xyz"), path("a/s_4.ply"));  // "exists": --resume skips frame 4
+  fs::create_directories(path("b"));
+  fs::copy_file(path("frames/f_0.xyz"), path("b/s_4.ply"));
+  const Result a = run("reconstruct 'frames/f_{}.xyz' -o 'a/s_{}.ply' --resume" + common);
+  const Result b = run("reconstruct 'frames/f_{}.xyz' -o 'b/s_{}.ply' --resume --sequential-io" + common);
+  EXPECT_EQ(a.exit_code, 1) << a.err;
+  EXPECT_EQ(b.exit_code, 1) << b.err;
+  for (const char* f : {"s_0.ply", "s_1.ply", "s_3.ply", "s_0_spheres.ply", "s_3_spheres.ply"}) {
+    const std::string da = slurp(path(std::string("a/") + f)), db = slurp(path(std::string("b/") + f));
+    EXPECT_FALSE(da.empty()) << f;
+    EXPECT_EQ(da, db) << f;
+  }
+  EXPECT_FALSE(fs::exists(path("a/s_2.ply")));
+  for (const char* key : {"\"written\": 3", "\"failed\": 1", "\"skipped\": 1"}) {
+    EXPECT_TRUE(contains(a.out, key)) << a.out;
+    EXPECT_TRUE(contains(b.out, key)) << b.out;
+  }
+  const std::size_t e1 = a.err.find("frame 2"), l3 = a.err.find("[4/5] frame 3");
+  ASSERT_NE(e1, std::string::npos) << a.err;
+  EXPECT_TRUE(l3 == std::string::npos || e1 < l3) << a.err;  // reported in frame order
+}
+
 TEST_F(CliIo, ResumeAndFrames) {
   for (int i = 0; i < 4; ++i) frame("frames/f_000" + std::to_string(i) + ".xyz", 0.3);
   Result r = run("reconstruct 'frames/f_{}.xyz' -o 'out/s_{}.glb' --spacing 0.1 --frames 1:3:2 -q");

@@ -26,6 +26,7 @@
 #include <chrono>
 #include <cstdio>
 #include <cstring>
+#include <future>
 #include <limits>
 #include <memory>
 #include <new>
@@ -111,6 +112,7 @@ struct Options {
   bool spacing_from_radii = false;      // no --spacing/--particle-radius: each frame's largest radius
   std::string frames;                   // --frames a:b[:step]
   bool resume = false;
+  bool sequential_io = false;  // --sequential-io: a sequence reads and writes between reconstructions
   std::int64_t step = -1; // H5Part step of a single-frame run (-1: the first)
   std::string memory_budget;  // --memory-budget, "" = no cap
   std::string subdomains;     // --subdomains auto|N|NxMxK, "" = whole frame
@@ -370,67 +372,139 @@ void check_attributes(const std::string& path, const nbmc::io::Particles& p, con
   }
 }
 
-// One frame of a sequence: read, reconstruct, write (a failure is reported in
-// the result, not thrown; a cancel sets cancelled_run).
-nbmc::cli::FrameResult run_frame(const Options& o, nbmc_context* ctx, const nbmc::cli::Frame& f, bool& cancelled_run) {
+// A frame of a sequence in three stages: read (any thread), reconstruct (the
+// caller's thread, on the context), write (any thread). A failure is
+// reported in the frame's result, not thrown; a cancel sets a flag.
+struct FrameInput {
+  nbmc::io::Particles particles;
+  bool skipped = false, cancelled = false;
+  std::string error;  // not empty: the frame failed
+  double seconds = 0;
+};
+
+FrameInput read_frame(const Options& o, const nbmc::cli::Frame& f) {
   using namespace nbmc;
-  cli::FrameResult r;
-  r.label = f.label;
-  r.input = f.input;
-  r.output = f.output;
+  FrameInput in;
   const auto t0 = Clock::now();
   if (!f.missing.empty()) {
-    r.status = "failed";
-    r.error = f.missing;
+    in.error = f.missing;
   } else if (o.resume && cli::output_exists(f.output)) {
-    r.status = "skipped";
+    in.skipped = true;
   } else {
     try {
       io::ReadOptions ro = read_options(o);
       ro.frame = f.step;
-      io::Particles particles = io::read_particles(f.input, ro);
-      check_attributes(f.input, particles, ro.only, ro);
-      r.particles = particles.count();
-      std::int32_t st = nbmc_context_set_particles_f64(ctx, particles.xyz.data(), particles.count(), 0);
-      if (st != NBMC_OK) throw cli::FrameError(std::string(nbmc_status_string(st)) + ": " + nbmc_context_last_error(ctx));
-      st = set_attributes(ctx, particles, o.attributes);
-      if (st != NBMC_OK) throw cli::FrameError(std::string(nbmc_status_string(st)) + ": " + nbmc_context_last_error(ctx));
-      nbmc_params params;
-      std::string radii_error;
-      st = set_radii(ctx, o, particles, params, radii_error);
-      if (st != NBMC_OK) throw cli::FrameError(std::string(nbmc_status_string(st)) + ": " + radii_error);
-      particles = io::Particles();  // the context has its copies
-      nbmc_mesh* raw_mesh = nullptr;
-      st = nbmc_context_reconstruct(ctx, &params, &raw_mesh);
-      MeshPtr mesh(raw_mesh);
-      if (st == NBMC_ERROR_CANCELLED) {
-        cancelled_run = true;
-        return r;
-      }
-      if (st != NBMC_OK) throw cli::FrameError(std::string(nbmc_status_string(st)) + ": " + nbmc_context_last_error(ctx));
-      io::MeshView view = mesh_view(mesh.get());
-      const std::vector<io::Attribute> attrs = mesh_attributes(mesh.get());
-      view.attributes = attrs.empty() ? nullptr : attrs.data();
-      view.attribute_count = attrs.size();
-      cli::make_parent_folders(f.output);
-      io::write_mesh(f.output, view, "", [] { return cli::interrupted(); });
-      if (o.params.isolated == NBMC_ISOLATED_SPHERE) write_spheres(spheres_path(f.output), mesh.get());
-      r.vertices = view.vertex_count;
-      r.triangles = view.triangle_count;
-      r.status = "written";
+      in.particles = io::read_particles(f.input, ro);
+      check_attributes(f.input, in.particles, ro.only, ro);
     } catch (const io::Cancelled&) {
-      cancelled_run = true;
-      return r;
+      in.cancelled = true;
     } catch (const std::bad_alloc&) {
-      r.status = "failed";
-      r.error = "out of memory";
+      in.error = "out of memory";
     } catch (const std::exception& e) {
-      r.status = "failed";
-      r.error = e.what();
+      in.error = e.what();
     }
+    if (!in.error.empty()) in.particles = io::Particles();
   }
+  in.seconds = seconds_since(t0);
+  return in;
+}
+
+// The frame's mesh (NULL when it failed: r.error says why, or was cancelled).
+MeshPtr reconstruct_frame(const Options& o, nbmc_context* ctx, FrameInput& in, nbmc::cli::FrameResult& r,
+                          bool& cancelled_run) {
+  using namespace nbmc;
+  try {
+    const io::Particles& particles = in.particles;
+    r.particles = particles.count();
+    std::int32_t st = nbmc_context_set_particles_f64(ctx, particles.xyz.data(), particles.count(), 0);
+    if (st != NBMC_OK) throw cli::FrameError(std::string(nbmc_status_string(st)) + ": " + nbmc_context_last_error(ctx));
+    st = set_attributes(ctx, particles, o.attributes);
+    if (st != NBMC_OK) throw cli::FrameError(std::string(nbmc_status_string(st)) + ": " + nbmc_context_last_error(ctx));
+    nbmc_params params;
+    std::string radii_error;
+    st = set_radii(ctx, o, particles, params, radii_error);
+    if (st != NBMC_OK) throw cli::FrameError(std::string(nbmc_status_string(st)) + ": " + radii_error);
+    in.particles = io::Particles();  // the context has its copies
+    nbmc_mesh* raw_mesh = nullptr;
+    st = nbmc_context_reconstruct(ctx, &params, &raw_mesh);
+    MeshPtr mesh(raw_mesh);
+    if (st == NBMC_ERROR_CANCELLED) {
+      cancelled_run = true;
+      return nullptr;
+    }
+    if (st != NBMC_OK) throw cli::FrameError(std::string(nbmc_status_string(st)) + ": " + nbmc_context_last_error(ctx));
+    return mesh;
+  } catch (const std::bad_alloc&) {
+    r.error = "out of memory";
+  } catch (const std::exception& e) {
+    r.error = e.what();
+  }
+  in.particles = io::Particles();
+  return nullptr;
+}
+
+// Writes the frame's mesh (and its spheres); r.status "written" on success.
+void write_frame(const Options& o, const nbmc::cli::Frame& f, const nbmc_mesh* mesh, nbmc::cli::FrameResult& r,
+                 bool& cancelled_run) {
+  using namespace nbmc;
+  try {
+    io::MeshView view = mesh_view(mesh);
+    const std::vector<io::Attribute> attrs = mesh_attributes(mesh);
+    view.attributes = attrs.empty() ? nullptr : attrs.data();
+    view.attribute_count = attrs.size();
+    cli::make_parent_folders(f.output);
+    io::write_mesh(f.output, view, "", [] { return cli::interrupted(); });
+    if (o.params.isolated == NBMC_ISOLATED_SPHERE) write_spheres(spheres_path(f.output), mesh);
+    r.vertices = view.vertex_count;
+    r.triangles = view.triangle_count;
+    r.status = "written";
+  } catch (const io::Cancelled&) {
+    cancelled_run = true;
+  } catch (const std::bad_alloc&) {
+    r.error = "out of memory";
+  } catch (const std::exception& e) {
+    r.error = e.what();
+  }
+}
+
+nbmc::cli::FrameResult frame_result(const nbmc::cli::Frame& f) {
+  nbmc::cli::FrameResult r;
+  r.label = f.label;
+  r.input = f.input;
+  r.output = f.output;
+  return r;
+}
+
+// One frame of a sequence, the three stages one after the other.
+nbmc::cli::FrameResult run_frame(const Options& o, nbmc_context* ctx, const nbmc::cli::Frame& f, bool& cancelled_run) {
+  using namespace nbmc;
+  cli::FrameResult r = frame_result(f);
+  const auto t0 = Clock::now();
+  FrameInput in = read_frame(o, f);
+  if (in.cancelled) {
+    cancelled_run = true;
+    return r;
+  }
+  if (in.skipped) r.status = "skipped";
+  else if (!in.error.empty()) r.error = in.error;
+  else if (MeshPtr mesh = reconstruct_frame(o, ctx, in, r, cancelled_run)) write_frame(o, f, mesh.get(), r, cancelled_run);
   r.seconds = seconds_since(t0);
   return r;
+}
+
+// Whether a sequence reads or writes HDF5 (the HDF5 library is not
+// thread-safe here: its frames are read and written on one thread).
+bool sequence_uses_hdf5(const Options& o, const std::vector<nbmc::cli::Frame>& frames) {
+  for (const nbmc::cli::Frame& f : frames) {
+    try {
+      const std::string in = nbmc::io::particle_format(f.input, o.input_format);
+      if (in == "h5part" || in == "hdf5" || in == "pysph" || in == "gadget") return true;
+      if (lower(nbmc::io::mesh_format(f.output)) == "h5") return true;
+    } catch (const std::exception&) {
+      // (read_frame reports it)
+    }
+  }
+  return false;
 }
 
 // ------------------------------------------------------------ a sequence
@@ -455,24 +529,91 @@ int reconstruct_sequence(Options& o, const std::vector<nbmc::cli::Frame>& frames
   std::vector<cli::FrameResult> results;
   cli::RateMeter meter(frames.size());
   bool cancelled_run = false;
-  for (std::size_t i = 0; i < frames.size(); ++i) {
-    const cli::Frame& f = frames[i];
-    if (cli::interrupted()) {
-      cancelled_run = true;
-      break;
-    }
-    cli::FrameResult r = run_frame(o, ctx.get(), f, cancelled_run);
-    if (cancelled_run) break;
-    meter.done(r.status == "written", r.seconds);
+  // A frame's result, reported in frame order once it is final. The meter
+  // counts each frame's share of the wall time (with the overlap below, the
+  // stages of neighbouring frames run at once).
+  auto last_done = Clock::now();
+  auto report = [&](cli::FrameResult r) {
+    const double wall = std::chrono::duration<double>(Clock::now() - last_done).count();
+    last_done = Clock::now();
+    meter.done(r.status == "written", wall);
     if (r.status == "failed") {
       if (r.error.rfind(r.input, 0) == 0) // the message names the file already
         std::fprintf(stderr, "nbmc: error: frame %s: %s\n", r.label.c_str(), r.error.c_str());
       else
         std::fprintf(stderr, "nbmc: error: frame %s (%s): %s\n", r.label.c_str(), r.input.c_str(), r.error.c_str());
     }
-    if (show) std::fputs(cli::progress_line(i + 1, frames.size(), r, meter).c_str(), stderr);
+    if (show) std::fputs(cli::progress_line(results.size() + 1, frames.size(), r, meter).c_str(), stderr);
     results.push_back(std::move(r));
+  };
+  // While a frame is reconstructed, the next one is read and the previous
+  // one written on two other threads (not with HDF5 files, nor with
+  // --sequential-io); the meshes are the same either way.
+  const bool overlap = !o.sequential_io && frames.size() > 1 && !sequence_uses_hdf5(o, frames);
+  auto read_ahead = [&](std::size_t i) {
+    return std::async(std::launch::async, [&o, &f = frames[i]] { return read_frame(o, f); });
+  };
+  struct Writing {
+    std::future<void> done;
+    cli::FrameResult r;
+    MeshPtr mesh;
+    bool cancelled = false;
+    double seconds = 0;  // the frame's read and reconstruction
+  };
+  std::unique_ptr<Writing> writing;  // the previous frame's write
+  auto finish_writing = [&] {
+    if (!writing) return;
+    writing->done.get();
+    writing->mesh.reset();
+    if (writing->cancelled) cancelled_run = true;
+    else report(std::move(writing->r));
+    writing.reset();
+  };
+  std::future<FrameInput> next;
+  if (overlap) next = read_ahead(0);
+  for (std::size_t i = 0; i < frames.size() && !cancelled_run; ++i) {
+    const cli::Frame& f = frames[i];
+    if (cli::interrupted()) {
+      cancelled_run = true;
+      break;
+    }
+    FrameInput in = overlap ? next.get() : read_frame(o, f);
+    if (overlap && i + 1 < frames.size()) next = read_ahead(i + 1);
+    if (in.cancelled) {
+      cancelled_run = true;
+      break;
+    }
+    cli::FrameResult r = frame_result(f);
+    const auto t0 = Clock::now();
+    MeshPtr mesh;
+    if (in.skipped) r.status = "skipped";
+    else if (!in.error.empty()) r.error = in.error;
+    else mesh = reconstruct_frame(o, ctx.get(), in, r, cancelled_run);
+    if (cancelled_run) break;
+    r.seconds = in.seconds + seconds_since(t0);
+    finish_writing();
+    if (cancelled_run) break;
+    if (!mesh) {
+      report(std::move(r));
+    } else if (!overlap) {
+      const auto t1 = Clock::now();
+      write_frame(o, f, mesh.get(), r, cancelled_run);
+      r.seconds += seconds_since(t1);
+      if (!cancelled_run) report(std::move(r));
+    } else {
+      writing.reset(new Writing);
+      writing->r = std::move(r);
+      writing->mesh = std::move(mesh);
+      Writing* w = writing.get();
+      w->done = std::async(std::launch::async, [&o, &f, w] {
+        const auto t1 = Clock::now();
+        write_frame(o, f, w->mesh.get(), w->r, w->cancelled);
+        w->r.seconds += seconds_since(t1);
+      });
+    }
   }
+  finish_writing();
+  if (next.valid()) next.wait();  // (a frame read ahead of a cancel)
   ctx.reset();
   nbmc_kokkos_finalize();
   if (cancelled_run) {
@@ -1274,6 +1415,9 @@ int main(int argc, char** argv) {
                   "Sequences: only frames a to b (inclusive), every step-th; IN with {} or a multi-step H5Part file")
       ->option_text("A:B[:STEP]");
   rec->add_flag("--resume", o.resume, "Sequences: skip frames whose output exists already");
+  rec->add_flag("--sequential-io", o.sequential_io,
+                "Sequences: read and write each frame between reconstructions (default: the next frame is read "
+                "and the previous one written while a frame is reconstructed; always so with HDF5 files)");
   auto* json = rec->add_option("--json", o.json_path,
                                "Write a machine-readable report to FILE ('-' or no value: stdout, instead of the "
                                "table); use --json=FILE before other arguments")
