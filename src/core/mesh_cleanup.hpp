@@ -728,15 +728,21 @@ class Cleaner {
   // short edge's ends by edges shorter than sin(1 degree) times the needle's
   // long edge is scaled about its centre until its shortest edge is 2 (or 4)
   // degrees' worth of the long edge (a move of about 1e-4 cell).
-  void consider_push(std::uint32_t t, Candidate& best) {
-    const std::uint32_t* v = T_ + 3 * std::size_t(t);
-    int k_short = 0;
-    double l_short = 0, l_long = 0;
+  // A triangle's shortest edge (v[k_short], v[k_short + 1]) and the lengths
+  // of its shortest and longest edges (the first shortest on ties).
+  void needle_edges(const std::uint32_t* v, int& k_short, double& l_short, double& l_long) const {
     for (int k = 0; k < 3; ++k) {
       const double l = norm(load(P_, v[(k + 1) % 3]) - load(P_, v[k]));
       if (k == 0 || l < l_short) l_short = l, k_short = k;
       l_long = std::max(l_long, l);
     }
+  }
+
+  void consider_push(std::uint32_t t, Candidate& best) {
+    const std::uint32_t* v = T_ + 3 * std::size_t(t);
+    int k_short = 0;
+    double l_short = 0, l_long = 0;
+    needle_edges(v, k_short, l_short, l_long);
     if (!(l_short > 0)) return;
     const double near = kSinOneDegree * l_long;
     cluster_.assign({v[k_short], v[(k_short + 1) % 3]});
@@ -839,11 +845,7 @@ class Cleaner {
     const std::uint32_t* v = T_ + 3 * std::size_t(t);
     int k_short = 0;
     double l_short = 0, l_long = 0;
-    for (int k = 0; k < 3; ++k) {
-      const double l = norm(load(P_, v[(k + 1) % 3]) - load(P_, v[k]));
-      if (k == 0 || l < l_short) l_short = l, k_short = k;
-      l_long = std::max(l_long, l);
-    }
+    needle_edges(v, k_short, l_short, l_long);
     const double near = kSinOneDegree * l_long;
     if (!(l_short < near)) return;
     // (a, b) in the triangle's direction.
@@ -1029,11 +1031,7 @@ class Cleaner {
     const std::uint32_t* v = T_ + 3 * std::size_t(t);
     int k_short = 0;
     double l_short = 0, l_long = 0;
-    for (int k = 0; k < 3; ++k) {
-      const double l = norm(load(P_, v[(k + 1) % 3]) - load(P_, v[k]));
-      if (k == 0 || l < l_short) l_short = l, k_short = k;
-      l_long = std::max(l_long, l);
-    }
+    needle_edges(v, k_short, l_short, l_long);
     const double near = kSinOneDegree * l_long;
     const std::uint32_t a = v[k_short], b = v[(k_short + 1) % 3];
     const Vec3 pa = load(P_, a);
