@@ -105,6 +105,16 @@ inline bool host_any_of(M m) {
 #if defined(__GNUC__) && !defined(__clang__)
 #pragma GCC diagnostic pop
 #endif
+
+// Whether the 8-lane kernels (AVX2, chosen at run time) are compiled: on
+// x86-64 with GCC, or with any compiler that compiles the whole translation
+// unit for AVX2 (-mavx2, -march=native). Clang rejects a 32-byte vector
+// passed to a function not compiled for AVX even where that function is
+// inlined into an AVX2 one, so a Clang build without -mavx2 uses 4 lanes
+// (the same results: the lane count never changes a value).
+#if !defined(__CUDACC__) && defined(__x86_64__) && defined(__GNUC__) && (!defined(__clang__) || defined(__AVX2__))
+#define NBMC_HOST_SIMD8 1
+#endif
 #endif
 
 // 1/R_j^2 of particle j in accumulate(): its own (Q[j]) for the radii

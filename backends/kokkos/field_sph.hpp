@@ -30,7 +30,7 @@
 #if !defined(__CUDA_ARCH__) && defined(__SSE__)
 #include <xmmintrin.h>
 #endif
-#if !defined(__CUDA_ARCH__) && !defined(__CUDACC__) && defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#if defined(NBMC_HOST_SIMD8)  // field_common.hpp
 #include <immintrin.h>
 #define NBMC_HOST_AVX_SQRT 1
 #endif
@@ -112,7 +112,9 @@ inline V sph_kernel_lanes(V k) {
   return cubic_spline(sqrt_lanes(q2), q2);
 }
 inline HostVecF sph_kernel(HostVecF k) { return sph_kernel_lanes(k); }
+#if defined(NBMC_HOST_SIMD8)
 inline HostSimd<8>::F sph_kernel(HostSimd<8>::F k) { return sph_kernel_lanes(k); }
+#endif
 #endif
 
 template <bool Radii>

@@ -247,7 +247,7 @@ KOKKOS_INLINE_FUNCTION bool eval_tile_host_lanes(const NeighbourView<MemSpace>& 
 // 8 lanes on CPUs with AVX2, chosen at run time: the tile code above compiled
 // for AVX2 (flatten: everything it calls is inlined into this one function,
 // so no other code is compiled for AVX2). Not under nvcc.
-#if !defined(__CUDACC__) && !defined(__CUDA_ARCH__) && defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+#if defined(NBMC_HOST_SIMD8)  // field_common.hpp: GCC, or any compiler with -mavx2
 #define NBMC_HOST_AVX2 1
 template <class Method, class MemSpace>
 __attribute__((target("avx2"), flatten)) bool eval_tile_host_avx2(
