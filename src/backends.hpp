@@ -91,9 +91,13 @@ bool cuda_pin(void* p, std::size_t bytes);
 void cuda_unpin(void* p);
 // Frees the context's host particle buffer (unpinning it first).
 void release_host_particles(nbmc_context& ctx);
-// Makes ctx.particles hold n uninitialised doubles. CUDA contexts keep one
-// page-locked buffer and reuse it while the size stays within a factor 2.
+// Makes ctx.particles hold n uninitialised doubles; the buffer is reused
+// while the size stays within a factor 2 (no page faults for a sequence's
+// next frame).
 double* prepare_host_particles(nbmc_context& ctx, std::size_t n);
+// CUDA contexts: page-locks the buffer once it is filled (then reused
+// pinned); a no-op elsewhere or when it is pinned already.
+void pin_host_particles(nbmc_context& ctx);
 // Copies the arrays of a device mesh into host buffers (any may be NULL).
 void download_mesh(const HostMesh& m, float* positions, float* normals, std::uint32_t* triangles);
 // Copies count particles (3 doubles each) from the CUDA device to the host.

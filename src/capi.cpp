@@ -12,6 +12,7 @@
 #include "context.hpp"
 
 #include "core/parallel.hpp"
+#include "core/trace.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -198,7 +199,9 @@ static int32_t set_particles_impl(nbmc_context* ctx, const T* xyz, uint64_t coun
   ctx->device_particles = nbmc::DeviceParticles();
   check_upload(xyz, count, byte_stride, fn);
   if (byte_stride == 0) byte_stride = 3 * sizeof(T);
+  nbmc::host_trace("set_particles: start", count);
   double* out = nbmc::prepare_host_particles(*ctx, 3 * std::size_t(count));
+  nbmc::host_trace("set_particles: buffer", count);
   const unsigned char* base = reinterpret_cast<const unsigned char*>(xyz);
   // Parallel over the particles on host threads (1.65 M took 70 ms on one
   // thread; the CUDA build has no OpenMP): a count and the smallest bad
@@ -226,6 +229,7 @@ static int32_t set_particles_impl(nbmc_context* ctx, const T* xyz, uint64_t coun
     chunk_bad[k] = nbad;
     chunk_first[k] = first;
   });
+  nbmc::host_trace("set_particles: copy, check", count);
   std::uint64_t bad = 0, first_bad = UINT64_MAX;
   for (std::size_t k = 0; k < chunks; ++k) {
     bad += chunk_bad[k];
@@ -238,6 +242,8 @@ static int32_t set_particles_impl(nbmc_context* ctx, const T* xyz, uint64_t coun
       << first_bad << ")";
     throw Error(NBMC_ERROR_INVALID_PARTICLES, s.str());
   }
+  nbmc::pin_host_particles(*ctx);
+  nbmc::host_trace("set_particles: pin", count);
   return NBMC_OK;
   NBMC_CAPI_END
 }
