@@ -17,6 +17,10 @@
 #   NBMC_BUILD_DIR    nbmc build directory (default: <repo>/build)
 #   NBMC_JOBS         parallel build jobs (default: nproc)
 #   NBMC_CUDA_ARCH    Kokkos architecture for the CUDA build (default: HOPPER90)
+#   CXX               the C++ compiler (default: c++, i.e. GCC on Debian). Kokkos
+#                     and nbmc are built by the same one (their OpenMP runtimes
+#                     must match); a Clang build keeps its own Kokkos
+#                     (<cache>/kokkos-...-openmp-clang) and needs libomp-dev.
 #
 # Kokkos comes from the source of Debian's `trilinos` package (packages/kokkos,
 # Kokkos 3.4.01); the patches in scripts/kokkos-patches/ make it build with
@@ -60,6 +64,13 @@ as_root() {
 APT_PACKAGES=(build-essential cmake ninja-build pkg-config zlib1g-dev libhdf5-dev
               libgtest-dev libcli11-dev gfortran patch xz-utils
               libopenmpi-dev openmpi-bin cargo python3-paraview)
+# The host compiler's family: Kokkos' OpenMP build is kept per family (GCC's
+# under the old name), since Kokkos and nbmc must share one OpenMP runtime.
+CXX_TAG=""
+if "${CXX:-c++}" --version 2>/dev/null | head -n1 | grep -qi clang; then
+  CXX_TAG=-clang
+  APT_PACKAGES+=(clang libomp-dev)
+fi
 install_packages() {
   [ "$SKIP_APT" = 1 ] && return 0
   command -v dpkg-query >/dev/null || { say "not a Debian system: skipping apt"; return 0; }
@@ -128,10 +139,10 @@ fetch_kokkos() {
 # ------------------------------------------------------- 3. Kokkos builds
 build_kokkos() { # $1 = variant (openmp|cuda)
   local variant=$1 prefix=$CACHE/kokkos-$KOKKOS_VERSION-$PATCH_HASH-$1
-  if [ "$variant" = cuda ]; then prefix=$prefix-$CUDA_ARCH; fi
+  if [ "$variant" = cuda ]; then prefix=$prefix-$CUDA_ARCH; else prefix=$prefix$CXX_TAG; fi
   KOKKOS_PREFIX=$prefix
   [ -f "$prefix/.nbmc-ready" ] && return 0
-  local bdir=$CACHE/build/kokkos-$variant
+  local bdir=$CACHE/build/kokkos-$variant$CXX_TAG
   rm -rf "$bdir" "$prefix"
   local args=(-G Ninja -S "$KOKKOS_SRC" -B "$bdir" -DCMAKE_BUILD_TYPE=Release
               -DCMAKE_INSTALL_PREFIX="$prefix" -DBUILD_SHARED_LIBS=ON

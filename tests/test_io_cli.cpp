@@ -99,21 +99,39 @@ TEST_F(CliIo, OverlappedAndSequentialIoGiveTheSameFiles) {
   fs::copy_file(path("frames/f_0.xyz"), path("b/s_4.ply"));
   const Result a = run("reconstruct 'frames/f_{}.xyz' -o 'a/s_{}.ply' --resume" + common);
   const Result b = run("reconstruct 'frames/f_{}.xyz' -o 'b/s_{}.ply' --resume --sequential-io" + common);
+  // Two contexts taking turns (the default with CUDA): the same again.
+  fs::create_directories(path("c"));
+  fs::copy_file(path("frames/f_0.xyz"), path("c/s_4.ply"));
+  const Result c = run("reconstruct 'frames/f_{}.xyz' -o 'c/s_{}.ply' --resume --contexts 2" + common);
   EXPECT_EQ(a.exit_code, 1) << a.err;
   EXPECT_EQ(b.exit_code, 1) << b.err;
+  EXPECT_EQ(c.exit_code, 1) << c.err;
   for (const char* f : {"s_0.ply", "s_1.ply", "s_3.ply", "s_0_spheres.ply", "s_3_spheres.ply"}) {
     const std::string da = slurp(path(std::string("a/") + f)), db = slurp(path(std::string("b/") + f));
     EXPECT_FALSE(da.empty()) << f;
     EXPECT_EQ(da, db) << f;
+    EXPECT_EQ(da, slurp(path(std::string("c/") + f))) << f;
   }
   EXPECT_FALSE(fs::exists(path("a/s_2.ply")));
+  EXPECT_FALSE(fs::exists(path("c/s_2.ply")));
   for (const char* key : {"\"written\": 3", "\"failed\": 1", "\"skipped\": 1"}) {
     EXPECT_TRUE(contains(a.out, key)) << a.out;
     EXPECT_TRUE(contains(b.out, key)) << b.out;
+    EXPECT_TRUE(contains(c.out, key)) << c.out;
   }
-  const std::size_t e1 = a.err.find("frame 2"), l3 = a.err.find("[4/5] frame 3");
-  ASSERT_NE(e1, std::string::npos) << a.err;
-  EXPECT_TRUE(l3 == std::string::npos || e1 < l3) << a.err;  // reported in frame order
+  for (const Result* r : {&a, &c}) {
+    const std::size_t e1 = r->err.find("frame 2"), l3 = r->err.find("[4/5] frame 3");
+    ASSERT_NE(e1, std::string::npos) << r->err;
+    EXPECT_TRUE(l3 == std::string::npos || e1 < l3) << r->err;  // reported in frame order
+  }
+  // In frame order in the JSON as well.
+  std::size_t at = 0;
+  for (int i = 0; i < 5; ++i) {
+    const std::size_t k = c.out.find("\"label\": \"" + std::to_string(i) + "\"", at);
+    ASSERT_NE(k, std::string::npos) << i << c.out;
+    at = k;
+  }
+  EXPECT_EQ(run("reconstruct 'frames/f_{}.xyz' -o 'c/s_{}.ply' --contexts 3" + common).exit_code, 2);
 }
 
 TEST_F(CliIo, ResumeAndFrames) {

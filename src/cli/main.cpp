@@ -113,6 +113,7 @@ struct Options {
   std::string frames;                   // --frames a:b[:step]
   bool resume = false;
   bool sequential_io = false;  // --sequential-io: a sequence reads and writes between reconstructions
+  int contexts = 0;            // --contexts: frames of a sequence reconstructed at once (0: 2 on CUDA, else 1)
   std::int64_t step = -1; // H5Part step of a single-frame run (-1: the first)
   std::string memory_budget;  // --memory-budget, "" = no cap
   std::string subdomains;     // --subdomains auto|N|NxMxK, "" = whole frame
@@ -517,14 +518,20 @@ int reconstruct_sequence(Options& o, const std::vector<nbmc::cli::Frame>& frames
   // The per-stage bar is replaced by one line per frame.
   cli::Progress bar(false, stderr_tty);
 
-  nbmc_context* raw = nullptr;
-  std::int32_t st = nbmc_context_create(&o.desc, &raw);
+  std::vector<ContextPtr> ctxs;
+  auto add_context = [&]() -> std::int32_t {
+    nbmc_context* raw = nullptr;
+    const std::int32_t st = nbmc_context_create(&o.desc, &raw);
+    if (st != NBMC_OK) return st;
+    ctxs.emplace_back(raw);
+    apply_memory_budget(raw, o);
+    nbmc_context_set_progress(raw, &cli::Progress::callback, &bar);  // (Ctrl-C only: no bar is drawn)
+    return NBMC_OK;
+  };
+  std::int32_t st = add_context();
   if (st != NBMC_OK) return library_error(st, nbmc_context_last_error(nullptr));
-  ContextPtr ctx(raw);
-  apply_memory_budget(ctx.get(), o);
-  nbmc_context_set_progress(ctx.get(), &cli::Progress::callback, &bar);
   std::int32_t backend = o.desc.backend;
-  nbmc_context_backend(ctx.get(), &backend);
+  nbmc_context_backend(ctxs[0].get(), &backend);
 
   std::vector<cli::FrameResult> results;
   cli::RateMeter meter(frames.size());
@@ -550,6 +557,18 @@ int reconstruct_sequence(Options& o, const std::vector<nbmc::cli::Frame>& frames
   // one written on two other threads (not with HDF5 files, nor with
   // --sequential-io); the meshes are the same either way.
   const bool overlap = !o.sequential_io && frames.size() > 1 && !sequence_uses_hdf5(o, frames);
+  // With CUDA, two contexts take turns: frame i's stages on the GPU run while
+  // frame i-1 is post-processed (clean-up) on the host threads, which is
+  // most of a GPU frame's time. Reconstructions on one backend are
+  // serialised inside nbmc, the post-processing is not. Each context holds
+  // its own buffers, so not under a memory budget unless asked for.
+  int n_contexts = o.contexts > 0 ? o.contexts
+                   : backend == NBMC_BACKEND_CUDA && o.memory_budget.empty() ? 2 : 1;
+  if (!overlap) n_contexts = 1;
+  while (int(ctxs.size()) < n_contexts) {
+    st = add_context();
+    if (st != NBMC_OK) return library_error(st, nbmc_context_last_error(nullptr));
+  }
   auto read_ahead = [&](std::size_t i) {
     return std::async(std::launch::async, [&o, &f = frames[i]] { return read_frame(o, f); });
   };
@@ -569,6 +588,42 @@ int reconstruct_sequence(Options& o, const std::vector<nbmc::cli::Frame>& frames
     else report(std::move(writing->r));
     writing.reset();
   };
+  // A frame's reconstruction (on a thread of its own with two contexts).
+  struct Reconstruction {
+    std::size_t index = 0;  // in frames
+    std::future<void> done;
+    FrameInput in;
+    cli::FrameResult r;
+    MeshPtr mesh;
+    bool cancelled = false;
+  };
+  // Takes a reconstruction, in frame order, to its report (and write).
+  auto complete = [&](std::unique_ptr<Reconstruction> c) {
+    if (c->done.valid()) c->done.get();
+    if (c->cancelled) cancelled_run = true;
+    if (cancelled_run) return;
+    finish_writing();
+    if (cancelled_run) return;
+    if (!c->mesh) {
+      report(std::move(c->r));
+    } else if (!overlap) {
+      const auto t1 = Clock::now();
+      write_frame(o, frames[c->index], c->mesh.get(), c->r, cancelled_run);
+      c->r.seconds += seconds_since(t1);
+      if (!cancelled_run) report(std::move(c->r));
+    } else {
+      writing.reset(new Writing);
+      writing->r = std::move(c->r);
+      writing->mesh = std::move(c->mesh);
+      Writing* w = writing.get();
+      w->done = std::async(std::launch::async, [&o, &f = frames[c->index], w] {
+        const auto t1 = Clock::now();
+        write_frame(o, f, w->mesh.get(), w->r, w->cancelled);
+        w->r.seconds += seconds_since(t1);
+      });
+    }
+  };
+  std::unique_ptr<Reconstruction> pending;  // the previous frame's, still running (two contexts)
   std::future<FrameInput> next;
   if (overlap) next = read_ahead(0);
   for (std::size_t i = 0; i < frames.size() && !cancelled_run; ++i) {
@@ -583,38 +638,36 @@ int reconstruct_sequence(Options& o, const std::vector<nbmc::cli::Frame>& frames
       cancelled_run = true;
       break;
     }
-    cli::FrameResult r = frame_result(f);
-    const auto t0 = Clock::now();
-    MeshPtr mesh;
-    if (in.skipped) r.status = "skipped";
-    else if (!in.error.empty()) r.error = in.error;
-    else mesh = reconstruct_frame(o, ctx.get(), in, r, cancelled_run);
-    if (cancelled_run) break;
-    r.seconds = in.seconds + seconds_since(t0);
-    finish_writing();
-    if (cancelled_run) break;
-    if (!mesh) {
-      report(std::move(r));
-    } else if (!overlap) {
-      const auto t1 = Clock::now();
-      write_frame(o, f, mesh.get(), r, cancelled_run);
-      r.seconds += seconds_since(t1);
-      if (!cancelled_run) report(std::move(r));
+    auto c = std::make_unique<Reconstruction>();
+    c->index = i;
+    c->r = frame_result(f);
+    c->in = std::move(in);
+    c->r.seconds = c->in.seconds;
+    if (c->in.skipped) {
+      c->r.status = "skipped";
+    } else if (!c->in.error.empty()) {
+      c->r.error = c->in.error;
     } else {
-      writing.reset(new Writing);
-      writing->r = std::move(r);
-      writing->mesh = std::move(mesh);
-      Writing* w = writing.get();
-      w->done = std::async(std::launch::async, [&o, &f, w] {
-        const auto t1 = Clock::now();
-        write_frame(o, f, w->mesh.get(), w->r, w->cancelled);
-        w->r.seconds += seconds_since(t1);
-      });
+      Reconstruction* p = c.get();
+      nbmc_context* ctx = ctxs[i % ctxs.size()].get();  // not the previous frame's
+      auto work = [&o, ctx, p] {
+        const auto t0 = Clock::now();
+        p->mesh = reconstruct_frame(o, ctx, p->in, p->r, p->cancelled);
+        p->r.seconds += seconds_since(t0);
+      };
+      if (ctxs.size() > 1) p->done = std::async(std::launch::async, work);
+      else work();
     }
+    if (pending) complete(std::move(pending));
+    if (ctxs.size() > 1 && !cancelled_run) pending = std::move(c);
+    else if (!cancelled_run) complete(std::move(c));
+    else if (c->done.valid()) c->done.wait();
   }
+  if (pending && !cancelled_run) complete(std::move(pending));
+  if (pending && pending->done.valid()) pending->done.wait();  // (cancelled)
   finish_writing();
   if (next.valid()) next.wait();  // (a frame read ahead of a cancel)
-  ctx.reset();
+  ctxs.clear();
   nbmc_kokkos_finalize();
   if (cancelled_run) {
     std::fputs("nbmc: cancelled\n", stderr);
@@ -1418,6 +1471,11 @@ int main(int argc, char** argv) {
   rec->add_flag("--sequential-io", o.sequential_io,
                 "Sequences: read and write each frame between reconstructions (default: the next frame is read "
                 "and the previous one written while a frame is reconstructed; always so with HDF5 files)");
+  rec->add_option("--contexts", o.contexts,
+                  "Sequences: frames reconstructed at once, each in its own context, so that one frame's GPU "
+                  "stages run while the previous frame is post-processed on the host (default: 2 with CUDA, "
+                  "1 otherwise or with --memory-budget; 1 with --sequential-io or HDF5 files)")
+      ->check(CLI::Range(0, 2));
   auto* json = rec->add_option("--json", o.json_path,
                                "Write a machine-readable report to FILE ('-' or no value: stdout, instead of the "
                                "table); use --json=FILE before other arguments")
