@@ -181,6 +181,24 @@ inline int triangle_class(const TriangleShape& s, double degenerate_double_area)
   return s.sin_min_angle < kSinOneDegree ? 1 : 0;
 }
 
+// True only for triangles that triangle_class certainly calls good (0),
+// from squared lengths alone: no square root, division or sort, a third of
+// triangle_shape's cost. The comparisons keep a relative margin of 1e-6,
+// far above the few roundings either way, so a triangle near a threshold
+// (and a NaN) gets false and is judged by triangle_shape itself; a scan
+// that asks this first finds the same triangles.
+inline bool surely_good(const Vec3& a, const Vec3& b, const Vec3& c, double degenerate_double_area) {
+  const Vec3 ab = b - a, bc = c - b, ca = a - c;
+  const Vec3 n = cross(ab, ca);
+  const double area2 = dot(n, n);  // (2 * area)^2
+  const double x = dot(ab, ab), y = dot(bc, bc), z = dot(ca, ca);
+  // The product of the two largest squared edges.
+  const double l12 = std::max({x * y, y * z, z * x});
+  constexpr double kMargin = 1 + 1e-6;
+  return area2 > 0 && area2 >= degenerate_double_area * degenerate_double_area * kMargin &&
+         area2 >= kSinOneDegree * kSinOneDegree * l12 * kMargin;
+}
+
 struct CheckResult {
   bool closed = false, manifold = false, oriented = false;
   std::uint64_t vertices = 0, triangles = 0, edges = 0;

@@ -222,6 +222,8 @@ class Cleaner {
     for_chunks(nt_, chunks, [&](std::size_t k, std::size_t b, std::size_t e) {
       for (std::size_t t = b; t < e; ++t) {
         if (!alive_[t]) continue;
+        const std::uint32_t* v = T_ + 3 * t;
+        if (surely_good(load(P_, v[0]), load(P_, v[1]), load(P_, v[2]), degenerate_double_area_)) continue;
         const TriangleShape s = shape(std::uint32_t(t));
         const int c = triangle_class(s, degenerate_double_area_);
         if (c) part[k].emplace_back(-c, s.sin_min_angle, std::uint32_t(t));
@@ -660,8 +662,11 @@ class Cleaner {
     n = (1.0 / ln) * n;
     Vec3 d = centroid - pv;
     d = d - dot(d, n) * n;
+    // The three trial positions change the same triangles: their old shapes
+    // are judged once (prepare_positions), each trial only the new ones.
+    if (!prepare_positions({v})) return;
     for (double f : {0.25, 0.5, 1.0}) {
-      consider_positions(t, {{v, pv + f * d}}, out);
+      judge_positions(t, {{v, pv + f * d}}, out);
       if (out.valid) return;
     }
   }
@@ -671,40 +676,70 @@ class Cleaner {
   // turns by more than the limit (triangles that were bad are compared with
   // the mean normal around the moved vertices).
   void consider_positions(std::uint32_t t, std::vector<std::pair<std::uint32_t, Vec3>> moved, Candidate& best) {
+    std::vector<std::uint32_t> vs;
+    for (const auto& m : moved) vs.push_back(m.first);
+    if (!prepare_positions(vs)) return;
+    judge_positions(t, std::move(moved), best);
+  }
+  // consider_positions in two steps, so that several trial positions of the
+  // same vertices share the first: the triangles around the vertices
+  // (around_), their mean normal (around_normal_) and each one's old class
+  // and normal (around_old_), which do not depend on the trial. False when
+  // no trial can be valid (an irregular vertex, no mean normal).
+  bool prepare_positions(const std::vector<std::uint32_t>& vs) {
     around_.clear();
-    for (auto& m : moved) {
-      if (irregular_[m.first]) return;
-      m.second = Vec3{double(Real(m.second.x)), double(Real(m.second.y)), double(Real(m.second.z))};
-      fan(m.first, fa_);
+    for (std::uint32_t x : vs) {
+      if (irregular_[x]) return false;
+      fan(x, fa_);
       around_.insert(around_.end(), fa_.begin(), fa_.end());
     }
     std::sort(around_.begin(), around_.end());
     around_.erase(std::unique(around_.begin(), around_.end()), around_.end());
     Vec3 n;
-    for (std::uint32_t u : around_) {
-      const std::uint32_t* w = T_ + 3 * std::size_t(u);
-      n = n + cross(load(P_, w[1]) - load(P_, w[0]), load(P_, w[2]) - load(P_, w[0]));
+    around_old_.resize(around_.size());
+    for (std::size_t i = 0; i < around_.size(); ++i) {
+      const std::uint32_t* w = T_ + 3 * std::size_t(around_[i]);
+      const Vec3 o0 = load(P_, w[0]), o1 = load(P_, w[1]), o2 = load(P_, w[2]);
+      const Vec3 c = cross(o1 - o0, o2 - o0);
+      n = n + c;
+      around_old_[i].normal = c;
+      around_old_[i].cls = triangle_class(triangle_shape(o0, o1, o2), degenerate_double_area_);
     }
-    if (!(norm(n) > 0)) return;
+    around_normal_ = n;
+    return norm(n) > 0;
+  }
+  // The second step: one trial (v, p) (the vertices given to
+  // prepare_positions, in any order). The bad triangle t is judged first:
+  // a trial that leaves it bad (most) costs one shape, not the whole fan's.
+  // The verdict and the score (a minimum) do not depend on that order.
+  void judge_positions(std::uint32_t t, std::vector<std::pair<std::uint32_t, Vec3>> moved, Candidate& best) {
+    for (auto& m : moved) m.second = Vec3{double(Real(m.second.x)), double(Real(m.second.y)), double(Real(m.second.z))};
+    const Vec3& n = around_normal_;
     double score = 2;
-    for (std::uint32_t u : around_) {
+    auto judge = [&](std::size_t i) {
+      const std::uint32_t u = around_[i];
       const std::uint32_t* w = T_ + 3 * std::size_t(u);
-      Vec3 q[3], o[3];
+      Vec3 q[3];
       for (int k = 0; k < 3; ++k) {
-        o[k] = q[k] = load(P_, w[k]);
+        q[k] = load(P_, w[k]);
         for (const auto& m : moved)
           if (m.first == w[k]) q[k] = m.second;
       }
-      const TriangleShape s_old = triangle_shape(o[0], o[1], o[2]);
       const TriangleShape s_new = triangle_shape(q[0], q[1], q[2]);
-      const int c_old = triangle_class(s_old, degenerate_double_area_);
+      const int c_old = around_old_[i].cls;
       const int c_new = triangle_class(s_new, degenerate_double_area_);
-      if (c_new == 2 || (c_new != 0 && (c_old == 0 || u == t))) return;
+      if (c_new == 2 || (c_new != 0 && (c_old == 0 || u == t))) return false;
       const Vec3 n_new = cross(q[1] - q[0], q[2] - q[0]);
-      const Vec3 n_ref = c_old == 0 ? cross(o[1] - o[0], o[2] - o[0]) : n;
-      if (dot(n_new, n_ref) <= cos_limit * norm(n_new) * norm(n_ref)) return;
+      const Vec3& n_ref = c_old == 0 ? around_old_[i].normal : n;
+      if (dot(n_new, n_ref) <= cos_limit * norm(n_new) * norm(n_ref)) return false;
       score = std::min(score, s_new.sin_min_angle);
-    }
+      return true;
+    };
+    const auto it_t = std::lower_bound(around_.begin(), around_.end(), t);
+    const std::size_t i_t = it_t != around_.end() && *it_t == t ? std::size_t(it_t - around_.begin()) : around_.size();
+    if (i_t < around_.size() && !judge(i_t)) return;
+    for (std::size_t i = 0; i < around_.size(); ++i)
+      if (i != i_t && !judge(i)) return;
     if (score <= best.score) return;
     best.valid = true;
     best.kind = Candidate::Move;
@@ -988,7 +1023,7 @@ class Cleaner {
   void apply_cut(const CutCandidate& c) {
     for (std::uint32_t u : c.removed) alive_[u] = 0;
     for (const auto& r : c.rewritten) {
-      for (int k = 0; k < 3; ++k) T_[3 * std::size_t(r.first) + k] = r.second[k];
+        for (int k = 0; k < 3; ++k) T_[3 * std::size_t(r.first) + k] = r.second[k];
       add_incidence(contains(r.second.data(), c.a) ? c.a : c.b, r.first);
     }
     const std::uint32_t ends[2] = {c.a, c.b};  // (nvcc's front end rejects {c.a, c.b} in a range-for)
@@ -1373,7 +1408,7 @@ class Cleaner {
   void apply_cluster(const ClusterCandidate& c) {
     for (std::uint32_t u : c.removed) alive_[u] = 0;
     for (const auto& r : c.rewritten) {
-      std::uint32_t owner = kNone;
+        std::uint32_t owner = kNone;
       for (int k = 0; k < 3; ++k) {
         const std::uint32_t old = T_[3 * std::size_t(r.first) + k];
         if (old != r.second[k]) owner = r.second[k];
@@ -1502,6 +1537,14 @@ class Cleaner {
   std::vector<std::pair<std::uint32_t, std::uint32_t>> extra_;  // (triangle, next entry)
   double degenerate_double_area_ = 0;
   std::vector<std::uint32_t> fa_, fb_, ra_, rb_, common_, scratch_, around_, cluster_;
+  // prepare_positions: the old class and normal of each triangle of around_,
+  // and their sum.
+  struct OldTriangle {
+    Vec3 normal;
+    int cls = 0;
+  };
+  std::vector<OldTriangle> around_old_;
+  Vec3 around_normal_;
   // What the repairs changed since the last bad_triangles_after(): vertices
   // moved or renamed into, triangles rewritten in place.
   std::vector<std::uint32_t> changed_vertices_, changed_triangles_;
