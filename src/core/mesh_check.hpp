@@ -32,6 +32,7 @@
 #include <vector>
 
 #include "parallel.hpp"
+#include "params.hpp"
 
 namespace nbmc {
 namespace mesh {
@@ -101,12 +102,17 @@ std::size_t compact_array(T* a, std::size_t width, std::size_t n, const Keep& ke
 // vertex; indices are renumbered), in place; returns the new vertex and
 // triangle counts. The clean-up's and the decimation's last step; on all
 // host threads (the result does not depend on them).
-template <class Real>
+template <class Real, class AliveVec>
 std::pair<std::size_t, std::size_t> compact_mesh(Real* positions, float* normals, std::size_t nv, std::uint32_t* tri,
-                                                 std::size_t nt, const std::vector<std::uint8_t>& alive) {
+                                                 std::size_t nt, const AliveVec& alive) {
   // The vertices the kept triangles use: a flag each, set by relaxed atomic
-  // stores (plain stores on x86; threads may set the same flag).
-  std::vector<std::atomic<std::uint8_t>> used(nv);
+  // stores (plain stores on x86; threads may set the same flag). Allocated
+  // unwritten and cleared on all host threads (a fresh array's pages are
+  // mapped when first written: slow for one thread alone); so is remap.
+  std::vector<std::atomic<std::uint8_t>, NoInitAllocator<std::atomic<std::uint8_t>>> used(nv);
+  for_chunks(nv, chunk_count(nv, 65536), [&](std::size_t, std::size_t b, std::size_t e) {
+    for (std::size_t v = b; v < e; ++v) used[v].store(0, std::memory_order_relaxed);
+  });
   for_chunks(nt, chunk_count(nt, 65536), [&](std::size_t, std::size_t b, std::size_t e) {
     for (std::size_t t = b; t < e; ++t)
       if (alive[t])
@@ -114,7 +120,7 @@ std::pair<std::size_t, std::size_t> compact_mesh(Real* positions, float* normals
   });
   auto is_used = [&](std::size_t v) { return std::size_t(used[v].load(std::memory_order_relaxed)); };
   // New vertex numbers: the used vertices before each one.
-  std::vector<std::uint32_t> remap(nv);
+  std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>> remap(nv);  // (every entry written below)
   {
     const std::size_t chunks = chunk_count(nv, 65536);
     std::vector<std::size_t> first(chunks + 1, 0);

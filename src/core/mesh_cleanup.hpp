@@ -140,9 +140,43 @@ template <class Real>
 class Cleaner {
  public:
   Cleaner(Real* positions, float* normals, std::size_t nv, std::uint32_t* tri, std::size_t nt)
-      : P_(positions), N_(normals), nv_(nv), T_(tri), nt_(nt), alive_(nt, 1), next_(nv, kNone), tail_(nv) {
-    for (std::size_t v = 0; v < nv; ++v) tail_[v] = std::uint32_t(v);
-    const double extent = bounding_extent(positions, nv);
+      : P_(positions), N_(normals), nv_(nv), T_(tri), nt_(nt), alive_(nt), next_(nv), tail_(nv) {
+    // The per-triangle and per-vertex arrays are left unwritten by their
+    // allocation and filled here on all host threads: the kernel maps (and
+    // clears) a fresh array's pages when they are first written, a few
+    // microseconds per 4 KiB page, which one thread writing them all (as a
+    // value-initialized std::vector does) pays alone. Each vertex chunk also
+    // finds its part of the bounding box.
+    for_chunks(nt, chunk_count(nt, 65536), [&](std::size_t, std::size_t b, std::size_t e) {
+      std::fill(alive_.begin() + b, alive_.begin() + e, std::uint8_t(1));
+    });
+    const std::size_t vchunks = chunk_count(nv, 65536);
+    std::vector<std::array<double, 6>> box(vchunks);  // lo, hi
+    for_chunks(nv, vchunks, [&](std::size_t k, std::size_t b, std::size_t e) {
+      for (std::size_t v = b; v < e; ++v) {
+        next_[v] = kNone;
+        tail_[v] = std::uint32_t(v);
+      }
+      // As bounding_extent: every chunk starts from vertex 0 (so a NaN
+      // coordinate is ignored, or not, exactly as in its serial loop).
+      std::array<double, 6>& x = box[k];
+      for (int a = 0; a < 3; ++a) x[a] = x[3 + a] = positions[a];
+      for (std::size_t v = b; v < e; ++v)
+        for (int a = 0; a < 3; ++a) {
+          x[a] = std::min(x[a], double(positions[3 * v + a]));
+          x[3 + a] = std::max(x[3 + a], double(positions[3 * v + a]));
+        }
+    });
+    double extent = 0;
+    if (nv > 0) {
+      std::array<double, 6> x = box[0];
+      for (std::size_t k = 1; k < vchunks; ++k)
+        for (int a = 0; a < 3; ++a) {
+          x[a] = std::min(x[a], box[k][a]);
+          x[3 + a] = std::max(x[3 + a], box[k][3 + a]);
+        }
+      extent = std::max({x[3] - x[0], x[4] - x[1], x[5] - x[2]});
+    }
     degenerate_double_area_ = 2 * kDegenerateAreaFraction * extent * extent;
     host_trace("clean-up: arrays, extent", nv);
     // Triangles around each vertex (CSR, ascending triangle index), on all
@@ -166,26 +200,29 @@ class Cleaner {
         for (std::size_t r = 0; r < parts; ++r) at[r * tparts + k + 1] = n[r];
       });
       for (std::size_t i = 0; i < parts * tparts; ++i) at[i + 1] += at[i];
-      struct Corner {
-        std::uint32_t v, t;
-      };
-      std::vector<Corner, NoInitAllocator<Corner>> corners(at[parts * tparts]);
+      // A corner is its index in tri (3 t + c, 32 bits as incident_'s
+      // offsets): its vertex is read again from tri, its triangle is a
+      // third of it. Half the bytes of storing both (fewer fresh pages to
+      // map, less to write and read back), and tri's reads stay local.
+      std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>> corners(at[parts * tparts]);
       for_chunks(nt, tparts, [&](std::size_t k, std::size_t b, std::size_t e) {
         std::vector<std::size_t> w(parts);
         for (std::size_t r = 0; r < parts; ++r) w[r] = at[r * tparts + k];
-        for (std::size_t t = b; t < e; ++t)
-          for (int c = 0; c < 3; ++c) {
-            const std::uint32_t v = tri[3 * t + c];
-            if (v < nv) corners[w[v >> shift]++] = Corner{v, std::uint32_t(t)};
-          }
+        for (std::size_t i = 3 * b; i < 3 * e; ++i) {
+          const std::uint32_t v = tri[i];
+          if (v < nv) corners[w[v >> shift]++] = std::uint32_t(i);
+        }
       });
       host_trace("clean-up: incidence corners", nt);
-      start_.assign(nv + 1, 0);
+      // (start_ unwritten: each thread clears its own range of it.)
+      start_.resize(nv + 1);
+      start_[0] = 0;
       incident_.resize(corners.size());
       on_threads(parts, [&](std::size_t r) {
         const std::size_t vb = r << shift, ve = std::min(nv, (r + 1) << shift);
         const std::size_t cb = at[r * tparts], ce = at[(r + 1) * tparts];
-        for (std::size_t i = cb; i < ce; ++i) ++start_[corners[i].v + 1];
+        std::fill(start_.begin() + vb + 1, start_.begin() + ve + 1, 0u);
+        for (std::size_t i = cb; i < ce; ++i) ++start_[tri[corners[i]] + 1];
         // (start_[vb] belongs to the range before: its lists start at cb.)
         std::vector<std::uint32_t> fill(ve - vb);
         std::size_t pos = cb;
@@ -194,7 +231,7 @@ class Cleaner {
           pos += start_[v + 1];
           start_[v + 1] = std::uint32_t(pos);
         }
-        for (std::size_t i = cb; i < ce; ++i) incident_[fill[corners[i].v - vb]++] = corners[i].t;
+        for (std::size_t i = cb; i < ce; ++i) incident_[fill[tri[corners[i]] - vb]++] = corners[i] / 3;
       });
       host_trace("clean-up: incidence lists", nt);
     }
@@ -462,7 +499,7 @@ class Cleaner {
   // one closed fan; the others, and the vertices of triangles that repeat a
   // vertex, are never touched.
   void mark_irregular() {
-    irregular_.assign(nv_, 0);
+    irregular_.resize(nv_);  // (every vertex written below, by its chunk's thread)
     for_chunks(nv_, chunk_count(nv_, 16384), [&](std::size_t, std::size_t vb, std::size_t ve) {
       std::vector<std::pair<std::uint32_t, std::uint32_t>> in;  // (previous vertex, local index)
       std::vector<std::uint32_t> out;                           // next vertex, by local index
@@ -480,7 +517,7 @@ class Cleaner {
           in.push_back({pv, i - b});
         }
         if (ok) ok = one_closed_fan(in, out);
-        if (!ok) irregular_[v] = 1;
+        irregular_[v] = ok ? 0 : 1;
       }
     });
   }
@@ -663,8 +700,9 @@ class Cleaner {
     Vec3 d = centroid - pv;
     d = d - dot(d, n) * n;
     // The three trial positions change the same triangles: their old shapes
-    // are judged once (prepare_positions), each trial only the new ones.
-    if (!prepare_positions({v})) return;
+    // are judged once (prepare_positions, with v's fan in fa_ already), each
+    // trial only the new ones.
+    if (!prepare_positions({v}, true)) return;
     for (double f : {0.25, 0.5, 1.0}) {
       judge_positions(t, {{v, pv + f * d}}, out);
       if (out.valid) return;
@@ -686,11 +724,12 @@ class Cleaner {
   // (around_), their mean normal (around_normal_) and each one's old class
   // and normal (around_old_), which do not depend on the trial. False when
   // no trial can be valid (an irregular vertex, no mean normal).
-  bool prepare_positions(const std::vector<std::uint32_t>& vs) {
+  // fan_ready: vs is one vertex whose fan fa_ holds now.
+  bool prepare_positions(const std::vector<std::uint32_t>& vs, bool fan_ready = false) {
     around_.clear();
     for (std::uint32_t x : vs) {
       if (irregular_[x]) return false;
-      fan(x, fa_);
+      if (!fan_ready) fan(x, fa_);
       around_.insert(around_.end(), fa_.begin(), fa_.end());
     }
     std::sort(around_.begin(), around_.end());
@@ -1530,8 +1569,9 @@ class Cleaner {
   std::size_t nv_;
   std::uint32_t* T_;
   std::size_t nt_;
-  std::vector<std::uint8_t> alive_, irregular_;
-  std::vector<std::uint32_t> start_, next_, tail_;
+  // (Allocated unwritten, filled on all host threads: see the constructor.)
+  std::vector<std::uint8_t, NoInitAllocator<std::uint8_t>> alive_, irregular_;
+  std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>> start_, next_, tail_;
   std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>> incident_;
   std::vector<std::uint32_t> extra_head_;                       // per vertex, into extra_ (after flips)
   std::vector<std::pair<std::uint32_t, std::uint32_t>> extra_;  // (triangle, next entry)
