@@ -159,6 +159,7 @@ class Cleaner {
       }
       // As bounding_extent: every chunk starts from vertex 0 (so a NaN
       // coordinate is ignored, or not, exactly as in its serial loop).
+      if (nv == 0) return;  // (one empty chunk; no vertex 0 to read)
       std::array<double, 6>& x = box[k];
       for (int a = 0; a < 3; ++a) x[a] = x[3 + a] = positions[a];
       for (std::size_t v = b; v < e; ++v)
