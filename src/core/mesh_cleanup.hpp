@@ -506,6 +506,12 @@ class Cleaner {
       std::vector<std::uint32_t> out;                           // next vertex, by local index
       for (std::size_t v = vb; v < ve; ++v) {
         const std::uint32_t b = start_[v], e = start_[v + 1];
+        // Almost every fan is small: one_closed_fan's small case on the
+        // stack, without the vectors.
+        if (e - b <= kSmallFan) {
+          irregular_[v] = small_closed_fan(std::uint32_t(v), b, e) ? 0 : 1;
+          continue;
+        }
         bool ok = e - b >= 3;
         in.clear();
         out.clear();
@@ -521,6 +527,34 @@ class Cleaner {
         irregular_[v] = ok ? 0 : 1;
       }
     });
+  }
+
+  // mark_irregular's test for v with a list [b, e) of at most kSmallFan
+  // triangles: exactly its loop and one_closed_fan's small case.
+  static constexpr std::uint32_t kSmallFan = 16;
+  bool small_closed_fan(std::uint32_t v, std::uint32_t b, std::uint32_t e) const {
+    const std::uint32_t n = e - b;
+    if (n < 3) return false;
+    std::uint32_t in[kSmallFan], out[kSmallFan];  // previous and next vertex, by local index
+    for (std::uint32_t i = 0; i < n; ++i) {
+      const std::uint32_t* w = T_ + 3 * std::size_t(incident_[b + i]);
+      const int k = w[0] == v ? 0 : w[1] == v ? 1 : 2;
+      out[i] = w[(k + 1) % 3];
+      in[i] = w[(k + 2) % 3];
+      if (out[i] == v || in[i] == v) return false;
+    }
+    for (std::uint32_t i = 1; i < n; ++i)
+      for (std::uint32_t j = 0; j < i; ++j)
+        if (in[i] == in[j]) return false;
+    std::uint32_t cur = 0, steps = 0;
+    do {
+      std::uint32_t j = 0;
+      while (j < n && in[j] != out[cur]) ++j;
+      if (j == n) return false;
+      cur = j;
+      ++steps;
+    } while (cur != 0 && steps <= n);
+    return cur == 0 && steps == n;
   }
 
   // Whether triangles with these (previous vertex, local index) and next
