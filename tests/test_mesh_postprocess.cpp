@@ -145,6 +145,54 @@ TEST(MeshCheck, DegenerateAndSliver) {
   EXPECT_EQ(r.components, 2u);  // the repeated-index triangle shares edge 0-1 with the sliver
 }
 
+// The clean-up's scan skips the triangles surely_good calls good without
+// triangle_shape: it must never call good a triangle that triangle_class
+// calls bad (else a bad triangle would go unrepaired), and should call most
+// good ones good. Random triangles, and ones built at the sliver and
+// degenerate thresholds (apex heights a few ulps below, at and above them).
+TEST(MeshCheck, SurelyGoodAgreesWithTriangleClass) {
+  using nbmc::mesh::surely_good;
+  using nbmc::mesh::triangle_class;
+  using nbmc::mesh::triangle_shape;
+  using nbmc::mesh::Vec3;
+  std::mt19937_64 rng(7);
+  std::uniform_real_distribution<double> u(-1, 1);
+  const double thresholds[] = {0.0, 1e-9, 2e-6};
+  std::size_t good = 0, surely = 0;  // of the random ones
+  auto judge = [&](const Vec3& a, const Vec3& b, const Vec3& c, double degenerate, bool count = false) {
+    const int cls = triangle_class(triangle_shape(a, b, c), degenerate);
+    const bool sure = surely_good(a, b, c, degenerate);
+    EXPECT_TRUE(!sure || cls == 0) << cls;
+    if (count) good += cls == 0, surely += sure;
+  };
+  for (int i = 0; i < 20000; ++i) {
+    const double degenerate = thresholds[i % 3];
+    const Vec3 a{u(rng), u(rng), u(rng)}, b{u(rng), u(rng), u(rng)}, c{u(rng), u(rng), u(rng)};
+    judge(a, b, c, degenerate, true);
+    // A sliver at the 1-degree threshold: base (0,0)-(1,0), apex at x
+    // along it and at the height that makes the smallest angle 1 degree,
+    // scaled by 1 +- a few ulps or +-1e-7.
+    const double x = 0.5 + 0.49 * u(rng);
+    // (Steps of about an ulp: where rounding decides, as a comparison
+    // without surely_good's margin would get wrong.)
+    // (The smallest angle is at the base's end farther from the apex.)
+    const double h = std::tan(M_PI / 180) * std::max(x, 1 - x);
+    // ... and a well-shaped triangle of twice the area at the degenerate
+    // threshold (0.8 L^2).
+    const double L = std::sqrt(degenerate / 0.8);
+    for (int k = -8; k <= 8; ++k) {
+      const double s = 1 + k * 1.1e-16;
+      judge(Vec3{0, 0, 0}, Vec3{1, 0, 0}, Vec3{x, h * s, 0}, degenerate);
+      if (degenerate > 0) judge(Vec3{0, 0, 0}, Vec3{L * s, 0, 0}, Vec3{0.5 * L, 0.8 * L, 0}, degenerate);
+    }
+  }
+  // Triangles of three coincident or collinear points, and NaN.
+  judge(Vec3{1, 1, 1}, Vec3{1, 1, 1}, Vec3{1, 1, 1}, 0);
+  judge(Vec3{0, 0, 0}, Vec3{1, 0, 0}, Vec3{2, 0, 0}, 0);
+  judge(Vec3{0, 0, 0}, Vec3{1, 0, 0}, Vec3{0, std::nan(""), 0}, 0);
+  EXPECT_GT(surely, good * 9 / 10);
+}
+
 TEST(MeshCheck, BadIndexThrows) {
   TestMesh m = tetrahedron();
   m.t[5] = 4;

@@ -32,6 +32,7 @@
 #include <vector>
 
 #include "parallel.hpp"
+#include "params.hpp"
 
 namespace nbmc {
 namespace mesh {
@@ -65,34 +66,44 @@ namespace detail {
 // lie in [S_k, S_k+1) and go to [D_k, D_k+1) with D_k <= S_k; the chunks
 // after k write from D_k+1 on, so chunk k first puts aside its kept items
 // from D_k+1 on (few: as many as the items dropped before chunk k+1), then
-// all chunks move their items at once.
-template <class T, class Keep, class F>
-std::size_t compact_array(T* a, std::size_t width, std::size_t n, const Keep& keep, const F& f) {
-  const std::size_t chunks = chunk_count(n, 65536);
-  std::vector<std::size_t> dst(chunks + 1, 0);
-  for_chunks(n, chunks, [&](std::size_t k, std::size_t b, std::size_t e) {
+// all chunks move their items at once. In steps, so that compact_mesh runs
+// the same step of its three arrays in one round of threads: count(k) for
+// every chunk, then starts(), put_aside(k) for every chunk, move(k, f).
+template <class T>
+struct ArrayCompaction {
+  T* a;
+  std::size_t width, n, chunks;
+  std::vector<std::size_t> dst;          // D_k; dst[chunks]: the items kept
+  std::vector<std::vector<T>> aside;
+  ArrayCompaction(T* a_, std::size_t width_, std::size_t n_)
+      : a(a_), width(width_), n(n_), chunks(chunk_count(n_, 65536)), dst(chunks + 1, 0), aside(chunks) {}
+  std::size_t begin(std::size_t k) const { return n * k / chunks; }  // (as for_chunks)
+  template <class Keep>
+  void count(std::size_t k, const Keep& keep) {
     std::size_t m = 0;
-    for (std::size_t i = b; i < e; ++i) m += keep(i) ? 1 : 0;
+    for (std::size_t i = begin(k), e = begin(k + 1); i < e; ++i) m += keep(i) ? 1 : 0;
     dst[k + 1] = m;
-  });
-  for (std::size_t k = 0; k < chunks; ++k) dst[k + 1] += dst[k];
-  std::vector<std::vector<T>> aside(chunks);
-  for_chunks(n, chunks, [&](std::size_t k, std::size_t b, std::size_t e) {
-    for (std::size_t i = std::max(b, dst[k + 1]); i < e; ++i)
+  }
+  void starts() {
+    for (std::size_t k = 0; k < chunks; ++k) dst[k + 1] += dst[k];
+  }
+  template <class Keep>
+  void put_aside(std::size_t k, const Keep& keep) {
+    for (std::size_t i = std::max(begin(k), dst[k + 1]), e = begin(k + 1); i < e; ++i)
       if (keep(i)) aside[k].insert(aside[k].end(), a + width * i, a + width * (i + 1));
-  });
-  for_chunks(n, chunks, [&](std::size_t k, std::size_t b, std::size_t e) {
+  }
+  template <class Keep, class F>
+  void move(std::size_t k, const Keep& keep, const F& f) {
     std::size_t to = dst[k];
     const T* from_aside = aside[k].data();
-    for (std::size_t i = b; i < e; ++i) {
+    for (std::size_t i = begin(k), e = begin(k + 1); i < e; ++i) {
       if (!keep(i)) continue;
       const T* src = i >= dst[k + 1] ? (from_aside += width) - width : a + width * i;
       for (std::size_t c = 0; c < width; ++c) a[width * to + c] = f(src[c]);
       ++to;
     }
-  });
-  return dst[chunks];
-}
+  }
+};
 
 }  // namespace detail
 
@@ -101,39 +112,56 @@ std::size_t compact_array(T* a, std::size_t width, std::size_t n, const Keep& ke
 // vertex; indices are renumbered), in place; returns the new vertex and
 // triangle counts. The clean-up's and the decimation's last step; on all
 // host threads (the result does not depend on them).
-template <class Real>
+template <class Real, class AliveVec>
 std::pair<std::size_t, std::size_t> compact_mesh(Real* positions, float* normals, std::size_t nv, std::uint32_t* tri,
-                                                 std::size_t nt, const std::vector<std::uint8_t>& alive) {
+                                                 std::size_t nt, const AliveVec& alive) {
   // The vertices the kept triangles use: a flag each, set by relaxed atomic
-  // stores (plain stores on x86; threads may set the same flag).
-  std::vector<std::atomic<std::uint8_t>> used(nv);
-  for_chunks(nt, chunk_count(nt, 65536), [&](std::size_t, std::size_t b, std::size_t e) {
-    for (std::size_t t = b; t < e; ++t)
-      if (alive[t])
-        for (int k = 0; k < 3; ++k) used[tri[3 * t + k]].store(1, std::memory_order_relaxed);
+  // stores (plain stores on x86; threads may set the same flag). Allocated
+  // unwritten and cleared on all host threads (a fresh array's pages are
+  // mapped when first written: slow for one thread alone); so is remap.
+  // Five rounds of host threads in all (each round starts its threads
+  // afresh): the arrays' steps share them.
+  std::vector<std::atomic<std::uint8_t>, NoInitAllocator<std::atomic<std::uint8_t>>> used(nv);
+  for_chunks(nv, chunk_count(nv, 65536), [&](std::size_t, std::size_t b, std::size_t e) {
+    for (std::size_t v = b; v < e; ++v) used[v].store(0, std::memory_order_relaxed);
   });
-  auto is_used = [&](std::size_t v) { return std::size_t(used[v].load(std::memory_order_relaxed)); };
-  // New vertex numbers: the used vertices before each one.
-  std::vector<std::uint32_t> remap(nv);
-  {
-    const std::size_t chunks = chunk_count(nv, 65536);
-    std::vector<std::size_t> first(chunks + 1, 0);
-    for_chunks(nv, chunks, [&](std::size_t k, std::size_t b, std::size_t e) {
-      std::size_t m = 0;
-      for (std::size_t v = b; v < e; ++v) m += is_used(v);
-      first[k + 1] = m;
-    });
-    for (std::size_t k = 0; k < chunks; ++k) first[k + 1] += first[k];
-    for_chunks(nv, chunks, [&](std::size_t k, std::size_t b, std::size_t e) {
-      std::size_t m = first[k];
-      for (std::size_t v = b; v < e; ++v) remap[v] = std::uint32_t(is_used(v) ? m++ : 0);
-    });
-  }
+  auto is_used = [&](std::size_t v) { return used[v].load(std::memory_order_relaxed) != 0; };
+  auto is_alive = [&](std::size_t t) { return alive[t] != 0; };
+  detail::ArrayCompaction<Real> pc(positions, 3, nv);
+  detail::ArrayCompaction<float> nc(normals, 3, nv);  // (not touched without normals)
+  detail::ArrayCompaction<std::uint32_t> tc(tri, 3, nt);
+  on_threads(tc.chunks, [&](std::size_t k) {
+    for (std::size_t t = tc.begin(k), e = tc.begin(k + 1); t < e; ++t)
+      if (alive[t])
+        for (int c = 0; c < 3; ++c) used[tri[3 * t + c]].store(1, std::memory_order_relaxed);
+    tc.count(k, is_alive);
+  });
+  on_threads(pc.chunks, [&](std::size_t k) { pc.count(k, is_used); });
+  pc.starts();
+  nc.dst = pc.dst;  // (the same chunks and vertices)
+  tc.starts();
+  // New vertex numbers: the used vertices before each one (pc's D_k).
+  std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>> remap(nv);  // (every entry written below)
+  const std::size_t rounds = std::max(pc.chunks, tc.chunks);
+  on_threads(rounds, [&](std::size_t k) {
+    if (k < pc.chunks) {
+      std::size_t m = pc.dst[k];
+      for (std::size_t v = pc.begin(k), e = pc.begin(k + 1); v < e; ++v)
+        remap[v] = std::uint32_t(is_used(v) ? m++ : 0);
+      pc.put_aside(k, is_used);
+      if (normals) nc.put_aside(k, is_used);
+    }
+    if (k < tc.chunks) tc.put_aside(k, is_alive);
+  });
   auto same = [](auto x) { return x; };
-  const std::size_t kept_v = detail::compact_array(positions, 3, nv, is_used, same);
-  if (normals) detail::compact_array(normals, 3, nv, is_used, same);
-  const std::size_t kept_t = detail::compact_array(
-      tri, 3, nt, [&](std::size_t t) { return alive[t] != 0; }, [&](std::uint32_t v) { return remap[v]; });
+  on_threads(rounds, [&](std::size_t k) {
+    if (k < pc.chunks) {
+      pc.move(k, is_used, same);
+      if (normals) nc.move(k, is_used, same);
+    }
+    if (k < tc.chunks) tc.move(k, is_alive, [&](std::uint32_t v) { return remap[v]; });
+  });
+  const std::size_t kept_v = pc.dst[pc.chunks], kept_t = tc.dst[tc.chunks];
   return {kept_v, kept_t};
 }
 
@@ -179,6 +207,24 @@ inline double bounding_extent(const Real* positions, std::size_t vertex_count, V
 inline int triangle_class(const TriangleShape& s, double degenerate_double_area) {
   if (s.double_area < degenerate_double_area || s.sin_min_angle <= 0) return 2;
   return s.sin_min_angle < kSinOneDegree ? 1 : 0;
+}
+
+// True only for triangles that triangle_class certainly calls good (0),
+// from squared lengths alone: no square root, division or sort, a third of
+// triangle_shape's cost. The comparisons keep a relative margin of 1e-6,
+// far above the few roundings either way, so a triangle near a threshold
+// (and a NaN) gets false and is judged by triangle_shape itself; a scan
+// that asks this first finds the same triangles.
+inline bool surely_good(const Vec3& a, const Vec3& b, const Vec3& c, double degenerate_double_area) {
+  const Vec3 ab = b - a, bc = c - b, ca = a - c;
+  const Vec3 n = cross(ab, ca);
+  const double area2 = dot(n, n);  // (2 * area)^2
+  const double x = dot(ab, ab), y = dot(bc, bc), z = dot(ca, ca);
+  // The product of the two largest squared edges.
+  const double l12 = std::max({x * y, y * z, z * x});
+  constexpr double kMargin = 1 + 1e-6;
+  return area2 > 0 && area2 >= degenerate_double_area * degenerate_double_area * kMargin &&
+         area2 >= kSinOneDegree * kSinOneDegree * l12 * kMargin;
 }
 
 struct CheckResult {

@@ -140,9 +140,44 @@ template <class Real>
 class Cleaner {
  public:
   Cleaner(Real* positions, float* normals, std::size_t nv, std::uint32_t* tri, std::size_t nt)
-      : P_(positions), N_(normals), nv_(nv), T_(tri), nt_(nt), alive_(nt, 1), next_(nv, kNone), tail_(nv) {
-    for (std::size_t v = 0; v < nv; ++v) tail_[v] = std::uint32_t(v);
-    const double extent = bounding_extent(positions, nv);
+      : P_(positions), N_(normals), nv_(nv), T_(tri), nt_(nt), alive_(nt), next_(nv), tail_(nv) {
+    // The per-triangle and per-vertex arrays are left unwritten by their
+    // allocation and filled here on all host threads: the kernel maps (and
+    // clears) a fresh array's pages when they are first written, a few
+    // microseconds per 4 KiB page, which one thread writing them all (as a
+    // value-initialized std::vector does) pays alone. Each vertex chunk also
+    // finds its part of the bounding box.
+    for_chunks(nt, chunk_count(nt, 65536), [&](std::size_t, std::size_t b, std::size_t e) {
+      std::fill(alive_.begin() + b, alive_.begin() + e, std::uint8_t(1));
+    });
+    const std::size_t vchunks = chunk_count(nv, 65536);
+    std::vector<std::array<double, 6>> box(vchunks);  // lo, hi
+    for_chunks(nv, vchunks, [&](std::size_t k, std::size_t b, std::size_t e) {
+      for (std::size_t v = b; v < e; ++v) {
+        next_[v] = kNone;
+        tail_[v] = std::uint32_t(v);
+      }
+      // As bounding_extent: every chunk starts from vertex 0 (so a NaN
+      // coordinate is ignored, or not, exactly as in its serial loop).
+      if (nv == 0) return;  // (one empty chunk; no vertex 0 to read)
+      std::array<double, 6>& x = box[k];
+      for (int a = 0; a < 3; ++a) x[a] = x[3 + a] = positions[a];
+      for (std::size_t v = b; v < e; ++v)
+        for (int a = 0; a < 3; ++a) {
+          x[a] = std::min(x[a], double(positions[3 * v + a]));
+          x[3 + a] = std::max(x[3 + a], double(positions[3 * v + a]));
+        }
+    });
+    double extent = 0;
+    if (nv > 0) {
+      std::array<double, 6> x = box[0];
+      for (std::size_t k = 1; k < vchunks; ++k)
+        for (int a = 0; a < 3; ++a) {
+          x[a] = std::min(x[a], box[k][a]);
+          x[3 + a] = std::max(x[3 + a], box[k][3 + a]);
+        }
+      extent = std::max({x[3] - x[0], x[4] - x[1], x[5] - x[2]});
+    }
     degenerate_double_area_ = 2 * kDegenerateAreaFraction * extent * extent;
     host_trace("clean-up: arrays, extent", nv);
     // Triangles around each vertex (CSR, ascending triangle index), on all
@@ -166,26 +201,29 @@ class Cleaner {
         for (std::size_t r = 0; r < parts; ++r) at[r * tparts + k + 1] = n[r];
       });
       for (std::size_t i = 0; i < parts * tparts; ++i) at[i + 1] += at[i];
-      struct Corner {
-        std::uint32_t v, t;
-      };
-      std::vector<Corner, NoInitAllocator<Corner>> corners(at[parts * tparts]);
+      // A corner is its index in tri (3 t + c, 32 bits as incident_'s
+      // offsets): its vertex is read again from tri, its triangle is a
+      // third of it. Half the bytes of storing both (fewer fresh pages to
+      // map, less to write and read back), and tri's reads stay local.
+      std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>> corners(at[parts * tparts]);
       for_chunks(nt, tparts, [&](std::size_t k, std::size_t b, std::size_t e) {
         std::vector<std::size_t> w(parts);
         for (std::size_t r = 0; r < parts; ++r) w[r] = at[r * tparts + k];
-        for (std::size_t t = b; t < e; ++t)
-          for (int c = 0; c < 3; ++c) {
-            const std::uint32_t v = tri[3 * t + c];
-            if (v < nv) corners[w[v >> shift]++] = Corner{v, std::uint32_t(t)};
-          }
+        for (std::size_t i = 3 * b; i < 3 * e; ++i) {
+          const std::uint32_t v = tri[i];
+          if (v < nv) corners[w[v >> shift]++] = std::uint32_t(i);
+        }
       });
       host_trace("clean-up: incidence corners", nt);
-      start_.assign(nv + 1, 0);
+      // (start_ unwritten: each thread clears its own range of it.)
+      start_.resize(nv + 1);
+      start_[0] = 0;
       incident_.resize(corners.size());
       on_threads(parts, [&](std::size_t r) {
         const std::size_t vb = r << shift, ve = std::min(nv, (r + 1) << shift);
         const std::size_t cb = at[r * tparts], ce = at[(r + 1) * tparts];
-        for (std::size_t i = cb; i < ce; ++i) ++start_[corners[i].v + 1];
+        std::fill(start_.begin() + vb + 1, start_.begin() + ve + 1, 0u);
+        for (std::size_t i = cb; i < ce; ++i) ++start_[tri[corners[i]] + 1];
         // (start_[vb] belongs to the range before: its lists start at cb.)
         std::vector<std::uint32_t> fill(ve - vb);
         std::size_t pos = cb;
@@ -194,7 +232,7 @@ class Cleaner {
           pos += start_[v + 1];
           start_[v + 1] = std::uint32_t(pos);
         }
-        for (std::size_t i = cb; i < ce; ++i) incident_[fill[corners[i].v - vb]++] = corners[i].t;
+        for (std::size_t i = cb; i < ce; ++i) incident_[fill[tri[corners[i]] - vb]++] = corners[i] / 3;
       });
       host_trace("clean-up: incidence lists", nt);
     }
@@ -222,6 +260,8 @@ class Cleaner {
     for_chunks(nt_, chunks, [&](std::size_t k, std::size_t b, std::size_t e) {
       for (std::size_t t = b; t < e; ++t) {
         if (!alive_[t]) continue;
+        const std::uint32_t* v = T_ + 3 * t;
+        if (surely_good(load(P_, v[0]), load(P_, v[1]), load(P_, v[2]), degenerate_double_area_)) continue;
         const TriangleShape s = shape(std::uint32_t(t));
         const int c = triangle_class(s, degenerate_double_area_);
         if (c) part[k].emplace_back(-c, s.sin_min_angle, std::uint32_t(t));
@@ -460,12 +500,18 @@ class Cleaner {
   // one closed fan; the others, and the vertices of triangles that repeat a
   // vertex, are never touched.
   void mark_irregular() {
-    irregular_.assign(nv_, 0);
+    irregular_.resize(nv_);  // (every vertex written below, by its chunk's thread)
     for_chunks(nv_, chunk_count(nv_, 16384), [&](std::size_t, std::size_t vb, std::size_t ve) {
       std::vector<std::pair<std::uint32_t, std::uint32_t>> in;  // (previous vertex, local index)
       std::vector<std::uint32_t> out;                           // next vertex, by local index
       for (std::size_t v = vb; v < ve; ++v) {
         const std::uint32_t b = start_[v], e = start_[v + 1];
+        // Almost every fan is small: one_closed_fan's small case on the
+        // stack, without the vectors.
+        if (e - b <= kSmallFan) {
+          irregular_[v] = small_closed_fan(std::uint32_t(v), b, e) ? 0 : 1;
+          continue;
+        }
         bool ok = e - b >= 3;
         in.clear();
         out.clear();
@@ -478,9 +524,37 @@ class Cleaner {
           in.push_back({pv, i - b});
         }
         if (ok) ok = one_closed_fan(in, out);
-        if (!ok) irregular_[v] = 1;
+        irregular_[v] = ok ? 0 : 1;
       }
     });
+  }
+
+  // mark_irregular's test for v with a list [b, e) of at most kSmallFan
+  // triangles: exactly its loop and one_closed_fan's small case.
+  static constexpr std::uint32_t kSmallFan = 16;
+  bool small_closed_fan(std::uint32_t v, std::uint32_t b, std::uint32_t e) const {
+    const std::uint32_t n = e - b;
+    if (n < 3) return false;
+    std::uint32_t in[kSmallFan], out[kSmallFan];  // previous and next vertex, by local index
+    for (std::uint32_t i = 0; i < n; ++i) {
+      const std::uint32_t* w = T_ + 3 * std::size_t(incident_[b + i]);
+      const int k = w[0] == v ? 0 : w[1] == v ? 1 : 2;
+      out[i] = w[(k + 1) % 3];
+      in[i] = w[(k + 2) % 3];
+      if (out[i] == v || in[i] == v) return false;
+    }
+    for (std::uint32_t i = 1; i < n; ++i)
+      for (std::uint32_t j = 0; j < i; ++j)
+        if (in[i] == in[j]) return false;
+    std::uint32_t cur = 0, steps = 0;
+    do {
+      std::uint32_t j = 0;
+      while (j < n && in[j] != out[cur]) ++j;
+      if (j == n) return false;
+      cur = j;
+      ++steps;
+    } while (cur != 0 && steps <= n);
+    return cur == 0 && steps == n;
   }
 
   // Whether triangles with these (previous vertex, local index) and next
@@ -660,8 +734,12 @@ class Cleaner {
     n = (1.0 / ln) * n;
     Vec3 d = centroid - pv;
     d = d - dot(d, n) * n;
+    // The three trial positions change the same triangles: their old shapes
+    // are judged once (prepare_positions, with v's fan in fa_ already), each
+    // trial only the new ones.
+    if (!prepare_positions({v}, true)) return;
     for (double f : {0.25, 0.5, 1.0}) {
-      consider_positions(t, {{v, pv + f * d}}, out);
+      judge_positions(t, {{v, pv + f * d}}, out);
       if (out.valid) return;
     }
   }
@@ -671,40 +749,71 @@ class Cleaner {
   // turns by more than the limit (triangles that were bad are compared with
   // the mean normal around the moved vertices).
   void consider_positions(std::uint32_t t, std::vector<std::pair<std::uint32_t, Vec3>> moved, Candidate& best) {
+    std::vector<std::uint32_t> vs;
+    for (const auto& m : moved) vs.push_back(m.first);
+    if (!prepare_positions(vs)) return;
+    judge_positions(t, std::move(moved), best);
+  }
+  // consider_positions in two steps, so that several trial positions of the
+  // same vertices share the first: the triangles around the vertices
+  // (around_), their mean normal (around_normal_) and each one's old class
+  // and normal (around_old_), which do not depend on the trial. False when
+  // no trial can be valid (an irregular vertex, no mean normal).
+  // fan_ready: vs is one vertex whose fan fa_ holds now.
+  bool prepare_positions(const std::vector<std::uint32_t>& vs, bool fan_ready = false) {
     around_.clear();
-    for (auto& m : moved) {
-      if (irregular_[m.first]) return;
-      m.second = Vec3{double(Real(m.second.x)), double(Real(m.second.y)), double(Real(m.second.z))};
-      fan(m.first, fa_);
+    for (std::uint32_t x : vs) {
+      if (irregular_[x]) return false;
+      if (!fan_ready) fan(x, fa_);
       around_.insert(around_.end(), fa_.begin(), fa_.end());
     }
     std::sort(around_.begin(), around_.end());
     around_.erase(std::unique(around_.begin(), around_.end()), around_.end());
     Vec3 n;
-    for (std::uint32_t u : around_) {
-      const std::uint32_t* w = T_ + 3 * std::size_t(u);
-      n = n + cross(load(P_, w[1]) - load(P_, w[0]), load(P_, w[2]) - load(P_, w[0]));
+    around_old_.resize(around_.size());
+    for (std::size_t i = 0; i < around_.size(); ++i) {
+      const std::uint32_t* w = T_ + 3 * std::size_t(around_[i]);
+      const Vec3 o0 = load(P_, w[0]), o1 = load(P_, w[1]), o2 = load(P_, w[2]);
+      const Vec3 c = cross(o1 - o0, o2 - o0);
+      n = n + c;
+      around_old_[i].normal = c;
+      around_old_[i].cls = triangle_class(triangle_shape(o0, o1, o2), degenerate_double_area_);
     }
-    if (!(norm(n) > 0)) return;
+    around_normal_ = n;
+    return norm(n) > 0;
+  }
+  // The second step: one trial (v, p) (the vertices given to
+  // prepare_positions, in any order). The bad triangle t is judged first:
+  // a trial that leaves it bad (most) costs one shape, not the whole fan's.
+  // The verdict and the score (a minimum) do not depend on that order.
+  void judge_positions(std::uint32_t t, std::vector<std::pair<std::uint32_t, Vec3>> moved, Candidate& best) {
+    for (auto& m : moved) m.second = Vec3{double(Real(m.second.x)), double(Real(m.second.y)), double(Real(m.second.z))};
+    const Vec3& n = around_normal_;
     double score = 2;
-    for (std::uint32_t u : around_) {
+    auto judge = [&](std::size_t i) {
+      const std::uint32_t u = around_[i];
       const std::uint32_t* w = T_ + 3 * std::size_t(u);
-      Vec3 q[3], o[3];
+      Vec3 q[3];
       for (int k = 0; k < 3; ++k) {
-        o[k] = q[k] = load(P_, w[k]);
+        q[k] = load(P_, w[k]);
         for (const auto& m : moved)
           if (m.first == w[k]) q[k] = m.second;
       }
-      const TriangleShape s_old = triangle_shape(o[0], o[1], o[2]);
       const TriangleShape s_new = triangle_shape(q[0], q[1], q[2]);
-      const int c_old = triangle_class(s_old, degenerate_double_area_);
+      const int c_old = around_old_[i].cls;
       const int c_new = triangle_class(s_new, degenerate_double_area_);
-      if (c_new == 2 || (c_new != 0 && (c_old == 0 || u == t))) return;
+      if (c_new == 2 || (c_new != 0 && (c_old == 0 || u == t))) return false;
       const Vec3 n_new = cross(q[1] - q[0], q[2] - q[0]);
-      const Vec3 n_ref = c_old == 0 ? cross(o[1] - o[0], o[2] - o[0]) : n;
-      if (dot(n_new, n_ref) <= cos_limit * norm(n_new) * norm(n_ref)) return;
+      const Vec3& n_ref = c_old == 0 ? around_old_[i].normal : n;
+      if (dot(n_new, n_ref) <= cos_limit * norm(n_new) * norm(n_ref)) return false;
       score = std::min(score, s_new.sin_min_angle);
-    }
+      return true;
+    };
+    const auto it_t = std::lower_bound(around_.begin(), around_.end(), t);
+    const std::size_t i_t = it_t != around_.end() && *it_t == t ? std::size_t(it_t - around_.begin()) : around_.size();
+    if (i_t < around_.size() && !judge(i_t)) return;
+    for (std::size_t i = 0; i < around_.size(); ++i)
+      if (i != i_t && !judge(i)) return;
     if (score <= best.score) return;
     best.valid = true;
     best.kind = Candidate::Move;
@@ -988,7 +1097,7 @@ class Cleaner {
   void apply_cut(const CutCandidate& c) {
     for (std::uint32_t u : c.removed) alive_[u] = 0;
     for (const auto& r : c.rewritten) {
-      for (int k = 0; k < 3; ++k) T_[3 * std::size_t(r.first) + k] = r.second[k];
+        for (int k = 0; k < 3; ++k) T_[3 * std::size_t(r.first) + k] = r.second[k];
       add_incidence(contains(r.second.data(), c.a) ? c.a : c.b, r.first);
     }
     const std::uint32_t ends[2] = {c.a, c.b};  // (nvcc's front end rejects {c.a, c.b} in a range-for)
@@ -1373,7 +1482,7 @@ class Cleaner {
   void apply_cluster(const ClusterCandidate& c) {
     for (std::uint32_t u : c.removed) alive_[u] = 0;
     for (const auto& r : c.rewritten) {
-      std::uint32_t owner = kNone;
+        std::uint32_t owner = kNone;
       for (int k = 0; k < 3; ++k) {
         const std::uint32_t old = T_[3 * std::size_t(r.first) + k];
         if (old != r.second[k]) owner = r.second[k];
@@ -1495,13 +1604,22 @@ class Cleaner {
   std::size_t nv_;
   std::uint32_t* T_;
   std::size_t nt_;
-  std::vector<std::uint8_t> alive_, irregular_;
-  std::vector<std::uint32_t> start_, next_, tail_;
+  // (Allocated unwritten, filled on all host threads: see the constructor.)
+  std::vector<std::uint8_t, NoInitAllocator<std::uint8_t>> alive_, irregular_;
+  std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>> start_, next_, tail_;
   std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>> incident_;
   std::vector<std::uint32_t> extra_head_;                       // per vertex, into extra_ (after flips)
   std::vector<std::pair<std::uint32_t, std::uint32_t>> extra_;  // (triangle, next entry)
   double degenerate_double_area_ = 0;
   std::vector<std::uint32_t> fa_, fb_, ra_, rb_, common_, scratch_, around_, cluster_;
+  // prepare_positions: the old class and normal of each triangle of around_,
+  // and their sum.
+  struct OldTriangle {
+    Vec3 normal;
+    int cls = 0;
+  };
+  std::vector<OldTriangle> around_old_;
+  Vec3 around_normal_;
   // What the repairs changed since the last bad_triangles_after(): vertices
   // moved or renamed into, triangles rewritten in place.
   std::vector<std::uint32_t> changed_vertices_, changed_triangles_;
