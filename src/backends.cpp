@@ -2,6 +2,7 @@
 #include "backends.hpp"
 #include "subdomains.hpp"
 #include "core/clusters.hpp"
+#include "core/parallel.hpp"
 
 #include <Kokkos_Core.hpp>
 
@@ -404,9 +405,18 @@ void pin_host_particles(nbmc_context& ctx) {
   if (cuda_pin(ctx.particles.data(), ctx.particles.capacity() * sizeof(double))) ctx.pinned = ctx.particles.data();
 }
 
+std::size_t host_threads_of(const nbmc_context& ctx) {
+  if (ctx.backend == NBMC_BACKEND_SERIAL) return 1;
+  return ctx.num_threads > 0 ? std::size_t(ctx.num_threads) : 0;
+}
+
 void run_on_kokkos_thread(nbmc_context& ctx, const std::function<void()>& fn) {
   std::lock_guard<std::mutex> lock(g_run_mutex[ctx.backend]);
-  kokkos_thread().run(fn);
+  const std::size_t threads = host_threads_of(ctx);
+  kokkos_thread().run([&] {
+    const ScopedHostThreads limit(threads);  // (stitching, subdomain packing)
+    fn();
+  });
 }
 
 namespace {

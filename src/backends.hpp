@@ -42,8 +42,12 @@ void run_region(nbmc_context& ctx, const ParticleInput& in, const Params& p, con
 // particle attributes onto the final vertices.
 void reconstruct_collective(nbmc_context& ctx, const nbmc_params& params, const nbmc__collective& hooks,
                             int32_t output, int32_t root, nbmc_mesh& mesh);
+// The most host threads a context's host steps may use (core/parallel.hpp's
+// limit): 1 for the serial backend, the context's thread count, 0 = all.
+std::size_t host_threads_of(const nbmc_context& ctx);
 // Runs fn where the context's backend runs its work (nbmc's Kokkos thread,
-// serialised with the reconstructions of that backend).
+// serialised with the reconstructions of that backend), with the context's
+// host thread limit.
 void run_on_kokkos_thread(nbmc_context& ctx, const std::function<void()>& fn);
 
 // Explicit instantiations, one file per backend (pipeline_*.cpp).

@@ -442,6 +442,9 @@ int32_t nbmc_context_reconstruct(nbmc_context* ctx, const nbmc_params* params, n
   nbmc::Params p = nbmc::resolve_params(*params);
   nbmc::apply_radii(*ctx, p);
   nbmc::check_domain(p);
+  // The post-processing and the attributes run on this thread's host
+  // threads: no more than the context was given.
+  const nbmc::ScopedHostThreads host_threads(nbmc::host_threads_of(*ctx));
   auto m = std::make_unique<nbmc_mesh>();
   nbmc::RunStats st;
   std::vector<std::uint32_t> kept;  // isolated drop/sphere: the particles kept

@@ -17,6 +17,7 @@
 #include "capi_mesh.hpp"
 #include "context.hpp"
 #include "subdomains.hpp"
+#include "core/parallel.hpp"
 
 #include <algorithm>
 #include <chrono>
@@ -563,6 +564,7 @@ void reconstruct_collective(nbmc_context& ctx, const nbmc_params& full, const nb
   HostMesh& mesh = out.mesh;
   const Coll c{hooks};
   const double t_start = seconds_now();
+  const ScopedHostThreads host_threads(host_threads_of(ctx));  // the root's post-processing, as in capi.cpp
   Params p;
   // 1. Parameters, and what each rank's upload left (agreed: a rank whose
   //    particles were rejected fails the call on every rank).

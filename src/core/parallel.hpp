@@ -13,10 +13,30 @@
 
 namespace nbmc {
 
-// Chunks for `count` items: one per hardware thread, each at least
-// `min_items` long (at least one chunk).
+// The most threads the loops below start on this thread (0: one per
+// hardware thread). The C API sets it from the context's thread count for
+// the duration of a call (ScopedHostThreads), so that a context asked for N
+// threads (or the serial backend: one) never runs more in its host steps.
+inline std::size_t& host_thread_limit() {
+  static thread_local std::size_t limit = 0;
+  return limit;
+}
+class ScopedHostThreads {
+ public:
+  explicit ScopedHostThreads(std::size_t limit) : old_(host_thread_limit()) { host_thread_limit() = limit; }
+  ~ScopedHostThreads() { host_thread_limit() = old_; }
+  ScopedHostThreads(const ScopedHostThreads&) = delete;
+  ScopedHostThreads& operator=(const ScopedHostThreads&) = delete;
+
+ private:
+  std::size_t old_;
+};
+
+// Chunks for `count` items: one per hardware thread (at most the limit
+// above), each at least `min_items` long (at least one chunk).
 inline std::size_t chunk_count(std::size_t count, std::size_t min_items) {
-  const std::size_t hw = std::max(1u, std::thread::hardware_concurrency());
+  const std::size_t limit = host_thread_limit();
+  const std::size_t hw = limit > 0 ? limit : std::max(1u, std::thread::hardware_concurrency());
   return std::max<std::size_t>(1, std::min(hw, count / std::max<std::size_t>(1, min_items)));
 }
 
