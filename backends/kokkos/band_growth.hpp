@@ -34,10 +34,11 @@
 //   8  carry_values, one kernel (old vertices keep their values), and the
 //      gather of the new vertices only, one kernel, its evaluation count
 //      added to device counters read once after the loop.
-// Allocations per round: the grown band's keys, words, offsets and values
-// (and the map when it must grow); the band it replaces is freed after the
-// next round's sync, when the device is idle anyway (cudaFree synchronises).
-// Scratch buffers grow only. Before, a round made about ten blocking
+// Allocations: the band a round replaces keeps its buffers for the next
+// rounds (allocated with 1/32 headroom), the block map is reused while it has
+// room, scratch buffers only grow: after the first two rounds, a round
+// usually allocates and frees nothing (cudaFree synchronises; fresh host
+// pages fault). Before, a round made about ten blocking
 // transfers (the band's keys and words to the host and back, the leak
 // candidates built on the host and uploaded, the leak count and list read
 // back, three growth lists uploaded) and about eight fences or totals read
@@ -180,6 +181,17 @@ void ensure_capacity(MemoryTracker& tracker, Buffer<T, MemSpace>& b, std::size_t
   b = Buffer<T, MemSpace>(tracker, label, n + n / 2);
 }
 
+// `from` if it holds n elements (its contents are not kept), else a new
+// buffer of n and 1/32 more: the band and its values grow by much less than
+// that per round, so buffers handed back by one round serve the next ones.
+template <class T, class MemSpace>
+Buffer<T, MemSpace> reuse_or_allocate(MemoryTracker& tracker, Buffer<T, MemSpace>& from, std::size_t n,
+                                      const char* label) {
+  if (from.size() >= n) return std::move(from);
+  from.release();
+  return Buffer<T, MemSpace>(tracker, label, n + n / 32);
+}
+
 // Totals of the growth (RunStats fields) and, for a subdomain, the cells it added.
 struct GrowthTotals {
   std::uint64_t rounds = 0, cells = 0, evaluations = 0;
@@ -210,11 +222,11 @@ void grow_band(const ExecSpace& space, MemoryTracker& tracker, const Grid& g,
   Buffer<std::uint64_t, MemSpace> word_keys, word_bits, block_set, new_blocks, candidates, sorted_new, old_to_new,
       list_words, list_bits;
   Buffer<std::uint32_t, MemSpace> word_slots, sort_values[2];
-  // The band and values a round replaced, released after the next round's
-  // sync: the device is idle then, so the frees (cudaFree synchronises) do
-  // not stall the queue.
-  Band<MemSpace> retired;
-  Buffer<float, MemSpace> retired_phi;
+  // The band and values a round replaced: their buffers serve the next
+  // rounds (reuse_or_allocate), so that most rounds neither allocate nor
+  // free (on a GPU, cudaFree synchronises; on the host, fresh pages fault).
+  Band<MemSpace> spare;
+  Buffer<float, MemSpace> spare_phi;
   std::size_t n_prev = 0;  // leaks of the previous round (in leak_lists[1])
 
   for (int round = 0;; ++round) {
@@ -320,8 +332,6 @@ void grow_band(const ExecSpace& space, MemoryTracker& tracker, const Grid& g,
     }
     const std::size_t n_leaks = hc[kLeakCount];
     trace("band leaks", n_leaks);
-    retired = Band<MemSpace>();  // the device is idle: free the previous round's band
-    retired_phi.release();
     if (n_leaks == 0) {
       // NBMC_CHECK_BAND=1 (tests): the scans near the added cells must have
       // found everything a full scan finds.
@@ -380,8 +390,8 @@ void grow_band(const ExecSpace& space, MemoryTracker& tracker, const Grid& g,
         grown.own_hi[a] = band.own_hi[a];
       }
       grown.n_blocks = n_new;
-      grown.block_keys = Buffer<std::uint64_t, MemSpace>(tracker, "band::block_keys", n_new);
-      grown.words = Buffer<std::uint64_t, MemSpace>(tracker, "band::words", n_new * 8);
+      grown.block_keys = reuse_or_allocate(tracker, spare.block_keys, n_new, "band::block_keys");
+      grown.words = reuse_or_allocate(tracker, spare.words, n_new * 8, "band::words");
       // The old map is kept (its keys are a subset) while it has room for the
       // new keys at the load HashMapStorage::allocate gives; its values are
       // renumbered below.
@@ -433,7 +443,7 @@ void grow_band(const ExecSpace& space, MemoryTracker& tracker, const Grid& g,
             });
       }
       // Prefix counts without reading the total back: it is known.
-      grown.word_offset = Buffer<std::uint64_t, MemSpace>(tracker, "band::word_offset", n_new * 8);
+      grown.word_offset = reuse_or_allocate(tracker, spare.word_offset, n_new * 8, "band::word_offset");
       {
         const auto words = Kokkos::View<const std::uint64_t*, MemSpace>(grown.words.view());
         const auto offs = grown.word_offset.view();
@@ -471,15 +481,15 @@ void grow_band(const ExecSpace& space, MemoryTracker& tracker, const Grid& g,
         if (bad) throw Error(9, "band growth: the block map is not numbered in key order");
       }
       // ---- the values: old vertices carried, new ones evaluated
-      Buffer<float, MemSpace> grown_phi(tracker, "scalar_field::values", grown.n_vertices);
+      Buffer<float, MemSpace> grown_phi = reuse_or_allocate(tracker, spare_phi, grown.n_vertices, "scalar_field::values");
       const BandView<MemSpace> gv = view_of(grown, g);
       carry_values(space, bv, n_words, cur_phi, gv, grown_phi.view(),
                    Kokkos::View<const std::uint64_t*, MemSpace>(U64(old_to_new.data(), n_old)));
       trace("growth: carry values", n_words);
       const WordList<MemSpace> list{U64(list_words.data(), n_list), U64(list_bits.data(), n_list)};
       totals.evaluations += evaluate(gv, n_list, list, grown_phi.view(), sink.view());
-      retired = std::move(band);
-      retired_phi = std::move(phi);
+      spare = std::move(band);
+      spare_phi = std::move(phi);
       band = std::move(grown);
       phi = std::move(grown_phi);
     }
