@@ -69,17 +69,16 @@ KOKKOS_INLINE_FUNCTION std::uint64_t cell_key(std::int64_t i, std::int64_t j, st
   return std::uint64_t(k) << 42 | std::uint64_t(j) << 21 | std::uint64_t(i);
 }
 
-// Inserts key into an open-addressing set (linear probing, mask + 1 slots,
-// empty slots ~0); returns its slot, or -1 when every slot is taken (the
-// probe is bounded: a full table flags an overflow instead of spinning).
-// `inserted`: whether this call added the key.
-template <class View>
-KOKKOS_INLINE_FUNCTION std::int64_t set_insert(const View& keys, std::uint64_t mask, std::uint64_t key,
+// Inserts key into an open-addressing set (linear probing, mask + 1 slots
+// at keys, empty slots ~0); returns its slot, or -1 when every slot is taken
+// (the probe is bounded: a full table flags an overflow instead of
+// spinning). `inserted`: whether this call added the key.
+KOKKOS_INLINE_FUNCTION std::int64_t set_insert(std::uint64_t* keys, std::uint64_t mask, std::uint64_t key,
                                                bool& inserted) {
   std::uint64_t slot = hash64(key) & mask;
   for (std::uint64_t probe = 0; probe <= mask; ++probe) {
     const std::uint64_t empty = ~std::uint64_t(0);
-    const std::uint64_t prev = Kokkos::atomic_compare_exchange(&keys(slot), empty, key);
+    const std::uint64_t prev = Kokkos::atomic_compare_exchange(&keys[slot], empty, key);
     if (prev == empty || prev == key) {
       inserted = prev == empty;
       return std::int64_t(slot);
@@ -110,24 +109,26 @@ enum GrowthCounter { kLeakCount, kWordCount, kNewBlockCount, kFreshCount, kOverf
 // find them), and the corners of those cells that are not band vertices
 // yet: per band word (key: block key * 8 + word), the bits of its new
 // vertices; the blocks that do not exist yet, each once.
+// Raw pointers, not views, and the band passed by the caller: kernels whose
+// functor is 512 bytes or more go through CUDA constant memory in Kokkos 3.4,
+// and each such launch waits for the previous one (a host sync); the
+// detection kernels stay below that (about 420 bytes with the band view).
 template <class MemSpace>
 struct GrowthRecorder {
-  Kokkos::View<unsigned int*, MemSpace> counters;
-  Kokkos::View<std::int64_t*, MemSpace> leaks;
-  std::uint64_t leak_cap = 0;
-  Kokkos::View<std::uint64_t*, MemSpace> word_keys, word_bits, block_set;  // mask + 1 slots each
-  std::uint64_t mask = 0;
-  Kokkos::View<std::uint32_t*, MemSpace> word_slots;  // entry -> slot of word_keys
-  Kokkos::View<std::uint64_t*, MemSpace> new_blocks;  // entry -> block key
-  std::uint64_t entry_cap = 0;
-  BandView<MemSpace> band;                 // the band before this round
-  std::int64_t lim_lo[3], lim_hi[3];       // corners allowed (grid and the band's vertex box), inclusive
+  unsigned int* counters = nullptr;
+  std::int64_t* leaks = nullptr;
+  std::uint64_t *word_keys = nullptr, *word_bits = nullptr, *block_set = nullptr;  // mask + 1 slots each
+  std::uint32_t* word_slots = nullptr;  // entry -> slot of word_keys
+  std::uint64_t* new_blocks = nullptr;  // entry -> block key
+  std::uint64_t leak_cap = 0, mask = 0, entry_cap = 0;
+  std::int32_t lim_lo[3] = {0, 0, 0}, lim_hi[3] = {0, 0, 0};  // corners allowed (grid, vertex box), inclusive
 
-  KOKKOS_INLINE_FUNCTION void overflow() const { counters(kOverflow) = 1u; }
+  KOKKOS_INLINE_FUNCTION void overflow() const { counters[kOverflow] = 1u; }
 
-  // Records corner (i, j, k) of a leak cell unless it is a band vertex (or
-  // outside the box; extend_band's rule).
-  KOKKOS_INLINE_FUNCTION void add_corner(std::int64_t i, std::int64_t j, std::int64_t k) const {
+  // Records corner (i, j, k) of a leak cell unless it is a vertex of `band`
+  // (the band before this round) or outside the box (extend_band's rule).
+  KOKKOS_INLINE_FUNCTION void add_corner(const BandView<MemSpace>& band, std::int64_t i, std::int64_t j,
+                                         std::int64_t k) const {
     if (i < lim_lo[0] || j < lim_lo[1] || k < lim_lo[2] || i > lim_hi[0] || j > lim_hi[1] || k > lim_hi[2]) return;
     const std::uint64_t key = morton3(std::uint32_t(i >> 3), std::uint32_t(j >> 3), std::uint32_t(k >> 3));
     const int sub = BandView<MemSpace>::word_of(i & 7, j & 7, k & 7);
@@ -141,33 +142,33 @@ struct GrowthRecorder {
       return;
     }
     if (inserted) {
-      const unsigned int q = Kokkos::atomic_fetch_add(&counters(kWordCount), 1u);
-      if (q < entry_cap) word_slots(q) = std::uint32_t(slot);
+      const unsigned int q = Kokkos::atomic_fetch_add(&counters[kWordCount], 1u);
+      if (q < entry_cap) word_slots[q] = std::uint32_t(slot);
       else overflow();
       if (b == ~0u) {
         bool new_block = false;
         if (set_insert(block_set, mask, key, new_block) < 0) {
           overflow();
         } else if (new_block) {
-          const unsigned int nb = Kokkos::atomic_fetch_add(&counters(kNewBlockCount), 1u);
-          if (nb < entry_cap) new_blocks(nb) = key;
+          const unsigned int nb = Kokkos::atomic_fetch_add(&counters[kNewBlockCount], 1u);
+          if (nb < entry_cap) new_blocks[nb] = key;
           else overflow();
         }
       }
     }
-    const std::uint64_t prev = Kokkos::atomic_fetch_or(&word_bits(slot), bit);
-    if (!(prev & bit)) Kokkos::atomic_fetch_add(&counters(kFreshCount), 1u);
+    const std::uint64_t prev = Kokkos::atomic_fetch_or(&word_bits[slot], bit);
+    if (!(prev & bit)) Kokkos::atomic_fetch_add(&counters[kFreshCount], 1u);
   }
 
   // Appends the n leak cells found at one cell (out: x y z triples) and
   // records their corners; leaks past the capacity are counted only.
-  KOKKOS_INLINE_FUNCTION void add_leaks(const std::int64_t* out, int n) const {
-    const std::uint64_t at = Kokkos::atomic_fetch_add(&counters(kLeakCount), unsigned(n));
+  KOKKOS_INLINE_FUNCTION void add_leaks(const BandView<MemSpace>& band, const std::int64_t* out, int n) const {
+    const std::uint64_t at = Kokkos::atomic_fetch_add(&counters[kLeakCount], unsigned(n));
     for (int q = 0; q < n; ++q) {
       if (at + std::uint64_t(q) >= leak_cap) return;
       const std::int64_t i = out[3 * q], j = out[3 * q + 1], k = out[3 * q + 2];
-      for (int a = 0; a < 3; ++a) leaks(3 * (at + std::uint64_t(q)) + std::uint64_t(a)) = out[3 * q + a];
-      for (int c = 0; c < 8; ++c) add_corner(i + (c & 1), j + ((c >> 1) & 1), k + (c >> 2));
+      for (int a = 0; a < 3; ++a) leaks[3 * (at + std::uint64_t(q)) + std::uint64_t(a)] = out[3 * q + a];
+      for (int c = 0; c < 8; ++c) add_corner(band, i + (c & 1), j + ((c >> 1) & 1), k + (c >> 2));
     }
   }
 };
@@ -246,27 +247,26 @@ void grow_band(const ExecSpace& space, MemoryTracker& tracker, const Grid& g,
       ensure_capacity(tracker, block_set, slots, "band_growth::block_set");
       ensure_capacity(tracker, word_slots, entry_cap, "band_growth::word_entries");
       ensure_capacity(tracker, new_blocks, entry_cap, "band_growth::new_blocks");
-      rec.counters = counters.view();
-      rec.leaks = leak_lists[0].view();
+      rec.counters = counters.data();
+      rec.leaks = leak_lists[0].data();
       rec.leak_cap = leak_cap;
-      rec.word_keys = U64(word_keys.data(), slots);
-      rec.word_bits = U64(word_bits.data(), slots);
-      rec.block_set = U64(block_set.data(), slots);
+      rec.word_keys = word_keys.data();
+      rec.word_bits = word_bits.data();
+      rec.block_set = block_set.data();
       rec.mask = slots - 1;
-      rec.word_slots = word_slots.view();
-      rec.new_blocks = new_blocks.view();
+      rec.word_slots = word_slots.data();
+      rec.new_blocks = new_blocks.data();
       rec.entry_cap = entry_cap;
-      rec.band = bv;
       for (int a = 0; a < 3; ++a) {
-        rec.lim_lo[a] = band.clip_lo[a];
-        rec.lim_hi[a] = std::min<std::int64_t>(g.dims[a] - 1, band.clip_hi[a]);
+        rec.lim_lo[a] = std::int32_t(band.clip_lo[a]);
+        rec.lim_hi[a] = std::int32_t(std::min<std::int64_t>(g.dims[a] - 1, band.clip_hi[a]));
       }
       // The candidate set of the scans near the added cells (27 per added
       // cell at most: it cannot fill).
       const std::size_t n_cand = round == 0 ? 0 : 27 * n_prev;
       const std::size_t cslots = round == 0 ? 0 : next_pow2(n_cand + n_cand / 2 + 16);
       if (cslots) ensure_capacity(tracker, candidates, cslots, "band_growth::candidates");
-      const U64 cand(candidates.data(), cslots);
+      std::uint64_t* const cand = candidates.data();
       // One kernel empties the sets and zeroes the counters; no fence: the
       // detection kernel runs after it on the same execution space instance.
       {
@@ -274,24 +274,45 @@ void grow_band(const ExecSpace& space, MemoryTracker& tracker, const Grid& g,
         Kokkos::parallel_for(
             "nbmc::band_growth::clear", Range(space, 0, std::max(slots, cslots)), KOKKOS_LAMBDA(const std::size_t s) {
               if (s < slots) {
-                r.word_keys(s) = ~std::uint64_t(0);
-                r.word_bits(s) = 0;
-                r.block_set(s) = ~std::uint64_t(0);
+                r.word_keys[s] = ~std::uint64_t(0);
+                r.word_bits[s] = 0;
+                r.block_set[s] = ~std::uint64_t(0);
               }
-              if (s < cslots) cand(s) = ~std::uint64_t(0);
-              if (s < std::size_t(kGrowthCounters)) r.counters(s) = 0u;
+              if (s < cslots) cand[s] = ~std::uint64_t(0);
+              if (s < std::size_t(kGrowthCounters)) r.counters[s] = 0u;
             });
       }
       if (round == 0) {
-        // The whole band.
-        for_each_band_vertex(
-            space, "nbmc::band_growth::leaks", bv, n_words,
-            KOKKOS_LAMBDA(const std::size_t w, const int bit, const std::int64_t self) {
-              std::int64_t i, j, k, out[18];
-              bv.vertex(w, bit, i, j, k);
-              const int n = leaks_at(bv, cur_phi, i, j, k, self, out, std::uint32_t(w >> 3));
-              if (n) rec.add_leaks(out, n);
-            });
+        // The whole band: on the host one work item per word, on a GPU one
+        // thread per vertex slot (as for_each_band_vertex, written out so
+        // that the functor holds one band view, not two: see GrowthRecorder).
+        if constexpr (host_memory) {
+          Kokkos::parallel_for(
+              "nbmc::band_growth::leaks",
+              Kokkos::RangePolicy<ExecSpace, Kokkos::Schedule<Kokkos::Dynamic>>(space, 0, n_words),
+              KOKKOS_LAMBDA(const std::size_t w) {
+                bv.for_each_vertex(w, [&](const int bit, const std::int64_t self) {
+                  std::int64_t i, j, k, out[18];
+                  bv.vertex(w, bit, i, j, k);
+                  const int n = leaks_at(bv, cur_phi, i, j, k, self, out, std::uint32_t(w >> 3));
+                  if (n) rec.add_leaks(bv, out, n);
+                });
+              });
+        } else {
+          Kokkos::parallel_for(
+              "nbmc::band_growth::leaks", Range(space, 0, n_words * 64), KOKKOS_LAMBDA(const std::size_t v) {
+                const std::size_t w = v >> 6;
+                const int bit = int(v & 63);
+                const std::uint64_t full = bv.words(w);
+                if (!((full >> bit) & 1)) return;
+                const std::int64_t self =
+                    std::int64_t(bv.word_offset(w) + popcount64(full & ((std::uint64_t(1) << bit) - 1)));
+                std::int64_t i, j, k, out[18];
+                bv.vertex(w, bit, i, j, k);
+                const int n = leaks_at(bv, cur_phi, i, j, k, self, out, std::uint32_t(w >> 3));
+                if (n) rec.add_leaks(bv, out, n);
+              });
+        }
       } else {
         // Only the cells that can have become leaky: a cell's leaks appear
         // when it becomes complete, i.e. when it gains a corner, so the 27
@@ -316,7 +337,7 @@ void grow_band(const ExecSpace& space, MemoryTracker& tracker, const Grid& g,
               if (self < 0) return;
               std::int64_t out[18];
               const int m = leaks_at(bv, cur_phi, i, j, k, self, out);
-              if (m) rec.add_leaks(out, m);
+              if (m) rec.add_leaks(bv, out, m);
             });
       }
       // The round's one device-to-host copy (and sync).
@@ -427,16 +448,16 @@ void grow_band(const ExecSpace& space, MemoryTracker& tracker, const Grid& g,
       {
         const U64 lw(list_words.data(), n_list), lb(list_bits.data(), n_list);
         const auto slots = Kokkos::View<const std::uint32_t*, MemSpace>(word_slots.view());
-        const auto wk = rec.word_keys;
-        const auto wb = rec.word_bits;
+        const std::uint64_t* const wk = rec.word_keys;
+        const std::uint64_t* const wb = rec.word_bits;
         const auto map = grown.blocks.map;
         const auto nwords = grown.words.view();
         Kokkos::parallel_for(
             "nbmc::band_growth::set_bits", Range(space, 0, n_list), KOKKOS_LAMBDA(const std::size_t q) {
               const std::uint32_t s = slots(q);
-              const std::uint64_t key = wk(s);
+              const std::uint64_t key = wk[s];
               const std::size_t w = std::size_t(map.find(key >> 3)) * 8 + std::size_t(key & 7);
-              const std::uint64_t bits = wb(s);
+              const std::uint64_t bits = wb[s];
               nwords(w) |= bits;  // each word is listed once: no other thread writes it
               lw(q) = w;
               lb(q) = bits;

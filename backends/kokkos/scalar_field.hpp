@@ -345,14 +345,21 @@ void carry_values(const ExecSpace& space, const BandView<typename ExecSpace::mem
                   const BandView<typename ExecSpace::memory_space>& band,
                   const Kokkos::View<float*, typename ExecSpace::memory_space>& phi,
                   const Kokkos::View<const std::uint64_t*, typename ExecSpace::memory_space>& old_to_new) {
+  // The four views it reads, not the two band views: a functor of 512 bytes
+  // or more would go through CUDA constant memory (Kokkos 3.4), whose
+  // launches wait for each other.
+  const Kokkos::View<const std::uint64_t*, typename ExecSpace::memory_space> owords = old.words,
+                                                                            ooffs = old.word_offset,
+                                                                            nwords = band.words,
+                                                                            noffs = band.word_offset;
   Kokkos::parallel_for(
       "nbmc::scalar_field::carry_values", Kokkos::RangePolicy<ExecSpace>(space, 0, old_words),
       KOKKOS_LAMBDA(const std::size_t w) {
-        const std::uint64_t oword = old.words(w);
+        const std::uint64_t oword = owords(w);
         if (!oword) return;
         const std::size_t nw = std::size_t(old_to_new(w >> 3)) * 8 + (w & 7);
-        const std::uint64_t nword = band.words(nw);
-        const std::size_t o0 = old.word_offset(w), n0 = band.word_offset(nw);
+        const std::uint64_t nword = nwords(nw);
+        const std::size_t o0 = ooffs(w), n0 = noffs(nw);
         if (oword == nword) {
           const int n = popcount64(oword);
           for (int q = 0; q < n; ++q) phi(n0 + q) = old_phi(o0 + q);
