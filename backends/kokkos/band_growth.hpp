@@ -38,11 +38,15 @@
 // rounds (allocated with 1/32 headroom), the block map is reused while it has
 // room, scratch buffers only grow: after the first two rounds, a round
 // usually allocates and frees nothing (cudaFree synchronises; fresh host
-// pages fault). Before, a round made about ten blocking
-// transfers (the band's keys and words to the host and back, the leak
-// candidates built on the host and uploaded, the leak count and list read
-// back, three growth lists uploaded) and about eight fences or totals read
-// back (map, numbering, prefix, carry, gather count, counter inits).
+// pages fault). In all, a round is about nine launches (a Kokkos scan is
+// two on CUDA), one sync with one 32-byte device-to-host copy, no
+// host-to-device copy; only the gather's functor is large enough for Kokkos'
+// constant-memory launch, which waits for the previous such launch (the
+// previous round's gather, long done). Before, a round made about ten
+// blocking transfers (the band's keys and words to the host and back, the
+// leak candidates built on the host and uploaded, the leak count and list
+// read back, three growth lists uploaded) and about eight fences or totals
+// read back (map, numbering, prefix, carry, gather count, counter inits).
 //
 // The list capacities are guesses (from the band or the previous round);
 // when one is exceeded, the overflow flag in the counters makes the round's
@@ -214,6 +218,9 @@ void grow_band(const ExecSpace& space, MemoryTracker& tracker, const Grid& g,
   constexpr bool host_memory = Kokkos::SpaceAccessibility<Kokkos::HostSpace, MemSpace>::accessible;
   ScopedRegion region("nbmc::band_growth");
   const bool check = std::getenv("NBMC_CHECK_BAND") != nullptr;
+  // NBMC_GROWTH_TINY_GUESSES=1 (tests): capacity guesses of 1, so that the
+  // detection's overflow path runs in every round.
+  const bool tiny_guesses = std::getenv("NBMC_GROWTH_TINY_GUESSES") != nullptr;
 
   Buffer<unsigned int, MemSpace> counters(tracker, "band_growth::counters", kGrowthCounters);
   unsigned int hc[kGrowthCounters];
@@ -238,6 +245,7 @@ void grow_band(const ExecSpace& space, MemoryTracker& tracker, const Grid& g,
     // or twice the previous round's), distinct words gaining vertices.
     std::size_t leak_cap = round == 0 ? 1024 + n_words / 16 : 1024 + 2 * n_prev;
     std::size_t entry_cap = 2 * leak_cap;
+    if (tiny_guesses) leak_cap = entry_cap = 1;  // tests: every round overflows and runs again
     GrowthRecorder<MemSpace> rec;
     for (int attempt = 0;; ++attempt) {
       const std::size_t slots = next_pow2(2 * entry_cap + 16);
