@@ -61,6 +61,7 @@
 
 #include <algorithm>
 #include <cstdlib>
+#include <functional>
 #include <string>
 #include <type_traits>
 #include <vector>
@@ -203,14 +204,22 @@ struct GrowthTotals {
   std::vector<std::int64_t>* grown_cells = nullptr;  // appended: each round's leaks, sorted (host)
 };
 
-// The growth loop. `evaluate(band_view, n_list, list, phi, sink)` runs the
-// field method's gather on the listed words (gather_field) and returns the
-// evaluations it counted on the host (0 where it added them to `sink`, 256
-// device counters). band and phi are replaced by the grown band and values.
-template <class ExecSpace, class Evaluate>
+// `evaluate(band_view, n_list, list, phi, sink)` runs the field method's
+// gather on the listed words (gather_field) and returns the evaluations it
+// counted on the host (0 where it added them to `sink`, 256 device
+// counters). A std::function, not a template parameter: nvcc rejects
+// extended lambdas in a function template instantiated with a local type
+// (the caller's lambda).
+template <class MemSpace>
+using GrowthEvaluate = std::function<std::uint64_t(const BandView<MemSpace>&, std::size_t, const WordList<MemSpace>&,
+                                                   const Kokkos::View<float*, MemSpace>&,
+                                                   const Kokkos::View<unsigned long long*, MemSpace>&)>;
+
+// The growth loop; band and phi are replaced by the grown band and values.
+template <class ExecSpace>
 void grow_band(const ExecSpace& space, MemoryTracker& tracker, const Grid& g,
                Band<typename ExecSpace::memory_space>& band, Buffer<float, typename ExecSpace::memory_space>& phi,
-               const Evaluate& evaluate, GrowthTotals& totals) {
+               const GrowthEvaluate<typename ExecSpace::memory_space>& evaluate, GrowthTotals& totals) {
   using MemSpace = typename ExecSpace::memory_space;
   using Range = Kokkos::RangePolicy<ExecSpace>;
   using Unmanaged = Kokkos::MemoryTraits<Kokkos::Unmanaged>;

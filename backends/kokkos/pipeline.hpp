@@ -371,13 +371,14 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
   if (p.field == FieldKind::NarrowBand) {
     GrowthTotals totals;
     if (region_in) totals.grown_cells = &region_in->grown;
-    auto evaluate = [&](const BandView<MemSpace>& bv, std::size_t n_list, const WordList<MemSpace>& list,
-                        const Kokkos::View<float*, MemSpace>& out,
-                        const Kokkos::View<unsigned long long*, MemSpace>& sink) {
+    const GrowthEvaluate<MemSpace> evaluate = [&](const BandView<MemSpace>& bv, std::size_t n_list,
+                                                  const WordList<MemSpace>& list,
+                                                  const Kokkos::View<float*, MemSpace>& out,
+                                                  const Kokkos::View<unsigned long long*, MemSpace>& sink) {
       auto grow = [&](auto method) {
         return gather_field<decltype(method)>(space, nbf, bv, n_list, g, fc, out, progress, list, sink);
       };
-      return with_field_method(p.method, radii, grow);
+      return std::uint64_t(with_field_method(p.method, radii, grow));
     };
     grow_band(space, tracker, g, band, phi, evaluate, totals);
     if (totals.rounds) st.band_growth_rounds = totals.rounds;
