@@ -154,3 +154,27 @@ TEST(BandGrowth, ScansNearTheAddedCellsFindEveryLeak) {
     }
   ::unsetenv("NBMC_CHECK_BAND");
 }
+
+// Band growth's capacity guesses (band_growth.hpp): when a round's leaks or
+// new words exceed them, the detection runs again with exact bounds. With
+// guesses of 1 every round takes that path; the mesh must not change.
+TEST(BandGrowth, DetectionOverflowGivesTheSameMesh) {
+  ::setenv("NBMC_CHECK_BAND", "1", 1);
+  nbmc_params p = params(0.1);
+  p.method = NBMC_METHOD_ZB05;
+  p.influence_radius = 1.5;
+  p.iso_radius = 1.44;
+  p.band_width = 1.0;
+  p.cell_size = 0.5;
+  const Points pts = sphere(0, 0, 0, 0.35, 0.1);
+  const Result guessed = reconstruct(pts, p, NBMC_BACKEND_OPENMP, 2);
+  ::setenv("NBMC_GROWTH_TINY_GUESSES", "1", 1);
+  const Result exact = reconstruct(pts, p, NBMC_BACKEND_OPENMP, 2);
+  ::unsetenv("NBMC_GROWTH_TINY_GUESSES");
+  ::unsetenv("NBMC_CHECK_BAND");
+  ASSERT_EQ(guessed.status, NBMC_OK) << guessed.message;
+  ASSERT_EQ(exact.status, NBMC_OK) << exact.message;
+  EXPECT_GT(guessed.mesh.triangle_count(), 0u);
+  EXPECT_EQ(exact.mesh.triangles, guessed.mesh.triangles);
+  EXPECT_EQ(exact.mesh.positions, guessed.mesh.positions);
+}

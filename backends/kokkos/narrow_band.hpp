@@ -341,19 +341,14 @@ void build_narrow_band(const ExecSpace& space, MemoryTracker& tracker, const Gri
 }
 
 // Grows the band by the eight corners of every cell in `cells` (grid
-// coordinates of the cells' minimum corners, host memory). Returns the new
-// band; `old` is left intact so field values can be carried over.
-// What extend_band changed, to carry the field values over (carry_values and
-// WordList in scalar_field.hpp): the new index of every old block, and the
-// words that gained vertices with the bits of those new vertices.
-struct BandGrowth {
-  std::vector<std::uint64_t> old_to_new, words, bits;
-};
-
+// coordinates of the cells' minimum corners, host memory), on the host.
+// Returns the new band; `old` is left intact. Used for a subdomain's seeds
+// (once per run) and, with NBMC_CHECK_BAND=1, as the reference of the band
+// growth's device extension (band_growth.hpp).
 template <class ExecSpace>
 void extend_band(const ExecSpace& space, MemoryTracker& tracker, const Grid& g,
                  const Band<typename ExecSpace::memory_space>& old, const std::vector<std::int64_t>& cells,
-                 Band<typename ExecSpace::memory_space>& band, BandGrowth* growth = nullptr) {
+                 Band<typename ExecSpace::memory_space>& band) {
   using MemSpace = typename ExecSpace::memory_space;
   auto okeys = Kokkos::create_mirror_view_and_copy(Kokkos::HostSpace(), old.block_keys.view());
   auto owords = Kokkos::create_mirror_view_and_copy(Kokkos::HostSpace(), old.words.view());
@@ -399,32 +394,14 @@ void extend_band(const ExecSpace& space, MemoryTracker& tracker, const Grid& g,
                  std::back_inserter(keys));
   check_band_blocks<MemSpace>(keys.size());
   std::vector<std::uint64_t> words(keys.size() * 8, 0);
-  if (growth) growth->old_to_new.resize(old.n_blocks);
   for (std::size_t b = 0, nbk = 0; b < old.n_blocks; ++b) {
     while (keys[nbk] < okeys(b)) ++nbk;  // okeys is a subsequence of keys
     for (int w = 0; w < 8; ++w) words[nbk * 8 + w] = owords(b * 8 + w);
-    if (growth) growth->old_to_new[b] = nbk;
   }
-  // Set the corners' bits; the words and bits that are new.
-  std::vector<std::pair<std::uint64_t, std::uint64_t>> fresh;  // (word, bit)
+  // Set the corners' bits.
   for (const Corner& c : corners) {
     const std::size_t b = std::size_t(std::lower_bound(keys.begin(), keys.end(), c.key) - keys.begin());
-    std::uint64_t& w = words[b * 8 + std::size_t(c.word)];
-    if (w & c.bit) continue;
-    w |= c.bit;
-    fresh.push_back({b * 8 + std::size_t(c.word), c.bit});
-  }
-  if (growth) {
-    std::sort(fresh.begin(), fresh.end());
-    growth->words.clear();
-    growth->bits.clear();
-    for (const auto& f : fresh) {
-      if (growth->words.empty() || growth->words.back() != f.first) {
-        growth->words.push_back(f.first);
-        growth->bits.push_back(0);
-      }
-      growth->bits.back() |= f.second;
-    }
+    words[b * 8 + std::size_t(c.word)] |= c.bit;
   }
   trace("extend: new words (host)", keys.size());
   band.n_blocks = keys.size();

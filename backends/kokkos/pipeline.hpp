@@ -3,6 +3,7 @@
 // upload -> neighbourhood -> surface particles -> band -> field -> marching cubes.
 #pragma once
 
+#include "band_growth.hpp"
 #include "common.hpp"
 #include "field_methods.hpp"
 #include "grid.hpp"
@@ -365,61 +366,24 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
   // crossed face next to a cell that is not entirely in the band): add that
   // cell's corners, evaluate the new vertices only, repeat. The paper's band
   // has no such guarantee; without it real frames get holes.
+  // The growth runs on the execution space (band_growth.hpp: one small
+  // device-to-host copy per round).
   if (p.field == FieldKind::NarrowBand) {
-    std::vector<std::int64_t> added;  // the cells whose corners the last round added
-    for (int round = 0;; ++round) {
-      // The first round scans the whole band; later ones only the cells
-      // around what the previous round added (the only cells that can leak).
-      const Kokkos::View<const float*, MemSpace> cur_phi = phi.view();
-      const std::vector<std::int64_t> leaks =
-          round == 0 ? find_band_leaks(space, view_of(band, g), band.n_blocks * 8, cur_phi)
-                     : find_band_leaks_near(space, view_of(band, g), cur_phi, added);
-      trace("band leaks", leaks.size() / 3);
-      if (leaks.empty()) {
-        // NBMC_CHECK_BAND=1 (tests): the scans near the added cells must have
-        // found everything a full scan finds.
-        if (round > 0 && std::getenv("NBMC_CHECK_BAND") &&
-            !find_band_leaks(space, view_of(band, g), band.n_blocks * 8, cur_phi).empty())
-          throw Error(9, "band growth: a full scan found leaks that the scans near the added cells missed");
-        break;
-      }
-      if (round >= 1000) throw Error(9, "the narrow band did not close after 1000 growth rounds");
-      Band<MemSpace> grown;
-      BandGrowth growth;
-      extend_band(space, tracker, g, band, leaks, grown, &growth);
-      Buffer<float, MemSpace> grown_phi(tracker, "scalar_field::values", grown.n_vertices);
-      {
-        // The old vertices keep their values; only the new ones are evaluated.
-        auto to_device = [&](const std::vector<std::uint64_t>& v, const char* label) {
-          Buffer<std::uint64_t, MemSpace> d(tracker, label, v.size());
-          Kokkos::deep_copy(space, d.view(),
-                            Kokkos::View<const std::uint64_t*, Kokkos::HostSpace,
-                                         Kokkos::MemoryTraits<Kokkos::Unmanaged>>(v.data(), v.size()));
-          return d;
-        };
-        const auto old_to_new = to_device(growth.old_to_new, "band::old_to_new");
-        const auto list_words = to_device(growth.words, "band::grown_words");
-        const auto list_bits = to_device(growth.bits, "band::grown_bits");
-        trace("growth: lists to device", growth.words.size());
-        carry_values(space, view_of(band, g), band.n_blocks * 8, Kokkos::View<const float*, MemSpace>(phi.view()),
-                     view_of(grown, g), grown_phi.view(),
-                     Kokkos::View<const std::uint64_t*, MemSpace>(old_to_new.view()));
-        trace("growth: carry values", band.n_blocks * 8);
-        const WordList<MemSpace> list{list_words.view(), list_bits.view()};
-        auto grow = [&](auto method) {
-          return gather_field<decltype(method)>(space, nbf, view_of(grown, g), growth.words.size(), g, fc,
-                                                grown_phi.view(), progress, list);
-        };
-        if (!growth.words.empty()) st.evaluations += with_field_method(p.method, radii, grow);
-      }
-      band = std::move(grown);
-      phi = std::move(grown_phi);
-      trace("band growth round", band.n_vertices);
-      st.band_growth_rounds = std::uint64_t(round + 1);
-      st.band_growth_cells += leaks.size() / 3;
-      if (region_in) region_in->grown.insert(region_in->grown.end(), leaks.begin(), leaks.end());
-      added = leaks;
-    }
+    GrowthTotals totals;
+    if (region_in) totals.grown_cells = &region_in->grown;
+    const GrowthEvaluate<MemSpace> evaluate = [&](const BandView<MemSpace>& bv, std::size_t n_list,
+                                                  const WordList<MemSpace>& list,
+                                                  const Kokkos::View<float*, MemSpace>& out,
+                                                  const Kokkos::View<unsigned long long*, MemSpace>& sink) {
+      auto grow = [&](auto method) {
+        return gather_field<decltype(method)>(space, nbf, bv, n_list, g, fc, out, progress, list, sink);
+      };
+      return std::uint64_t(with_field_method(p.method, radii, grow));
+    };
+    grow_band(space, tracker, g, band, phi, evaluate, totals);
+    if (totals.rounds) st.band_growth_rounds = totals.rounds;
+    st.band_growth_cells += totals.cells;
+    st.evaluations += totals.evaluations;
   }
   lap(4);
   const BandView<MemSpace> bv = view_of(band, g);

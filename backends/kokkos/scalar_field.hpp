@@ -345,14 +345,21 @@ void carry_values(const ExecSpace& space, const BandView<typename ExecSpace::mem
                   const BandView<typename ExecSpace::memory_space>& band,
                   const Kokkos::View<float*, typename ExecSpace::memory_space>& phi,
                   const Kokkos::View<const std::uint64_t*, typename ExecSpace::memory_space>& old_to_new) {
+  // The four views it reads, not the two band views: a functor of 512 bytes
+  // or more would go through CUDA constant memory (Kokkos 3.4), whose
+  // launches wait for each other.
+  const Kokkos::View<const std::uint64_t*, typename ExecSpace::memory_space> owords = old.words,
+                                                                            ooffs = old.word_offset,
+                                                                            nwords = band.words,
+                                                                            noffs = band.word_offset;
   Kokkos::parallel_for(
       "nbmc::scalar_field::carry_values", Kokkos::RangePolicy<ExecSpace>(space, 0, old_words),
       KOKKOS_LAMBDA(const std::size_t w) {
-        const std::uint64_t oword = old.words(w);
+        const std::uint64_t oword = owords(w);
         if (!oword) return;
         const std::size_t nw = std::size_t(old_to_new(w >> 3)) * 8 + (w & 7);
-        const std::uint64_t nword = band.words(nw);
-        const std::size_t o0 = old.word_offset(w), n0 = band.word_offset(nw);
+        const std::uint64_t nword = nwords(nw);
+        const std::size_t o0 = ooffs(w), n0 = noffs(nw);
         if (oword == nword) {
           const int n = popcount64(oword);
           for (int q = 0; q < n; ++q) phi(n0 + q) = old_phi(o0 + q);
@@ -367,7 +374,8 @@ void carry_values(const ExecSpace& space, const BandView<typename ExecSpace::mem
           ++q;
         }
       });
-  space.fence();
+  // No fence: the gather that fills the new vertices runs after it on the
+  // same execution space instance (band_growth.hpp).
 }
 
 // Host gather: one work item per band word (4x4x4 tile), vectorised across
@@ -542,9 +550,34 @@ std::uint64_t gather_words_direct(const ExecSpace& space, const NeighbourView<ty
                                   const BandView<typename ExecSpace::memory_space>& band, std::size_t w0,
                                   std::size_t w1, const Grid& g, const FieldConstants& fc,
                                   const Kokkos::View<float*, typename ExecSpace::memory_space>& phi,
-                                  const WordList<typename ExecSpace::memory_space>& list) {
+                                  const WordList<typename ExecSpace::memory_space>& list,
+                                  const Kokkos::View<unsigned long long*, typename ExecSpace::memory_space>& sink) {
   using MemSpace = typename ExecSpace::memory_space;
   const float c = float(g.cell), S = float(g.nb_cell);
+  if (sink.extent(0)) {
+    // The band growth's gathers (band_growth.hpp): the count goes to the
+    // caller's device counters (a power of two of them, spread by word),
+    // read once after the growth, so that this launch needs no allocation
+    // and no sync.
+    const std::size_t spread = sink.extent(0) - 1;
+    Kokkos::parallel_for(
+        "nbmc::scalar_field::gather_direct", Kokkos::RangePolicy<ExecSpace>(space, w0 * 64, w1 * 64),
+        KOKKOS_LAMBDA(const std::size_t v) {
+          const std::size_t q = v >> 6;
+          const std::size_t w = list.word(q);
+          const int bit = int(v & 63);
+          const std::uint64_t full = band.words(w);
+          if (!((list.todo(q, full) >> bit) & 1)) return;
+          std::int64_t i, j, k;
+          band.vertex(w, bit, i, j, k);
+          const std::size_t out = band.word_offset(w) + popcount64(full & ((std::uint64_t(1) << bit) - 1));
+          const float x[3] = {float(i) * c, float(j) * c, float(k) * c};
+          std::uint64_t e = 0;
+          phi(out) = eval_vertex_direct<Method>(nb, x, S, fc, e);
+          if (e) Kokkos::atomic_add(&sink(q & spread), static_cast<unsigned long long>(e));
+        });
+    return 0;
+  }
   // A parallel_for, not a parallel_reduce: Kokkos 3.4 launches a CUDA reduce
   // on a capped grid (ncu, H100, 1.65 M frame at cell r: 256 blocks of 256
   // threads, 0.48 waves, 21% achieved occupancy, 8.4 ms). The evaluation
@@ -577,14 +610,17 @@ std::uint64_t gather_words_direct(const ExecSpace& space, const NeighbourView<ty
 
 // Evaluates the field on the band's words [0, n_words), or with a list (see
 // WordList; n_words is then its length) only on the listed vertices: after
-// the band grew, the new ones (carry_values copies the others).
+// the band grew, the new ones (carry_values copies the others). With `sink`
+// (a power of two of device counters), the default device gather adds its
+// evaluation count there and returns 0 (no sync); the host gathers return it.
 template <class Method, class ExecSpace>
 std::uint64_t gather_field(const ExecSpace& space, const NeighbourView<typename ExecSpace::memory_space>& nb,
                            const BandView<typename ExecSpace::memory_space>& band, std::size_t n_words,
                            const Grid& g, const FieldConstants& fc,
                            const Kokkos::View<float*, typename ExecSpace::memory_space>& phi,
                            const Progress& progress,
-                           const WordList<typename ExecSpace::memory_space>& list = {}) {
+                           const WordList<typename ExecSpace::memory_space>& list = {},
+                           const Kokkos::View<unsigned long long*, typename ExecSpace::memory_space>& sink = {}) {
   ScopedRegion region("nbmc::scalar_field::gather");
   using MemSpace = typename ExecSpace::memory_space;
   std::uint64_t total_evals = 0;
@@ -597,7 +633,7 @@ std::uint64_t gather_field(const ExecSpace& space, const NeighbourView<typename 
     if constexpr (host)
       total_evals += gather_words_host<Method>(space, nb, band, w0, w1, g, fc, phi, list);
     else if (device_gather_kind() == 1)
-      total_evals += gather_words_direct<Method>(space, nb, band, w0, w1, g, fc, phi, list);
+      total_evals += gather_words_direct<Method>(space, nb, band, w0, w1, g, fc, phi, list, sink);
     else
       total_evals += gather_words_team<Method>(space, nb, band, w0, w1, g, fc, phi, list);
     trace("gather chunk", w1 - w0);
