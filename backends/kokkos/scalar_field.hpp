@@ -554,36 +554,19 @@ std::uint64_t gather_words_direct(const ExecSpace& space, const NeighbourView<ty
                                   const Kokkos::View<unsigned long long*, typename ExecSpace::memory_space>& sink) {
   using MemSpace = typename ExecSpace::memory_space;
   const float c = float(g.cell), S = float(g.nb_cell);
-  if (sink.extent(0)) {
-    // The band growth's gathers (band_growth.hpp): the count goes to the
-    // caller's device counters (a power of two of them, spread by word),
-    // read once after the growth, so that this launch needs no allocation
-    // and no sync.
-    const std::size_t spread = sink.extent(0) - 1;
-    Kokkos::parallel_for(
-        "nbmc::scalar_field::gather_direct", Kokkos::RangePolicy<ExecSpace>(space, w0 * 64, w1 * 64),
-        KOKKOS_LAMBDA(const std::size_t v) {
-          const std::size_t q = v >> 6;
-          const std::size_t w = list.word(q);
-          const int bit = int(v & 63);
-          const std::uint64_t full = band.words(w);
-          if (!((list.todo(q, full) >> bit) & 1)) return;
-          std::int64_t i, j, k;
-          band.vertex(w, bit, i, j, k);
-          const std::size_t out = band.word_offset(w) + popcount64(full & ((std::uint64_t(1) << bit) - 1));
-          const float x[3] = {float(i) * c, float(j) * c, float(k) * c};
-          std::uint64_t e = 0;
-          phi(out) = eval_vertex_direct<Method>(nb, x, S, fc, e);
-          if (e) Kokkos::atomic_add(&sink(q & spread), static_cast<unsigned long long>(e));
-        });
-    return 0;
-  }
   // A parallel_for, not a parallel_reduce: Kokkos 3.4 launches a CUDA reduce
   // on a capped grid (ncu, H100, 1.65 M frame at cell r: 256 blocks of 256
   // threads, 0.48 waves, 21% achieved occupancy, 8.4 ms). The evaluation
-  // count goes through per-word counters (native 64-bit atomics, at most 64
-  // threads per counter) and a small reduce.
-  Kokkos::View<unsigned long long*, MemSpace> counts("nbmc::scalar_field::evals_per_word", w1 - w0);
+  // count goes through counters (native 64-bit atomics): per word and a
+  // small reduce here; for the band growth's gathers (band_growth.hpp), the
+  // caller's `sink` (a power of two of counters, spread by word) read once
+  // after the growth, so that its launches need no allocation and no sync.
+  const bool to_sink = sink.extent(0) > 0;
+  Kokkos::View<unsigned long long*, MemSpace> counts;
+  if (!to_sink) counts = Kokkos::View<unsigned long long*, MemSpace>("nbmc::scalar_field::evals_per_word", w1 - w0);
+  const Kokkos::View<unsigned long long*, MemSpace> target = to_sink ? sink : counts;
+  // Counter of the q-th listed word: (q - base) & mask.
+  const std::size_t base = to_sink ? 0 : w0, mask = to_sink ? sink.extent(0) - 1 : ~std::size_t(0);
   Kokkos::parallel_for(
       "nbmc::scalar_field::gather_direct", Kokkos::RangePolicy<ExecSpace>(space, w0 * 64, w1 * 64),
       KOKKOS_LAMBDA(const std::size_t v) {
@@ -598,8 +581,9 @@ std::uint64_t gather_words_direct(const ExecSpace& space, const NeighbourView<ty
         const float x[3] = {float(i) * c, float(j) * c, float(k) * c};
         std::uint64_t e = 0;
         phi(out) = eval_vertex_direct<Method>(nb, x, S, fc, e);
-        if (e) Kokkos::atomic_add(&counts(q - w0), static_cast<unsigned long long>(e));
+        if (e) Kokkos::atomic_add(&target((q - base) & mask), static_cast<unsigned long long>(e));
       });
+  if (to_sink) return 0;
   std::uint64_t evals = 0;
   Kokkos::parallel_reduce(
       "nbmc::scalar_field::count_evals", Kokkos::RangePolicy<ExecSpace>(space, 0, w1 - w0),
