@@ -251,8 +251,11 @@ void grow_band(const ExecSpace& space, MemoryTracker& tracker, const Grid& g,
     const Kokkos::View<const float*, MemSpace> cur_phi = phi.view();
     const std::size_t n_words = band.n_blocks * 8;
     // Guessed capacities: leak cells (as many as 1/16 of the band's words,
-    // or twice the previous round's), distinct words gaining vertices.
-    std::size_t leak_cap = round == 0 ? 1024 + n_words / 16 : 1024 + 2 * n_prev;
+    // or twice the previous round's), distinct words gaining vertices. (A
+    // floor of 64: with 1024 the sets took about 350 KB whatever the frame,
+    // twice a small frame's whole reconstruction; a guess too small costs
+    // one detection more, not a different band.)
+    std::size_t leak_cap = round == 0 ? 64 + n_words / 16 : 64 + 2 * n_prev;
     std::size_t entry_cap = 2 * leak_cap;
     if (tiny_guesses) leak_cap = entry_cap = 1;  // tests: every round overflows and runs again
     GrowthRecorder<MemSpace> rec;
