@@ -208,10 +208,8 @@ static int32_t set_particles_impl(nbmc_context* ctx, const T* xyz, uint64_t coun
   // index per chunk, which do not depend on the thread count. Threads as the
   // context's (a serial context: one; 0: every hardware thread).
   const std::size_t n = std::size_t(count);
-  const std::size_t threads = ctx->backend == NBMC_BACKEND_SERIAL ? 1
-                              : ctx->num_threads > 0 ? std::size_t(ctx->num_threads)
-                                                     : nbmc::chunk_count(n, 1);
-  const std::size_t chunks = std::min(threads, nbmc::chunk_count(n, 100000));
+  const nbmc::ScopedHostThreads limit(nbmc::host_threads_of(*ctx));
+  const std::size_t chunks = nbmc::chunk_count(n, 100000);
   std::vector<std::uint64_t> chunk_bad(chunks, 0), chunk_first(chunks, UINT64_MAX);
   nbmc::for_chunks(n, chunks, [&](std::size_t k, std::size_t b, std::size_t e) {
     std::uint64_t nbad = 0, first = UINT64_MAX;

@@ -127,12 +127,10 @@ std::vector<double, NoInitAllocator<double>> interpolate_at_vertices(nbmc_contex
   if (nv == 0 || width == 0) return result;
   if (n == 0) throw Error(NBMC_ERROR_NO_PARTICLES, "attribute interpolation: there are no particles");
   // All attributes side by side, particle-major.
-  // (Host copies on the host's threads: one for a serial context.)
-  const auto chunks = [&](std::size_t items) {
-    return ctx.backend == NBMC_BACKEND_SERIAL ? std::size_t(1) : chunk_count(items, 1 << 16);
-  };
+  // (Host copies on the context's host threads: nbmc_context_reconstruct
+  // sets the limit, one for a serial context.)
   std::vector<double, NoInitAllocator<double>> packed(n * width);
-  for_chunks(n, chunks(n), [&](std::size_t, std::size_t b, std::size_t e) {
+  for_chunks(n, chunk_count(n, 1 << 16), [&](std::size_t, std::size_t b, std::size_t e) {
     std::size_t off = 0;
     for (const io::Attribute& a : attributes) {
       const std::size_t c = std::size_t(a.components);

@@ -47,10 +47,8 @@ void check_set(const nbmc_context& ctx, std::uint64_t count, std::uint64_t& byte
 template <class T>
 void store(nbmc_context& ctx, const T* packed, std::size_t n, const char* fn) {
   std::vector<double> r(n);
-  const std::size_t threads = ctx.backend == NBMC_BACKEND_SERIAL ? 1
-                              : ctx.num_threads > 0            ? std::size_t(ctx.num_threads)
-                                                               : chunk_count(n, 1);
-  const std::size_t chunks = std::min(threads, chunk_count(n, 100000));
+  const ScopedHostThreads limit(host_threads_of(ctx));
+  const std::size_t chunks = chunk_count(n, 100000);
   std::vector<std::uint64_t> bad(chunks, 0), first(chunks, UINT64_MAX);
   std::vector<double> lo(chunks, std::numeric_limits<double>::infinity()), hi(chunks, 0);
   for_chunks(n, chunks, [&](std::size_t k, std::size_t b, std::size_t e) {
