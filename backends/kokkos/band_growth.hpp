@@ -69,11 +69,6 @@
 namespace nbmc {
 namespace Details {
 
-// A cell's packed key (pack_cell, callable on devices): z << 42 | y << 21 | x.
-KOKKOS_INLINE_FUNCTION std::uint64_t cell_key(std::int64_t i, std::int64_t j, std::int64_t k) {
-  return std::uint64_t(k) << 42 | std::uint64_t(j) << 21 | std::uint64_t(i);
-}
-
 // Inserts key into an open-addressing set (linear probing, mask + 1 slots
 // at keys, empty slots ~0); returns its slot, or -1 when every slot is taken
 // (the probe is bounded: a full table flags an overflow instead of
@@ -350,7 +345,7 @@ void grow_band(const ExecSpace& space, MemoryTracker& tracker, const Grid& g,
                                  k = added(3 * c + 2) + std::int64_t(o / 9) - 1;
               if (i < 0 || j < 0 || k < 0) return;
               bool first = false;
-              if (set_insert(cand, cmask, cell_key(i, j, k), first) < 0) rec.overflow();  // cannot happen: sized
+              if (set_insert(cand, cmask, pack_cell(i, j, k), first) < 0) rec.overflow();  // cannot happen: sized
               if (!first) return;
               if (i + 1 >= bv.dims[0] || j + 1 >= bv.dims[1] || k + 1 >= bv.dims[2]) return;
               const std::int64_t self = bv.index(i, j, k);

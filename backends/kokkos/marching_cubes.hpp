@@ -211,7 +211,8 @@ KOKKOS_INLINE_FUNCTION int leaks_at(const BandView<MemSpace>& band, const Kokkos
 // lists filled in parallel come out in one order; with `unique`, drops repeats.
 // Cell triples as packed keys z << 42 | y << 21 | x (coordinates in
 // [0, 2^21), as kMaxAxisCells guarantees): ordered by z, then y, then x.
-inline std::uint64_t pack_cell(std::int64_t i, std::int64_t j, std::int64_t k) {
+// (Device code too: the band growth's candidate set, band_growth.hpp.)
+KOKKOS_INLINE_FUNCTION std::uint64_t pack_cell(std::int64_t i, std::int64_t j, std::int64_t k) {
   return std::uint64_t(k) << 42 | std::uint64_t(j) << 21 | std::uint64_t(i);
 }
 // Writes packed keys back as triples (cells resized to 3 per key).
