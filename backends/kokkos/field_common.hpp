@@ -20,7 +20,9 @@
 // A method's per-particle data come from a pass over the particles before the
 // field (NeighbourView::pdata, P floats per particle in the sorted order; SPH:
 // a weight, field_sph.hpp; YT10: a kernel, field_yt10.hpp); a particle that
-// contributes nothing (k = 0) must add exactly +0 whatever its data.
+// contributes nothing (k = 0) must add exactly +0 whatever its data (an
+// accumulator is never -0), so that skipping it changes no sum: accumulate
+// and the device gathers skip the particles with s2 >= 1.
 //
 // Per-particle radii (nbmc_context_set_radii_*, radii.hpp): each method has
 // a variant (radii = true) in which particle j has its own kernel support

@@ -87,6 +87,7 @@ struct FieldSSP07T {
       const float dx = X[j] - x0, dy = Y[j] - x1, dz = Z[j] - x2;
       const float q = inv_support2<Radii>(Q, j, inv_R2);
       const float s2 = (dx * dx + dy * dy + dz * dz) * q;
+      if (!(s2 < 1.f)) continue;  // it would add exactly +0 (field_common.hpp)
       const float k = s2 < 1.f ? 1.f - s2 : 0.f;
       count += s2 < 1.f ? 1u : 0u;
       float k2 = k * k;

@@ -118,6 +118,7 @@ struct FieldYT10 {
     for (std::uint32_t j = b; j < e; ++j) {
       const float dx = X[j] - x0, dy = Y[j] - x1, dz = Z[j] - x2;
       const float s2 = (dx * dx + dy * dy + dz * dz) * inv_R2;
+      if (!(s2 < 1.f)) continue;  // it would add exactly +0 (field_common.hpp)
       const float k = s2 < 1.f ? 1.f - s2 : 0.f;
       count += s2 < 1.f ? 1u : 0u;
       add(acc, dx, dy, dz, k, PD + std::size_t(kYt10Floats) * j, 1.f);
@@ -171,6 +172,7 @@ struct Yt10Moments {
     for (std::uint32_t j = b; j < e; ++j) {
       const float dx = X[j] - x0, dy = Y[j] - x1, dz = Z[j] - x2;
       const float s2 = (dx * dx + dy * dy + dz * dz) * inv_R2;
+      if (!(s2 < 1.f)) continue;  // it would add exactly +0 (field_common.hpp)
       const float k = s2 < 1.f ? 1.f - s2 : 0.f;
       count += s2 < 1.f ? 1u : 0u;
       add(acc, dx, dy, dz, k, nullptr, 1.f);

@@ -25,15 +25,25 @@ namespace Details {
 
 constexpr int kMaxTileCells = 1024;
 
-// Which device gather runs: 1 = one thread per vertex (default), 0 = the
-// team-tiled shared-memory kernel (NBMC_GPU_GATHER=team). Measured on an
-// H100 (bench/RESULTS.md): direct 54 ms, team 66 s on the 1.65 M frame at
-// r/2 -- the particles and the cell map fit in L2, so tiling buys nothing
-// and the team kernel's serial staging costs a lot.
+// Which device gather runs for a whole band: 2 = one thread per band
+// vertex, the threads numbered in band order (default;
+// gather_vertices_direct); 1 = one thread per vertex slot of the words
+// (NBMC_GPU_GATHER=slots); 3 = one warp per word (NBMC_GPU_GATHER=warp;
+// gather_words_warp); 0 = the team-tiled shared-memory kernel
+// (NBMC_GPU_GATHER=team). The band growth's gathers (a few new vertices per
+// listed word) always run one thread per slot. Measured on an H200, 1.65 M
+// frame at r/2 (bench/RESULTS.md, session 20): field 14 ms (vertices), 16-17
+// (slots), 21 (warp: 1.4x fewer instructions per vertex, but 150 registers,
+// 14% occupancy); on an H100 earlier: direct 54 ms, team 66 s -- the
+// particles and the cell map fit in L2, and the team kernel's serial
+// staging costs a lot.
 inline int device_gather_kind() {
   static const int kind = [] {
     const char* e = std::getenv("NBMC_GPU_GATHER");
-    return e && std::string(e) == "team" ? 0 : 1;
+    if (e && std::string(e) == "team") return 0;
+    if (e && std::string(e) == "slots") return 1;
+    if (e && std::string(e) == "warp") return 3;
+    return 2;
   }();
   return kind;
 }
@@ -300,13 +310,24 @@ KOKKOS_INLINE_FUNCTION std::uint32_t sum_vertex_direct(const NeighbourView<MemSp
   std::int64_t lo[3], hi[3];
   cell_span(nb, x, x, fc.R, lo, hi);
   const float* X = nb.pos.data();
+  const float inv_R2 = fc.inv_R2;
+  auto beyond = [&](float d) { return (d * d) * inv_R2 >= 1.f; };
   for (std::int64_t z = lo[2]; z <= hi[2]; ++z)
     for (std::int64_t y = lo[1]; y <= hi[1]; ++y)
       for (std::int64_t xx = lo[0]; xx <= hi[0]; ++xx) {
-        std::uint32_t b, e;
-        if (!nb.cell_range(xx, y, z, b, e)) continue;
+        // The distance first: a cell that is too far needs no lookup.
         const float clo[3] = {float(xx) * S, float(y) * S, float(z) * S};
         if (box_distance2(clo, S, x) >= fc.R * fc.R) continue;
+        std::uint32_t b, e;
+        if (!nb.cell_range(xx, y, z, b, e)) continue;
+        // A cell's particles are sorted by x: the runs before the first and
+        // after the last that can reach x are skipped. They would add k = 0
+        // (exactly +0 to every sum): a skipped particle has
+        // ((X - x0)^2) * inv_R2 >= 1 with the float operations of s2, and
+        // s2 = ((dx^2 + dy^2) + dz^2) * q_j is at least that (rounding is
+        // monotone; q_j >= inv_R2 with radii).
+        while (b < e && X[b] < x[0] && beyond(X[b] - x[0])) ++b;
+        while (e > b && X[e - 1] > x[0] && beyond(X[e - 1] - x[0])) --e;
         evals += Method::accumulate(acc, X, X + nb.n, X + 2 * nb.n, Method::P ? nb.pdata.data() : nullptr,
                                     Method::radii ? nb.support.data() : nullptr, b, e, x[0], x[1], x[2], fc.inv_R2);
       }
@@ -592,6 +613,276 @@ std::uint64_t gather_words_direct(const ExecSpace& space, const NeighbourView<ty
   return evals;
 }
 
+// Word of band index o: the last word whose first vertex is at or before o
+// (an empty word after it starts after o); and the bit of that vertex.
+template <class MemSpace>
+KOKKOS_INLINE_FUNCTION void word_and_bit_of(const BandView<MemSpace>& band, std::size_t n_words, std::uint64_t o,
+                                            std::size_t& w, int& bit) {
+  std::size_t a = 0, b = n_words - 1;
+  while (a < b) {
+    const std::size_t mid = (a + b + 1) / 2;
+    if (band.word_offset(mid) <= o) a = mid;
+    else b = mid - 1;
+  }
+  w = a;
+  std::uint64_t word = band.words(a);
+  int rank = int(o - band.word_offset(a));
+  int base = 0;  // the rank-th set bit: halve the word while the rank lies beyond the lower half
+  for (int half = 32; half >= 8; half /= 2) {
+    const std::uint64_t low = word & ((std::uint64_t(1) << half) - 1);
+    const int n = popcount64(low);
+    if (rank >= n) {
+      rank -= n;
+      word >>= half;
+      base += half;
+    } else {
+      word = low;
+    }
+  }
+  for (; rank > 0; --rank) word &= word - 1;
+  bit = base + ctz64(word);
+}
+
+// Device gather over band indices [o0, o1): one thread per band vertex, in
+// band order, so that a warp's 32 threads are 32 vertices of one or two
+// neighbouring words (one thread per vertex slot leaves the lanes of the
+// slots outside the band idle: most of a word's 64 on a thin band). Each
+// vertex's value is eval_vertex_direct's, as in gather_words_direct.
+template <class Method, class ExecSpace>
+std::uint64_t gather_vertices_direct(const ExecSpace& space, const NeighbourView<typename ExecSpace::memory_space>& nb,
+                                     const BandView<typename ExecSpace::memory_space>& band, std::size_t n_words,
+                                     std::size_t o0, std::size_t o1, const Grid& g, const FieldConstants& fc,
+                                     const Kokkos::View<float*, typename ExecSpace::memory_space>& phi) {
+  using MemSpace = typename ExecSpace::memory_space;
+  const float c = float(g.cell), S = float(g.nb_cell);
+  // Evaluation counts per 64 vertices, summed below (see gather_words_direct
+  // on why not a parallel_reduce).
+  Kokkos::View<unsigned long long*, MemSpace> counts("nbmc::scalar_field::evals_per_64", (o1 - o0 + 63) / 64);
+  Kokkos::parallel_for(
+      "nbmc::scalar_field::gather_vertices", Kokkos::RangePolicy<ExecSpace>(space, o0, o1),
+      KOKKOS_LAMBDA(const std::size_t o) {
+        std::size_t w;
+        int bit;
+        word_and_bit_of(band, n_words, o, w, bit);
+        std::int64_t i, j, k;
+        band.vertex(w, bit, i, j, k);
+        const float x[3] = {float(i) * c, float(j) * c, float(k) * c};
+        std::uint64_t e = 0;
+        phi(o) = eval_vertex_direct<Method>(nb, x, S, fc, e);
+        if (e) Kokkos::atomic_add(&counts((o - o0) >> 6), static_cast<unsigned long long>(e));
+      });
+  std::uint64_t evals = 0;
+  Kokkos::parallel_reduce(
+      "nbmc::scalar_field::count_evals", Kokkos::RangePolicy<ExecSpace>(space, 0, counts.extent(0)),
+      KOKKOS_LAMBDA(const std::size_t q, std::uint64_t& acc) { acc += counts(q); }, evals);
+  space.fence();
+  return evals;
+}
+
+// Warp-wide operations of gather_words_warp (CUDA; the host compilation of
+// its lambda, which never runs, sees single-lane stand-ins, so that both
+// compilations capture the same variables).
+KOKKOS_INLINE_FUNCTION unsigned warp_ballot(bool p) {
+#if defined(__CUDA_ARCH__)
+  return __ballot_sync(0xffffffffu, p);
+#else
+  return p ? 1u : 0u;
+#endif
+}
+KOKKOS_INLINE_FUNCTION bool warp_any(bool p) {
+#if defined(__CUDA_ARCH__)
+  return __any_sync(0xffffffffu, p) != 0;
+#else
+  return p;
+#endif
+}
+template <class T>
+KOKKOS_INLINE_FUNCTION T warp_read(T v, int src) {
+#if defined(__CUDA_ARCH__)
+  return __shfl_sync(0xffffffffu, v, src);
+#else
+  (void)src;
+  return v;
+#endif
+}
+KOKKOS_INLINE_FUNCTION std::uint32_t warp_sum(std::uint32_t v) {
+#if defined(__CUDA_ARCH__)
+  for (int off = 16; off > 0; off /= 2) v += __shfl_down_sync(0xffffffffu, v, off);
+#endif
+  return v;
+}
+
+// Device gather, one warp per band word (a 4x4x4 tile), the host tiles'
+// scheme on a GPU: the warp's lanes look up the tile's neighbour cells
+// together (32 hash lookups at once, instead of every vertex its own 125),
+// then walk the occupied ones in the span's z, y, x order; every particle is
+// loaded once for the whole warp and each lane adds it to its vertices (the
+// word's set bits of rank l and l + 32). Each vertex sums exactly what
+// eval_vertex_direct sums, in its order:
+//  - the vertex visits a cell when the cell lies in its own cell_span and
+//    box_distance2 < R^2 (the same float expressions). A cell whose box is
+//    R or farther from the whole tile (a lower bound of every vertex's
+//    box_distance2, from the tile's corners) is skipped by all; one in every
+//    vertex's span whose farthest distance from the tile (an upper bound,
+//    the per-axis terms at the tile's extremes, where they are largest) is
+//    below R is visited by all; the others are decided per vertex;
+//  - restricted to one vertex's own span, the tile span's z, y, x order is
+//    that vertex's order;
+//  - particles with s2 >= 1 add exactly +0 and are skipped (per vertex; and
+//    the runs of a cell beyond R of the whole tile in x, as on the host).
+// The sums use Method::add, whose operations are accumulate's.
+constexpr int kWarpWordsPerTeam = 4;
+
+template <class Method, class ExecSpace>
+std::uint64_t gather_words_warp(const ExecSpace& space, const NeighbourView<typename ExecSpace::memory_space>& nb,
+                                const BandView<typename ExecSpace::memory_space>& band, std::size_t w0,
+                                std::size_t w1, const Grid& g, const FieldConstants& fc,
+                                const Kokkos::View<float*, typename ExecSpace::memory_space>& phi) {
+  using MemSpace = typename ExecSpace::memory_space;
+  using Policy = Kokkos::TeamPolicy<ExecSpace>;
+  using Member = typename Policy::member_type;
+  const float c = float(g.cell), S = float(g.nb_cell);
+  const std::size_t n_teams = (w1 - w0 + kWarpWordsPerTeam - 1) / kWarpWordsPerTeam;
+  Kokkos::View<unsigned long long*, MemSpace> counts("nbmc::scalar_field::evals_per_team", n_teams);
+  Kokkos::parallel_for(
+      "nbmc::scalar_field::gather_warp", Policy(space, int(n_teams), 32 * kWarpWordsPerTeam),
+      KOKKOS_LAMBDA(const Member& team) {
+        const int lane = team.team_rank() & 31;
+        const std::size_t w = w0 + std::size_t(team.league_rank()) * kWarpWordsPerTeam + (team.team_rank() >> 5);
+        if (w >= w1) return;  // the whole warp
+        const std::uint64_t full = band.words(w);
+        if (!full) return;
+        const int n_set = popcount64(full);
+        // The lane's vertices: the set bits of rank lane and lane + 32.
+        int bits[2] = {-1, -1};
+        {
+          std::uint64_t rest = full;
+          int r = 0;
+          while (rest) {
+            const int b = ctz64(rest);
+            rest &= rest - 1;
+            if (r == lane) bits[0] = b;
+            if (r == lane + 32) bits[1] = b;
+            ++r;
+          }
+        }
+        const int nv = n_set > 32 ? 2 : 1;  // vertices per lane (warp-uniform)
+        float xv[2][3];
+        std::int64_t vlo[2][3], vhi[2][3];
+        std::size_t out[2] = {0, 0};
+#pragma unroll
+        for (int u = 0; u < 2; ++u) {
+          const int b = bits[u] < 0 ? 0 : bits[u];
+          std::int64_t i, j, k;
+          band.vertex(w, b, i, j, k);
+          xv[u][0] = float(i) * c;
+          xv[u][1] = float(j) * c;
+          xv[u][2] = float(k) * c;
+          cell_span(nb, xv[u], xv[u], fc.R, vlo[u], vhi[u]);
+          out[u] = band.word_offset(w) + popcount64(full & ((std::uint64_t(1) << b) - 1));
+        }
+        std::int64_t i0, j0, k0;
+        band.vertex(w, 0, i0, j0, k0);
+        const float tmin[3] = {float(i0) * c, float(j0) * c, float(k0) * c};
+        const float tmax[3] = {float(i0 + 3) * c, float(j0 + 3) * c, float(k0 + 3) * c};
+        std::int64_t lo[3], hi[3], in_lo[3], in_hi[3];
+        cell_span(nb, tmin, tmax, fc.R, lo, hi);      // contains every vertex's span
+        cell_span(nb, tmax, tmin, fc.R, in_lo, in_hi);  // within every vertex's span
+        const std::int64_t nx = hi[0] - lo[0] + 1, ny = hi[1] - lo[1] + 1, nz = hi[2] - lo[2] + 1;
+        const int n_span = int(nx * ny * nz);
+        const float R2 = fc.R * fc.R;
+        const float inv_R2 = fc.inv_R2;
+        const float* X = nb.pos.data();
+        const float* Y = X + nb.n;
+        const float* Z = Y + nb.n;
+        auto beyond = [&](float d) { return (d * d) * inv_R2 >= 1.f; };
+        float acc[2][Method::N];
+#pragma unroll
+        for (int u = 0; u < 2; ++u)
+          for (int q = 0; q < Method::N; ++q) acc[u][q] = 0.f;
+        std::uint32_t count = 0;
+        for (int base = 0; base < n_span; base += 32) {
+          // Lane l looks up cell base + l.
+          const int q = base + lane;
+          std::uint32_t cb = 0, ce = 0;
+          int state = 0;  // 0: no vertex visits; 1: all do; 2: decided per vertex
+          if (q < n_span) {
+            const std::int64_t cx = lo[0] + q % nx, cy = lo[1] + (q / nx) % ny, cz = lo[2] + q / (nx * ny);
+            const float clo[3] = {float(cx) * S, float(cy) * S, float(cz) * S};
+            const std::int64_t cc[3] = {cx, cy, cz};
+            float dmin2 = 0, dmax2 = 0;
+            bool inner = true;
+            for (int a = 0; a < 3; ++a) {
+              const float below = clo[a] - tmax[a], above = tmin[a] - (clo[a] + S);
+              const float dmin = below > 0 ? below : (above > 0 ? above : 0.f);
+              dmin2 += dmin * dmin;
+              float dm = 0;
+              for (int e = 0; e < 2; ++e) {
+                const float xa = e ? tmax[a] : tmin[a];
+                const float b2 = clo[a] - xa, a2 = xa - (clo[a] + S);
+                const float d = b2 > 0 ? b2 : (a2 > 0 ? a2 : 0.f);
+                dm = d > dm ? d : dm;
+              }
+              dmax2 += dm * dm;
+              inner = inner && cc[a] >= in_lo[a] && cc[a] <= in_hi[a];
+            }
+            if (dmin2 < R2 && nb.cell_range(cx, cy, cz, cb, ce) && ce > cb) state = inner && dmax2 < R2 ? 1 : 2;
+          }
+          unsigned todo = warp_ballot(state != 0);
+          while (todo) {
+            const int src = ctz64(todo);
+            todo &= todo - 1;
+            const int cq = base + src;
+            std::uint32_t pb = warp_read(cb, src), pe = warp_read(ce, src);
+            const int cstate = warp_read(state, src);
+            const std::int64_t cx = lo[0] + cq % nx, cy = lo[1] + (cq / nx) % ny, cz = lo[2] + cq / (nx * ny);
+            bool visit[2];
+#pragma unroll
+            for (int u = 0; u < 2; ++u) {
+              if (bits[u] < 0) {
+                visit[u] = false;
+              } else if (cstate == 1) {
+                visit[u] = true;
+              } else {
+                const float clo[3] = {float(cx) * S, float(cy) * S, float(cz) * S};
+                visit[u] = cx >= vlo[u][0] && cx <= vhi[u][0] && cy >= vlo[u][1] && cy <= vhi[u][1] &&
+                           cz >= vlo[u][2] && cz <= vhi[u][2] && box_distance2(clo, S, xv[u]) < R2;
+              }
+            }
+            if (!warp_any(visit[0] || visit[1])) continue;
+            while (pb < pe && X[pb] < tmin[0] && beyond(X[pb] - tmin[0])) ++pb;
+            while (pe > pb && X[pe - 1] > tmax[0] && beyond(X[pe - 1] - tmax[0])) --pe;
+            for (std::uint32_t p = pb; p < pe; ++p) {
+              const float px = X[p], py = Y[p], pz = Z[p];
+              const float qp = inv_support2<Method::radii>(nb.support.data(), p, inv_R2);
+              const float* pd = Method::P ? nb.pdata.data() + std::size_t(Method::P) * p : nullptr;
+#pragma unroll
+              for (int u = 0; u < 2; ++u) {  // constant indices: the sums stay in registers
+                if (u >= nv || !visit[u]) continue;
+                const float dx = px - xv[u][0], dy = py - xv[u][1], dz = pz - xv[u][2];
+                const float s2 = (dx * dx + dy * dy + dz * dz) * qp;
+                if (!(s2 < 1.f)) continue;
+                ++count;
+                Method::add(acc[u], dx, dy, dz, 1.f - s2, pd, qp);
+              }
+            }
+          }
+        }
+#pragma unroll
+        for (int u = 0; u < 2; ++u)
+          if (bits[u] >= 0) phi(out[u]) = Method::value(acc[u], fc);
+        count = warp_sum(count);
+        if (lane == 0 && count)
+          Kokkos::atomic_add(&counts(std::size_t(team.league_rank())), static_cast<unsigned long long>(count));
+      });
+  std::uint64_t evals = 0;
+  Kokkos::parallel_reduce(
+      "nbmc::scalar_field::count_evals", Kokkos::RangePolicy<ExecSpace>(space, 0, n_teams),
+      KOKKOS_LAMBDA(const std::size_t q, std::uint64_t& acc) { acc += counts(q); }, evals);
+  space.fence();
+  return evals;
+}
+
 // Evaluates the field on the band's words [0, n_words), or with a list (see
 // WordList; n_words is then its length) only on the listed vertices: after
 // the band grew, the new ones (carry_values copies the others). With `sink`
@@ -611,12 +902,38 @@ std::uint64_t gather_field(const ExecSpace& space, const NeighbourView<typename 
   // Chunks bound the time to react to cancellation. On a GPU, launches of
   // 4096 words filled half a wave of an H100 (ncu), so chunks are larger there.
   constexpr bool host = Kokkos::SpaceAccessibility<Kokkos::HostSpace, MemSpace>::accessible;
+  if constexpr (!host) {
+    if (!list.listed() && device_gather_kind() == 3) {
+      // One warp per band word, in chunks.
+      const std::size_t wchunk = std::max<std::size_t>(65536, n_words / 8);
+      for (std::size_t w0 = 0; w0 < n_words; w0 += wchunk) {
+        const std::size_t w1 = std::min(n_words, w0 + wchunk);
+        total_evals += gather_words_warp<Method>(space, nb, band, w0, w1, g, fc, phi);
+        trace("gather chunk", w1 - w0);
+        progress(4 /*NBMC_STAGE_FIELD*/, double(w1) / double(n_words));
+      }
+      return total_evals;
+    }
+    if (!list.listed() && device_gather_kind() == 2) {
+      // One thread per band vertex (phi holds the band's values), in chunks.
+      const std::size_t n = phi.extent(0);
+      if (n_words == 0 || n == 0) return 0;
+      const std::size_t vchunk = std::max<std::size_t>(std::size_t(1) << 22, n / 8);
+      for (std::size_t o0 = 0; o0 < n; o0 += vchunk) {
+        const std::size_t o1 = std::min(n, o0 + vchunk);
+        total_evals += gather_vertices_direct<Method>(space, nb, band, n_words, o0, o1, g, fc, phi);
+        trace("gather chunk", o1 - o0);
+        progress(4 /*NBMC_STAGE_FIELD*/, double(o1) / double(n));
+      }
+      return total_evals;
+    }
+  }
   const std::size_t chunk = host ? std::max<std::size_t>(4096, n_words / 64) : std::max<std::size_t>(65536, n_words / 8);
   for (std::size_t w0 = 0; w0 < n_words; w0 += chunk) {
     const std::size_t w1 = std::min(n_words, w0 + chunk);
     if constexpr (host)
       total_evals += gather_words_host<Method>(space, nb, band, w0, w1, g, fc, phi, list);
-    else if (device_gather_kind() == 1)
+    else if (device_gather_kind() != 0)
       total_evals += gather_words_direct<Method>(space, nb, band, w0, w1, g, fc, phi, list, sink);
     else
       total_evals += gather_words_team<Method>(space, nb, band, w0, w1, g, fc, phi, list);
