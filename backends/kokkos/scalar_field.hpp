@@ -28,8 +28,9 @@ constexpr int kMaxTileCells = 1024;
 // Which device gather runs for a whole band: 2 = one thread per band
 // vertex, the threads numbered in band order (default;
 // gather_vertices_direct); 1 = one thread per vertex slot of the words
-// (NBMC_GPU_GATHER=slots); 3 = one warp per word (NBMC_GPU_GATHER=warp;
-// gather_words_warp); 0 = the team-tiled shared-memory kernel
+// (NBMC_GPU_GATHER=slots); 3 = one warp per 32 band vertices sharing their
+// cells (NBMC_GPU_GATHER=warp; gather_vertices_warp); 0 = the team-tiled
+// shared-memory kernel
 // (NBMC_GPU_GATHER=team). The band growth's gathers (a few new vertices per
 // listed word) always run one thread per slot. Measured on an H200, 1.65 M
 // frame at r/2 (bench/RESULTS.md, session 20): field 14 ms (vertices), 16-17
@@ -705,6 +706,24 @@ KOKKOS_INLINE_FUNCTION T warp_read(T v, int src) {
   return v;
 #endif
 }
+KOKKOS_INLINE_FUNCTION float warp_min(float v) {
+#if defined(__CUDA_ARCH__)
+  for (int off = 16; off > 0; off /= 2) {
+    const float o = __shfl_xor_sync(0xffffffffu, v, off);
+    v = o < v ? o : v;
+  }
+#endif
+  return v;
+}
+KOKKOS_INLINE_FUNCTION float warp_max(float v) {
+#if defined(__CUDA_ARCH__)
+  for (int off = 16; off > 0; off /= 2) {
+    const float o = __shfl_xor_sync(0xffffffffu, v, off);
+    v = o > v ? o : v;
+  }
+#endif
+  return v;
+}
 KOKKOS_INLINE_FUNCTION std::uint32_t warp_sum(std::uint32_t v) {
 #if defined(__CUDA_ARCH__)
   for (int off = 16; off > 0; off /= 2) v += __shfl_down_sync(0xffffffffu, v, off);
@@ -712,165 +731,145 @@ KOKKOS_INLINE_FUNCTION std::uint32_t warp_sum(std::uint32_t v) {
   return v;
 }
 
-// Device gather, one warp per band word (a 4x4x4 tile), the host tiles'
-// scheme on a GPU: the warp's lanes look up the tile's neighbour cells
-// together (32 hash lookups at once, instead of every vertex its own 125),
-// then walk the occupied ones in the span's z, y, x order; every particle is
-// loaded once for the whole warp and each lane adds it to its vertices (the
-// word's set bits of rank l and l + 32). Each vertex sums exactly what
-// eval_vertex_direct sums, in its order:
+// Device gather, one warp per 32 consecutive band vertices (one per lane;
+// band order keeps them within one or two neighbouring words), the host
+// tiles' scheme on a GPU: the lanes look up the neighbour cells of the
+// warp's bounding box together (32 hash lookups at once, instead of every
+// vertex its own 125), then walk the occupied ones in the span's z, y, x
+// order; every particle is loaded once for the whole warp and each lane adds
+// it to its vertex. Each vertex sums exactly what eval_vertex_direct sums,
+// in its order:
 //  - the vertex visits a cell when the cell lies in its own cell_span and
 //    box_distance2 < R^2 (the same float expressions). A cell whose box is
-//    R or farther from the whole tile (a lower bound of every vertex's
-//    box_distance2, from the tile's corners) is skipped by all; one in every
-//    vertex's span whose farthest distance from the tile (an upper bound,
-//    the per-axis terms at the tile's extremes, where they are largest) is
-//    below R is visited by all; the others are decided per vertex;
-//  - restricted to one vertex's own span, the tile span's z, y, x order is
+//    R or farther from the warp's box (a lower bound of every vertex's
+//    box_distance2) is skipped by all; one in every vertex's span whose
+//    farthest distance from the box (an upper bound: the per-axis terms at
+//    the box's extremes, where they are largest) is below R is visited by
+//    all; the others are decided per vertex;
+//  - restricted to one vertex's own span, the warp span's z, y, x order is
 //    that vertex's order;
 //  - particles with s2 >= 1 add exactly +0 and are skipped (per vertex; and
-//    the runs of a cell beyond R of the whole tile in x, as on the host).
-// The sums use Method::add, whose operations are accumulate's.
-constexpr int kWarpWordsPerTeam = 4;
+//    the runs of a cell beyond R of the whole box in x, as on the host).
+// The sums use Method::add, whose operations are accumulate's. A warp whose
+// vertices lie far apart (two distant words) evaluates them one per lane
+// with eval_vertex_direct.
+constexpr int kWarpsPerTeam = 4;
+constexpr int kMaxWarpSpan = 512;  // cells
 
 template <class Method, class ExecSpace>
-std::uint64_t gather_words_warp(const ExecSpace& space, const NeighbourView<typename ExecSpace::memory_space>& nb,
-                                const BandView<typename ExecSpace::memory_space>& band, std::size_t w0,
-                                std::size_t w1, const Grid& g, const FieldConstants& fc,
-                                const Kokkos::View<float*, typename ExecSpace::memory_space>& phi) {
+std::uint64_t gather_vertices_warp(const ExecSpace& space, const NeighbourView<typename ExecSpace::memory_space>& nb,
+                                   const BandView<typename ExecSpace::memory_space>& band, std::size_t n_words,
+                                   std::size_t o0, std::size_t o1, const Grid& g, const FieldConstants& fc,
+                                   const Kokkos::View<float*, typename ExecSpace::memory_space>& phi) {
   using MemSpace = typename ExecSpace::memory_space;
   using Policy = Kokkos::TeamPolicy<ExecSpace>;
   using Member = typename Policy::member_type;
   const float c = float(g.cell), S = float(g.nb_cell);
-  const std::size_t n_teams = (w1 - w0 + kWarpWordsPerTeam - 1) / kWarpWordsPerTeam;
+  const std::size_t n_warps = (o1 - o0 + 31) / 32;
+  const std::size_t n_teams = (n_warps + kWarpsPerTeam - 1) / kWarpsPerTeam;
   Kokkos::View<unsigned long long*, MemSpace> counts("nbmc::scalar_field::evals_per_team", n_teams);
   Kokkos::parallel_for(
-      "nbmc::scalar_field::gather_warp", Policy(space, int(n_teams), 32 * kWarpWordsPerTeam),
+      "nbmc::scalar_field::gather_warp", Policy(space, int(n_teams), 32 * kWarpsPerTeam),
       KOKKOS_LAMBDA(const Member& team) {
         const int lane = team.team_rank() & 31;
-        const std::size_t w = w0 + std::size_t(team.league_rank()) * kWarpWordsPerTeam + (team.team_rank() >> 5);
-        if (w >= w1) return;  // the whole warp
-        const std::uint64_t full = band.words(w);
-        if (!full) return;
-        const int n_set = popcount64(full);
-        // The lane's vertices: the set bits of rank lane and lane + 32.
-        int bits[2] = {-1, -1};
+        const std::size_t first = o0 + (std::size_t(team.league_rank()) * kWarpsPerTeam + (team.team_rank() >> 5)) * 32;
+        if (first >= o1) return;  // the whole warp
+        const std::size_t o = first + std::size_t(lane);
+        const bool active = o < o1;
+        float x[3];
         {
-          std::uint64_t rest = full;
-          int r = 0;
-          while (rest) {
-            const int b = ctz64(rest);
-            rest &= rest - 1;
-            if (r == lane) bits[0] = b;
-            if (r == lane + 32) bits[1] = b;
-            ++r;
-          }
-        }
-        const int nv = n_set > 32 ? 2 : 1;  // vertices per lane (warp-uniform)
-        float xv[2][3];
-        std::int64_t vlo[2][3], vhi[2][3];
-        std::size_t out[2] = {0, 0};
-#pragma unroll
-        for (int u = 0; u < 2; ++u) {
-          const int b = bits[u] < 0 ? 0 : bits[u];
+          std::size_t w;
+          int bit;
+          word_and_bit_of(band, n_words, active ? o : first, w, bit);
           std::int64_t i, j, k;
-          band.vertex(w, b, i, j, k);
-          xv[u][0] = float(i) * c;
-          xv[u][1] = float(j) * c;
-          xv[u][2] = float(k) * c;
-          cell_span(nb, xv[u], xv[u], fc.R, vlo[u], vhi[u]);
-          out[u] = band.word_offset(w) + popcount64(full & ((std::uint64_t(1) << b) - 1));
+          band.vertex(w, bit, i, j, k);
+          x[0] = float(i) * c;
+          x[1] = float(j) * c;
+          x[2] = float(k) * c;
         }
-        std::int64_t i0, j0, k0;
-        band.vertex(w, 0, i0, j0, k0);
-        const float tmin[3] = {float(i0) * c, float(j0) * c, float(k0) * c};
-        const float tmax[3] = {float(i0 + 3) * c, float(j0 + 3) * c, float(k0 + 3) * c};
+        // The warp's box (inactive lanes repeat the first vertex).
+        float tmin[3], tmax[3];
+        for (int a = 0; a < 3; ++a) {
+          tmin[a] = warp_min(x[a]);
+          tmax[a] = warp_max(x[a]);
+        }
         std::int64_t lo[3], hi[3], in_lo[3], in_hi[3];
         cell_span(nb, tmin, tmax, fc.R, lo, hi);      // contains every vertex's span
         cell_span(nb, tmax, tmin, fc.R, in_lo, in_hi);  // within every vertex's span
         const std::int64_t nx = hi[0] - lo[0] + 1, ny = hi[1] - lo[1] + 1, nz = hi[2] - lo[2] + 1;
-        const int n_span = int(nx * ny * nz);
-        const float R2 = fc.R * fc.R;
-        const float inv_R2 = fc.inv_R2;
-        const float* X = nb.pos.data();
-        const float* Y = X + nb.n;
-        const float* Z = Y + nb.n;
-        auto beyond = [&](float d) { return (d * d) * inv_R2 >= 1.f; };
-        float acc[2][Method::N];
-#pragma unroll
-        for (int u = 0; u < 2; ++u)
-          for (int q = 0; q < Method::N; ++q) acc[u][q] = 0.f;
+        const std::int64_t n_span = nx * ny * nz;
         std::uint32_t count = 0;
-        for (int base = 0; base < n_span; base += 32) {
-          // Lane l looks up cell base + l.
-          const int q = base + lane;
-          std::uint32_t cb = 0, ce = 0;
-          int state = 0;  // 0: no vertex visits; 1: all do; 2: decided per vertex
-          if (q < n_span) {
-            const std::int64_t cx = lo[0] + q % nx, cy = lo[1] + (q / nx) % ny, cz = lo[2] + q / (nx * ny);
-            const float clo[3] = {float(cx) * S, float(cy) * S, float(cz) * S};
-            const std::int64_t cc[3] = {cx, cy, cz};
-            float dmin2 = 0, dmax2 = 0;
-            bool inner = true;
-            for (int a = 0; a < 3; ++a) {
-              const float below = clo[a] - tmax[a], above = tmin[a] - (clo[a] + S);
-              const float dmin = below > 0 ? below : (above > 0 ? above : 0.f);
-              dmin2 += dmin * dmin;
-              float dm = 0;
-              for (int e = 0; e < 2; ++e) {
-                const float xa = e ? tmax[a] : tmin[a];
-                const float b2 = clo[a] - xa, a2 = xa - (clo[a] + S);
-                const float d = b2 > 0 ? b2 : (a2 > 0 ? a2 : 0.f);
-                dm = d > dm ? d : dm;
+        if (n_span > kMaxWarpSpan) {  // far apart: one vertex per lane
+          std::uint64_t e = 0;
+          if (active) phi(o) = eval_vertex_direct<Method>(nb, x, S, fc, e);
+          count = std::uint32_t(e);
+        } else {
+          std::int64_t vlo[3], vhi[3];
+          cell_span(nb, x, x, fc.R, vlo, vhi);
+          const float R2 = fc.R * fc.R;
+          const float inv_R2 = fc.inv_R2;
+          const float* X = nb.pos.data();
+          const float* Y = X + nb.n;
+          const float* Z = Y + nb.n;
+          auto beyond = [&](float d) { return (d * d) * inv_R2 >= 1.f; };
+          float acc[Method::N];
+          for (int q = 0; q < Method::N; ++q) acc[q] = 0.f;
+          for (int base = 0; base < int(n_span); base += 32) {
+            // Lane l looks up cell base + l.
+            const int q = base + lane;
+            std::uint32_t cb = 0, ce = 0;
+            int state = 0;  // 0: no vertex visits; 1: all do; 2: decided per vertex
+            if (q < int(n_span)) {
+              const std::int64_t cx = lo[0] + q % nx, cy = lo[1] + (q / nx) % ny, cz = lo[2] + q / (nx * ny);
+              const float clo[3] = {float(cx) * S, float(cy) * S, float(cz) * S};
+              const std::int64_t cc[3] = {cx, cy, cz};
+              float dmin2 = 0, dmax2 = 0;
+              bool inner = true;
+              for (int a = 0; a < 3; ++a) {
+                const float below = clo[a] - tmax[a], above = tmin[a] - (clo[a] + S);
+                const float dmin = below > 0 ? below : (above > 0 ? above : 0.f);
+                dmin2 += dmin * dmin;
+                const float b0 = clo[a] - tmin[a], a0 = tmin[a] - (clo[a] + S);
+                const float d0 = b0 > 0 ? b0 : (a0 > 0 ? a0 : 0.f);
+                const float b1 = clo[a] - tmax[a], a1 = tmax[a] - (clo[a] + S);
+                const float d1 = b1 > 0 ? b1 : (a1 > 0 ? a1 : 0.f);
+                const float dm = d1 > d0 ? d1 : d0;
+                dmax2 += dm * dm;
+                inner = inner && cc[a] >= in_lo[a] && cc[a] <= in_hi[a];
               }
-              dmax2 += dm * dm;
-              inner = inner && cc[a] >= in_lo[a] && cc[a] <= in_hi[a];
+              if (dmin2 < R2 && nb.cell_range(cx, cy, cz, cb, ce) && ce > cb) state = inner && dmax2 < R2 ? 1 : 2;
             }
-            if (dmin2 < R2 && nb.cell_range(cx, cy, cz, cb, ce) && ce > cb) state = inner && dmax2 < R2 ? 1 : 2;
-          }
-          unsigned todo = warp_ballot(state != 0);
-          while (todo) {
-            const int src = ctz64(todo);
-            todo &= todo - 1;
-            const int cq = base + src;
-            std::uint32_t pb = warp_read(cb, src), pe = warp_read(ce, src);
-            const int cstate = warp_read(state, src);
-            const std::int64_t cx = lo[0] + cq % nx, cy = lo[1] + (cq / nx) % ny, cz = lo[2] + cq / (nx * ny);
-            bool visit[2];
-#pragma unroll
-            for (int u = 0; u < 2; ++u) {
-              if (bits[u] < 0) {
-                visit[u] = false;
-              } else if (cstate == 1) {
-                visit[u] = true;
-              } else {
+            unsigned todo = warp_ballot(state != 0);
+            while (todo) {
+              const int src = ctz64(todo);
+              todo &= todo - 1;
+              const int cq = base + src;
+              std::uint32_t pb = warp_read(cb, src), pe = warp_read(ce, src);
+              const int cstate = warp_read(state, src);
+              bool visit = active;
+              if (active && cstate != 1) {
+                const std::int64_t cx = lo[0] + cq % nx, cy = lo[1] + (cq / nx) % ny, cz = lo[2] + cq / (nx * ny);
                 const float clo[3] = {float(cx) * S, float(cy) * S, float(cz) * S};
-                visit[u] = cx >= vlo[u][0] && cx <= vhi[u][0] && cy >= vlo[u][1] && cy <= vhi[u][1] &&
-                           cz >= vlo[u][2] && cz <= vhi[u][2] && box_distance2(clo, S, xv[u]) < R2;
+                visit = cx >= vlo[0] && cx <= vhi[0] && cy >= vlo[1] && cy <= vhi[1] && cz >= vlo[2] &&
+                        cz <= vhi[2] && box_distance2(clo, S, x) < R2;
               }
-            }
-            if (!warp_any(visit[0] || visit[1])) continue;
-            while (pb < pe && X[pb] < tmin[0] && beyond(X[pb] - tmin[0])) ++pb;
-            while (pe > pb && X[pe - 1] > tmax[0] && beyond(X[pe - 1] - tmax[0])) --pe;
-            for (std::uint32_t p = pb; p < pe; ++p) {
-              const float px = X[p], py = Y[p], pz = Z[p];
-              const float qp = inv_support2<Method::radii>(nb.support.data(), p, inv_R2);
-              const float* pd = Method::P ? nb.pdata.data() + std::size_t(Method::P) * p : nullptr;
-#pragma unroll
-              for (int u = 0; u < 2; ++u) {  // constant indices: the sums stay in registers
-                if (u >= nv || !visit[u]) continue;
-                const float dx = px - xv[u][0], dy = py - xv[u][1], dz = pz - xv[u][2];
+              if (!warp_any(visit)) continue;
+              while (pb < pe && X[pb] < tmin[0] && beyond(X[pb] - tmin[0])) ++pb;
+              while (pe > pb && X[pe - 1] > tmax[0] && beyond(X[pe - 1] - tmax[0])) --pe;
+              if (!visit) continue;  // this lane only; the others' loop has no warp operation
+              for (std::uint32_t p = pb; p < pe; ++p) {
+                const float dx = X[p] - x[0], dy = Y[p] - x[1], dz = Z[p] - x[2];
+                const float qp = inv_support2<Method::radii>(nb.support.data(), p, inv_R2);
                 const float s2 = (dx * dx + dy * dy + dz * dz) * qp;
                 if (!(s2 < 1.f)) continue;
                 ++count;
-                Method::add(acc[u], dx, dy, dz, 1.f - s2, pd, qp);
+                Method::add(acc, dx, dy, dz, 1.f - s2, Method::P ? nb.pdata.data() + std::size_t(Method::P) * p : nullptr,
+                            qp);
               }
             }
           }
+          if (active) phi(o) = Method::value(acc, fc);
         }
-#pragma unroll
-        for (int u = 0; u < 2; ++u)
-          if (bits[u] >= 0) phi(out[u]) = Method::value(acc[u], fc);
         count = warp_sum(count);
         if (lane == 0 && count)
           Kokkos::atomic_add(&counts(std::size_t(team.league_rank())), static_cast<unsigned long long>(count));
@@ -903,25 +902,17 @@ std::uint64_t gather_field(const ExecSpace& space, const NeighbourView<typename 
   // 4096 words filled half a wave of an H100 (ncu), so chunks are larger there.
   constexpr bool host = Kokkos::SpaceAccessibility<Kokkos::HostSpace, MemSpace>::accessible;
   if constexpr (!host) {
-    if (!list.listed() && device_gather_kind() == 3) {
-      // One warp per band word, in chunks.
-      const std::size_t wchunk = std::max<std::size_t>(65536, n_words / 8);
-      for (std::size_t w0 = 0; w0 < n_words; w0 += wchunk) {
-        const std::size_t w1 = std::min(n_words, w0 + wchunk);
-        total_evals += gather_words_warp<Method>(space, nb, band, w0, w1, g, fc, phi);
-        trace("gather chunk", w1 - w0);
-        progress(4 /*NBMC_STAGE_FIELD*/, double(w1) / double(n_words));
-      }
-      return total_evals;
-    }
-    if (!list.listed() && device_gather_kind() == 2) {
+    if (!list.listed() && device_gather_kind() >= 2) {
       // One thread per band vertex (phi holds the band's values), in chunks.
       const std::size_t n = phi.extent(0);
       if (n_words == 0 || n == 0) return 0;
       const std::size_t vchunk = std::max<std::size_t>(std::size_t(1) << 22, n / 8);
       for (std::size_t o0 = 0; o0 < n; o0 += vchunk) {
         const std::size_t o1 = std::min(n, o0 + vchunk);
-        total_evals += gather_vertices_direct<Method>(space, nb, band, n_words, o0, o1, g, fc, phi);
+        if (device_gather_kind() == 3)
+          total_evals += gather_vertices_warp<Method>(space, nb, band, n_words, o0, o1, g, fc, phi);
+        else
+          total_evals += gather_vertices_direct<Method>(space, nb, band, n_words, o0, o1, g, fc, phi);
         trace("gather chunk", o1 - o0);
         progress(4 /*NBMC_STAGE_FIELD*/, double(o1) / double(n));
       }
