@@ -28,22 +28,19 @@ constexpr int kMaxTileCells = 1024;
 // Which device gather runs for a whole band: 2 = one thread per band
 // vertex, the threads numbered in band order (default;
 // gather_vertices_direct); 1 = one thread per vertex slot of the words
-// (NBMC_GPU_GATHER=slots); 3 = one warp per 32 band vertices sharing their
-// cells (NBMC_GPU_GATHER=warp; gather_vertices_warp); 0 = the team-tiled
-// shared-memory kernel
+// (NBMC_GPU_GATHER=slots); 0 = the team-tiled shared-memory kernel
 // (NBMC_GPU_GATHER=team). The band growth's gathers (a few new vertices per
 // listed word) always run one thread per slot. Measured on an H200, 1.65 M
 // frame at r/2 (bench/RESULTS.md, session 20): field 14 ms (vertices), 16-17
-// (slots), 21 (warp: 1.4x fewer instructions per vertex, but 150 registers,
-// 14% occupancy); on an H100 earlier: direct 54 ms, team 66 s -- the
-// particles and the cell map fit in L2, and the team kernel's serial
-// staging costs a lot.
+// ms (slots); two warp-cooperative kernels (cells looked up once per warp,
+// commits 6329e94 and 1dfe7e6) were slower (20-21 ms: 110-150 registers);
+// on an H100 earlier: direct 54 ms, team 66 s -- the particles and the cell
+// map fit in L2, and the team kernel's serial staging costs a lot.
 inline int device_gather_kind() {
   static const int kind = [] {
     const char* e = std::getenv("NBMC_GPU_GATHER");
     if (e && std::string(e) == "team") return 0;
     if (e && std::string(e) == "slots") return 1;
-    if (e && std::string(e) == "warp") return 3;
     return 2;
   }();
   return kind;
@@ -680,208 +677,6 @@ std::uint64_t gather_vertices_direct(const ExecSpace& space, const NeighbourView
   return evals;
 }
 
-// Warp-wide operations of gather_words_warp (CUDA; the host compilation of
-// its lambda, which never runs, sees single-lane stand-ins, so that both
-// compilations capture the same variables).
-KOKKOS_INLINE_FUNCTION unsigned warp_ballot(bool p) {
-#if defined(__CUDA_ARCH__)
-  return __ballot_sync(0xffffffffu, p);
-#else
-  return p ? 1u : 0u;
-#endif
-}
-KOKKOS_INLINE_FUNCTION bool warp_any(bool p) {
-#if defined(__CUDA_ARCH__)
-  return __any_sync(0xffffffffu, p) != 0;
-#else
-  return p;
-#endif
-}
-template <class T>
-KOKKOS_INLINE_FUNCTION T warp_read(T v, int src) {
-#if defined(__CUDA_ARCH__)
-  return __shfl_sync(0xffffffffu, v, src);
-#else
-  (void)src;
-  return v;
-#endif
-}
-KOKKOS_INLINE_FUNCTION float warp_min(float v) {
-#if defined(__CUDA_ARCH__)
-  for (int off = 16; off > 0; off /= 2) {
-    const float o = __shfl_xor_sync(0xffffffffu, v, off);
-    v = o < v ? o : v;
-  }
-#endif
-  return v;
-}
-KOKKOS_INLINE_FUNCTION float warp_max(float v) {
-#if defined(__CUDA_ARCH__)
-  for (int off = 16; off > 0; off /= 2) {
-    const float o = __shfl_xor_sync(0xffffffffu, v, off);
-    v = o > v ? o : v;
-  }
-#endif
-  return v;
-}
-KOKKOS_INLINE_FUNCTION std::uint32_t warp_sum(std::uint32_t v) {
-#if defined(__CUDA_ARCH__)
-  for (int off = 16; off > 0; off /= 2) v += __shfl_down_sync(0xffffffffu, v, off);
-#endif
-  return v;
-}
-
-// Device gather, one warp per 32 consecutive band vertices (one per lane;
-// band order keeps them within one or two neighbouring words), the host
-// tiles' scheme on a GPU: the lanes look up the neighbour cells of the
-// warp's bounding box together (32 hash lookups at once, instead of every
-// vertex its own 125), then walk the occupied ones in the span's z, y, x
-// order; every particle is loaded once for the whole warp and each lane adds
-// it to its vertex. Each vertex sums exactly what eval_vertex_direct sums,
-// in its order:
-//  - the vertex visits a cell when the cell lies in its own cell_span and
-//    box_distance2 < R^2 (the same float expressions). A cell whose box is
-//    R or farther from the warp's box (a lower bound of every vertex's
-//    box_distance2) is skipped by all; one in every vertex's span whose
-//    farthest distance from the box (an upper bound: the per-axis terms at
-//    the box's extremes, where they are largest) is below R is visited by
-//    all; the others are decided per vertex;
-//  - restricted to one vertex's own span, the warp span's z, y, x order is
-//    that vertex's order;
-//  - particles with s2 >= 1 add exactly +0 and are skipped (per vertex; and
-//    the runs of a cell beyond R of the whole box in x, as on the host).
-// The sums use Method::add, whose operations are accumulate's. A warp whose
-// vertices lie far apart (two distant words) evaluates them one per lane
-// with eval_vertex_direct.
-constexpr int kWarpsPerTeam = 4;
-constexpr int kMaxWarpSpan = 512;  // cells
-
-template <class Method, class ExecSpace>
-std::uint64_t gather_vertices_warp(const ExecSpace& space, const NeighbourView<typename ExecSpace::memory_space>& nb,
-                                   const BandView<typename ExecSpace::memory_space>& band, std::size_t n_words,
-                                   std::size_t o0, std::size_t o1, const Grid& g, const FieldConstants& fc,
-                                   const Kokkos::View<float*, typename ExecSpace::memory_space>& phi) {
-  using MemSpace = typename ExecSpace::memory_space;
-  using Policy = Kokkos::TeamPolicy<ExecSpace>;
-  using Member = typename Policy::member_type;
-  const float c = float(g.cell), S = float(g.nb_cell);
-  const std::size_t n_warps = (o1 - o0 + 31) / 32;
-  const std::size_t n_teams = (n_warps + kWarpsPerTeam - 1) / kWarpsPerTeam;
-  Kokkos::View<unsigned long long*, MemSpace> counts("nbmc::scalar_field::evals_per_team", n_teams);
-  Kokkos::parallel_for(
-      "nbmc::scalar_field::gather_warp", Policy(space, int(n_teams), 32 * kWarpsPerTeam),
-      KOKKOS_LAMBDA(const Member& team) {
-        const int lane = team.team_rank() & 31;
-        const std::size_t first = o0 + (std::size_t(team.league_rank()) * kWarpsPerTeam + (team.team_rank() >> 5)) * 32;
-        if (first >= o1) return;  // the whole warp
-        const std::size_t o = first + std::size_t(lane);
-        const bool active = o < o1;
-        float x[3];
-        {
-          std::size_t w;
-          int bit;
-          word_and_bit_of(band, n_words, active ? o : first, w, bit);
-          std::int64_t i, j, k;
-          band.vertex(w, bit, i, j, k);
-          x[0] = float(i) * c;
-          x[1] = float(j) * c;
-          x[2] = float(k) * c;
-        }
-        // The warp's box (inactive lanes repeat the first vertex).
-        float tmin[3], tmax[3];
-        for (int a = 0; a < 3; ++a) {
-          tmin[a] = warp_min(x[a]);
-          tmax[a] = warp_max(x[a]);
-        }
-        std::int64_t lo[3], hi[3], in_lo[3], in_hi[3];
-        cell_span(nb, tmin, tmax, fc.R, lo, hi);      // contains every vertex's span
-        cell_span(nb, tmax, tmin, fc.R, in_lo, in_hi);  // within every vertex's span
-        const std::int64_t nx = hi[0] - lo[0] + 1, ny = hi[1] - lo[1] + 1, nz = hi[2] - lo[2] + 1;
-        const std::int64_t n_span = nx * ny * nz;
-        std::uint32_t count = 0;
-        if (n_span > kMaxWarpSpan) {  // far apart: one vertex per lane
-          std::uint64_t e = 0;
-          if (active) phi(o) = eval_vertex_direct<Method>(nb, x, S, fc, e);
-          count = std::uint32_t(e);
-        } else {
-          std::int64_t vlo[3], vhi[3];
-          cell_span(nb, x, x, fc.R, vlo, vhi);
-          const float R2 = fc.R * fc.R;
-          const float inv_R2 = fc.inv_R2;
-          const float* X = nb.pos.data();
-          const float* Y = X + nb.n;
-          const float* Z = Y + nb.n;
-          auto beyond = [&](float d) { return (d * d) * inv_R2 >= 1.f; };
-          float acc[Method::N];
-          for (int q = 0; q < Method::N; ++q) acc[q] = 0.f;
-          for (int base = 0; base < int(n_span); base += 32) {
-            // Lane l looks up cell base + l.
-            const int q = base + lane;
-            std::uint32_t cb = 0, ce = 0;
-            int state = 0;  // 0: no vertex visits; 1: all do; 2: decided per vertex
-            if (q < int(n_span)) {
-              const std::int64_t cx = lo[0] + q % nx, cy = lo[1] + (q / nx) % ny, cz = lo[2] + q / (nx * ny);
-              const float clo[3] = {float(cx) * S, float(cy) * S, float(cz) * S};
-              const std::int64_t cc[3] = {cx, cy, cz};
-              float dmin2 = 0, dmax2 = 0;
-              bool inner = true;
-              for (int a = 0; a < 3; ++a) {
-                const float below = clo[a] - tmax[a], above = tmin[a] - (clo[a] + S);
-                const float dmin = below > 0 ? below : (above > 0 ? above : 0.f);
-                dmin2 += dmin * dmin;
-                const float b0 = clo[a] - tmin[a], a0 = tmin[a] - (clo[a] + S);
-                const float d0 = b0 > 0 ? b0 : (a0 > 0 ? a0 : 0.f);
-                const float b1 = clo[a] - tmax[a], a1 = tmax[a] - (clo[a] + S);
-                const float d1 = b1 > 0 ? b1 : (a1 > 0 ? a1 : 0.f);
-                const float dm = d1 > d0 ? d1 : d0;
-                dmax2 += dm * dm;
-                inner = inner && cc[a] >= in_lo[a] && cc[a] <= in_hi[a];
-              }
-              if (dmin2 < R2 && nb.cell_range(cx, cy, cz, cb, ce) && ce > cb) state = inner && dmax2 < R2 ? 1 : 2;
-            }
-            unsigned todo = warp_ballot(state != 0);
-            while (todo) {
-              const int src = ctz64(todo);
-              todo &= todo - 1;
-              const int cq = base + src;
-              std::uint32_t pb = warp_read(cb, src), pe = warp_read(ce, src);
-              const int cstate = warp_read(state, src);
-              bool visit = active;
-              if (active && cstate != 1) {
-                const std::int64_t cx = lo[0] + cq % nx, cy = lo[1] + (cq / nx) % ny, cz = lo[2] + cq / (nx * ny);
-                const float clo[3] = {float(cx) * S, float(cy) * S, float(cz) * S};
-                visit = cx >= vlo[0] && cx <= vhi[0] && cy >= vlo[1] && cy <= vhi[1] && cz >= vlo[2] &&
-                        cz <= vhi[2] && box_distance2(clo, S, x) < R2;
-              }
-              if (!warp_any(visit)) continue;
-              while (pb < pe && X[pb] < tmin[0] && beyond(X[pb] - tmin[0])) ++pb;
-              while (pe > pb && X[pe - 1] > tmax[0] && beyond(X[pe - 1] - tmax[0])) --pe;
-              if (!visit) continue;  // this lane only; the others' loop has no warp operation
-              for (std::uint32_t p = pb; p < pe; ++p) {
-                const float dx = X[p] - x[0], dy = Y[p] - x[1], dz = Z[p] - x[2];
-                const float qp = inv_support2<Method::radii>(nb.support.data(), p, inv_R2);
-                const float s2 = (dx * dx + dy * dy + dz * dz) * qp;
-                if (!(s2 < 1.f)) continue;
-                ++count;
-                Method::add(acc, dx, dy, dz, 1.f - s2, Method::P ? nb.pdata.data() + std::size_t(Method::P) * p : nullptr,
-                            qp);
-              }
-            }
-          }
-          if (active) phi(o) = Method::value(acc, fc);
-        }
-        count = warp_sum(count);
-        if (lane == 0 && count)
-          Kokkos::atomic_add(&counts(std::size_t(team.league_rank())), static_cast<unsigned long long>(count));
-      });
-  std::uint64_t evals = 0;
-  Kokkos::parallel_reduce(
-      "nbmc::scalar_field::count_evals", Kokkos::RangePolicy<ExecSpace>(space, 0, n_teams),
-      KOKKOS_LAMBDA(const std::size_t q, std::uint64_t& acc) { acc += counts(q); }, evals);
-  space.fence();
-  return evals;
-}
-
 // Evaluates the field on the band's words [0, n_words), or with a list (see
 // WordList; n_words is then its length) only on the listed vertices: after
 // the band grew, the new ones (carry_values copies the others). With `sink`
@@ -902,17 +697,14 @@ std::uint64_t gather_field(const ExecSpace& space, const NeighbourView<typename 
   // 4096 words filled half a wave of an H100 (ncu), so chunks are larger there.
   constexpr bool host = Kokkos::SpaceAccessibility<Kokkos::HostSpace, MemSpace>::accessible;
   if constexpr (!host) {
-    if (!list.listed() && device_gather_kind() >= 2) {
+    if (!list.listed() && device_gather_kind() == 2) {
       // One thread per band vertex (phi holds the band's values), in chunks.
       const std::size_t n = phi.extent(0);
       if (n_words == 0 || n == 0) return 0;
       const std::size_t vchunk = std::max<std::size_t>(std::size_t(1) << 22, n / 8);
       for (std::size_t o0 = 0; o0 < n; o0 += vchunk) {
         const std::size_t o1 = std::min(n, o0 + vchunk);
-        if (device_gather_kind() == 3)
-          total_evals += gather_vertices_warp<Method>(space, nb, band, n_words, o0, o1, g, fc, phi);
-        else
-          total_evals += gather_vertices_direct<Method>(space, nb, band, n_words, o0, o1, g, fc, phi);
+        total_evals += gather_vertices_direct<Method>(space, nb, band, n_words, o0, o1, g, fc, phi);
         trace("gather chunk", o1 - o0);
         progress(4 /*NBMC_STAGE_FIELD*/, double(o1) / double(n));
       }
