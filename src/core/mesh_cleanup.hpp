@@ -83,13 +83,30 @@
 //    CleanupResult counts their triangles.
 // Cost: the adjacency, the irregular-vertex marking and one scan of every
 // triangle run on all host threads; after that only the bad triangles and
-// what the repairs changed are looked at again (each pass), and only the
-// components of the bad triangles left are walked.
+// what the repairs changed are looked at again (each pass, on all host
+// threads from 4096 triangles), and only the components of the bad
+// triangles left are walked (serially).
 //
-// Serial and in a fixed order (worst triangle first, then by index), so the
-// result depends only on the input mesh: the same on every backend and
-// thread count. The output keeps the surviving triangles in their order and
-// the surviving vertices in theirs; unreferenced vertices are dropped.
+// In a fixed order (worst triangle first, then by index), so the result
+// depends only on the input mesh: the same on every backend and thread
+// count. That serial order defines the result; a pass of the repairs runs
+// on the host threads (from kParallelMinItems bad triangles per thread; the
+// cluster merges of 5. always serially) by deterministic reservations and
+// gives exactly the serial pass' mesh: in rounds, each of the next items of
+// the list computes its region (the vertices whose positions or triangles
+// its repair may read or write: its triangle's vertices and their
+// one-rings, a needle's widening cluster and its one-ring, in the last
+// round a pinched tube's third vertices' one-rings) and reserves it with
+// its place in the list; an item holding its whole region commits, in
+// parallel with the other such items, and the others wait for the next
+// round, so each item runs after every earlier item whose region meets
+// its own. A stamp per vertex (the last item that committed with it in its
+// region) catches a region that grew, after a later item committed beside
+// it, into that item's; the pass is then undone (per-thread undo logs) and
+// run serially. Counts and changed lists are per thread and merged after
+// each round; the next pass' list is sorted, so their order does not
+// matter. The output keeps the surviving triangles in their order and the
+// surviving vertices in theirs; unreferenced vertices are dropped.
 #pragma once
 
 #include "mesh_check.hpp"
@@ -100,6 +117,7 @@
 #include <algorithm>
 #include <array>
 #include <atomic>
+#include <chrono>
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
@@ -142,13 +160,15 @@ struct CleanupResult {
 namespace detail {
 
 // For the tests: repair_pass runs on several threads from this many bad
-// triangles per thread (the library: Cleaner::kParallelMinItems), and, when
+// triangles per thread (the library: Cleaner::kParallelMinItems), as does
+// bad_triangles_after from this many triangles looked at (4096), and, when
 // undo_after_round > 0, undoes its pass after that round (as when a region
 // grew) and runs it serially.
 struct RepairPassHooks {
   std::size_t min_items = 0;  // 0: kParallelMinItems
   std::size_t undo_after_round = 0;
-  // What the parallel passes did (added to): passes, rounds, items that lost.
+  // What the parallel passes did while min_items > 0 (added to): passes,
+  // rounds, items that lost.
   std::uint64_t parallel_passes = 0, rounds = 0, lost = 0;
 };
 inline RepairPassHooks& repair_pass_hooks() {
@@ -333,6 +353,41 @@ class Cleaner {
   // triangle of the mesh; this, the same per triangle of the repairs'
   // neighbourhoods.
   BadList bad_triangles_after(const BadList& before) {
+    // On several host threads: each chunk of what is looked at (the
+    // triangles of `before`, the fans of the changed vertices, the changed
+    // triangles) lists its bad triangles, a triangle looked at twice twice;
+    // sorted and made unique, the same list.
+    const std::size_t nb = before.size(), ncv = changed_vertices_.size(), nct = changed_triangles_.size();
+    const std::size_t total = nb + ncv + nct;
+    const std::size_t min_items = repair_pass_hooks().min_items;
+    const std::size_t chunks = chunk_count(total, min_items > 0 ? min_items : 4096);
+    if (chunks > 1) {
+      std::vector<BadList> part(chunks);
+      for_chunks(total, chunks, [&](std::size_t k, std::size_t b, std::size_t e) {
+        std::vector<std::uint32_t> f;
+        BadList& out = part[k];
+        auto look_at = [&](std::uint32_t t) {
+          if (!alive_[t]) return;
+          const TriangleShape s = shape(t);
+          const int c = triangle_class(s, degenerate_double_area_);
+          if (c) out.emplace_back(-c, s.sin_min_angle, t);
+        };
+        for (std::size_t i = b; i < e; ++i) {
+          if (i < nb) look_at(std::get<2>(before[i]));
+          else if (i < nb + ncv) {
+            fan(changed_vertices_[i - nb], f);
+            for (std::uint32_t t : f) look_at(t);
+          } else look_at(changed_triangles_[i - nb - ncv]);
+        }
+      });
+      changed_vertices_.clear();
+      changed_triangles_.clear();
+      BadList bad;
+      for (const auto& q : part) bad.insert(bad.end(), q.begin(), q.end());
+      std::sort(bad.begin(), bad.end());
+      bad.erase(std::unique(bad.begin(), bad.end()), bad.end());
+      return bad;
+    }
     std::vector<std::uint32_t> look;
     look.reserve(before.size() + 8 * changed_vertices_.size() + changed_triangles_.size());
     for (const auto& b : before) look.push_back(std::get<2>(b));
@@ -436,6 +491,7 @@ class Cleaner {
   static constexpr std::size_t kParallelMinItems = 128;
   static constexpr std::size_t kPrefixPerThread = 64;
 
+
   std::uint64_t repair_pass(const BadList& bad) {
     const std::size_t n = bad.size();
     const RepairPassHooks hooks = repair_pass_hooks();
@@ -448,17 +504,15 @@ class Cleaner {
     }
     const std::uint64_t saved[4] = {collapses, flips, moves, cuts};
     const std::size_t saved_vertices = changed_vertices_.size(), saved_triangles = changed_triangles_.size();
-    if (!reserve_) {
-      reserve_.reset(new std::atomic<std::uint32_t>[nv_]);
-      stamp_.resize(nv_);
+    if (!slots_ || std::uint64_t(stamp_base_) + n + 2 >= kNone) {
+      if (!slots_) slots_.reset(new Slot[nv_]);
       stamp_base_ = 0;
       for_chunks(nv_, chunk_count(nv_, 65536), [&](std::size_t, std::size_t b, std::size_t e) {
-        for (std::size_t x = b; x < e; ++x) reserve_[x].store(kNone, std::memory_order_relaxed);
+        for (std::size_t x = b; x < e; ++x) {
+          slots_[x].reserve.store(kNone, std::memory_order_relaxed);
+          slots_[x].stamp = 0;
+        }
       });
-    }
-    if (std::uint64_t(stamp_base_) + n + 2 >= kNone) {
-      std::fill(stamp_.begin(), stamp_.end(), 0u);
-      stamp_base_ = 0;
     }
     const std::uint32_t base = stamp_base_ + 1;  // item i's stamp: base + i
     stamp_base_ = base + std::uint32_t(n);
@@ -480,7 +534,6 @@ class Cleaner {
       while (cur.size() < prefix && fresh < n) cur.push_back(std::uint32_t(fresh++));
     };
     refill();
-    std::atomic<std::size_t> at_a{0}, at_b{0}, at_c{0};
     std::atomic<bool> violation{false}, failed{false};
     bool done = false;
     std::exception_ptr error;
@@ -505,12 +558,14 @@ class Cleaner {
         if (done) return;
         // Reserve.
         guarded([&] {
-          for (std::size_t i; (i = at_a.fetch_add(1, std::memory_order_relaxed)) < cur.size();) {
+          const std::size_t m = cur.size(), ib = m * w / threads, ie = m * (w + 1) / threads;
+          for (std::size_t i = ib; i < ie; ++i) {
             const std::uint32_t pos = cur[i];
             me.region(std::get<2>(bad[pos]), reg[i]);
             for (std::uint32_t x : reg[i]) {
-              std::uint32_t old = reserve_[x].load(std::memory_order_relaxed);
-              while (pos < old && !reserve_[x].compare_exchange_weak(old, pos, std::memory_order_relaxed)) {
+              std::atomic<std::uint32_t>& r = slots_[x].reserve;
+              std::uint32_t old = r.load(std::memory_order_relaxed);
+              while (pos < old && !r.compare_exchange_weak(old, pos, std::memory_order_relaxed)) {
               }
             }
           }
@@ -518,11 +573,12 @@ class Cleaner {
         barrier.wait();
         // Commit the items that hold their whole region.
         guarded([&] {
-          for (std::size_t i; (i = at_b.fetch_add(1, std::memory_order_relaxed)) < cur.size();) {
+          const std::size_t m = cur.size(), ib = m * w / threads, ie = m * (w + 1) / threads;
+          for (std::size_t i = ib; i < ie; ++i) {
             const std::uint32_t pos = cur[i];
             bool won = true;
             for (std::uint32_t x : reg[i])
-              if (reserve_[x].load(std::memory_order_relaxed) != pos) {
+              if (slots_[x].reserve.load(std::memory_order_relaxed) != pos) {
                 won = false;
                 break;
               }
@@ -530,17 +586,18 @@ class Cleaner {
             if (!won) continue;
             const std::uint32_t stamp = base + pos;
             for (std::uint32_t x : reg[i])
-              if (stamp_[x] > stamp) violation.store(true, std::memory_order_relaxed);
+              if (slots_[x].stamp > stamp) violation.store(true, std::memory_order_relaxed);
             if (violation.load(std::memory_order_relaxed)) continue;  // (the pass is undone)
             me.repaired_ += me.repair(std::get<2>(bad[pos])) ? 1 : 0;
-            for (std::uint32_t x : reg[i]) stamp_[x] = stamp;
+            for (std::uint32_t x : reg[i]) slots_[x].stamp = stamp;
           }
         });
         barrier.wait();
         // Release the reservations.
         guarded([&] {
-          for (std::size_t i; (i = at_c.fetch_add(1, std::memory_order_relaxed)) < cur.size();)
-            for (std::uint32_t x : reg[i]) reserve_[x].store(kNone, std::memory_order_relaxed);
+          const std::size_t m = cur.size(), ib = m * w / threads, ie = m * (w + 1) / threads;
+          for (std::size_t i = ib; i < ie; ++i)
+            for (std::uint32_t x : reg[i]) slots_[x].reserve.store(kNone, std::memory_order_relaxed);
         });
         barrier.wait();
         if (w != 0) continue;
@@ -573,7 +630,6 @@ class Cleaner {
         cur.swap(next);
         refill();
         done = cur.empty();
-        at_a = 0, at_b = 0, at_c = 0;
       }
     });
     if (error) std::rethrow_exception(error);
@@ -585,14 +641,14 @@ class Cleaner {
       repaired = 0;
       for (const auto& b : bad) repaired += repair(std::get<2>(b)) ? 1 : 0;
     }
-    {
+    if (hooks.min_items > 0) {  // (a test's: the library's clean-ups may run on several threads at once)
       RepairPassHooks& h = repair_pass_hooks();
       ++h.parallel_passes;
       h.rounds += rounds;
       h.lost += lost;
     }
     if (trace_on()) {
-      std::fprintf(stderr, "[nbmc trace] clean-up pass: items=%zu threads=%zu rounds=%llu lost=%llu (%.1f%%)%s\n", n,
+      std::fprintf(stderr, "[nbmc trace] clean-up rounds: items=%zu threads=%zu rounds=%llu lost=%llu (%.1f%%)%s\n", n,
                    threads, (unsigned long long)rounds, (unsigned long long)lost, 100.0 * double(lost) / double(n),
                    violation ? " (undone, run serially)" : "");
     }
@@ -1116,41 +1172,62 @@ class Cleaner {
       std::sort(out.begin(), out.end());
       return;
     }
-    auto add_fan = [&](std::uint32_t x) {
-      fan(x, scratch_);
-      for (std::uint32_t u : scratch_) out.insert(out.end(), T_ + 3 * std::size_t(u), T_ + 3 * std::size_t(u) + 3);
+    auto add = [&](const std::vector<std::uint32_t>& f) {
+      for (std::uint32_t u : f) out.insert(out.end(), T_ + 3 * std::size_t(u), T_ + 3 * std::size_t(u) + 3);
     };
-    for (int k = 0; k < 3; ++k) add_fan(v[k]);
     int k_short = 0;
     double l_short = 0, l_long = 0;
     needle_edges(v, k_short, l_short, l_long);
     const double near = kSinOneDegree * l_long;
-    const std::uint32_t a = v[k_short], b = v[(k_short + 1) % 3];
+    // The fans of the short edge's ends (a, b) in fa_ and fb_, their rings
+    // in ra_ and rb_ (consider_push's first two steps, and the cut's).
+    const std::uint32_t a = v[k_short], b = v[(k_short + 1) % 3], c = v[(k_short + 2) % 3];
+    fan(a, fa_);
+    fan(b, fb_);
+    fan(c, scratch_);
+    add(fa_);
+    add(fb_);
+    add(scratch_);
     if (l_short > 0) {
       // consider_push's cluster (its loop, its order).
+      ring(a, fa_, ra_);
+      ring(b, fb_, rb_);
       cluster_.assign({a, b});
       for (std::size_t i = 0; i < cluster_.size() && cluster_.size() <= 8; ++i) {
-        fan(cluster_[i], fb_);
-        ring(cluster_[i], fb_, rb_);
-        for (std::uint32_t u : rb_)
-          if (norm(load(P_, u) - load(P_, cluster_[i])) < near &&
-              std::find(cluster_.begin(), cluster_.end(), u) == cluster_.end())
+        const std::uint32_t x = cluster_[i];
+        const std::vector<std::uint32_t>* r = &ra_;
+        if (i == 1) r = &rb_;
+        if (i >= 2) {
+          fan(x, scratch_);
+          add(scratch_);
+          ring(x, scratch_, common_);
+          r = &common_;
+        }
+        const Vec3 px = load(P_, x);
+        for (std::uint32_t u : *r)
+          if (norm(load(P_, u) - px) < near && std::find(cluster_.begin(), cluster_.end(), u) == cluster_.end())
             cluster_.push_back(u);
       }
-      for (std::uint32_t x : cluster_)
-        if (!contains(v, x)) add_fan(x);
+      // (members found but not looked from: their one-rings too)
+      for (std::size_t i = 2; i < cluster_.size(); ++i) {
+        fan(cluster_[i], scratch_);
+        add(scratch_);
+      }
     }
     if (last_resort && l_short < near) {
-      fan(a, fa_);
-      ring(a, fa_, ra_);
-      fan(b, fb_);
-      ring(b, fb_, rb_);
+      if (!(l_short > 0)) {
+        ring(a, fa_, ra_);
+        ring(b, fb_, rb_);
+      }
       common_.clear();
       std::set_intersection(ra_.begin(), ra_.end(), rb_.begin(), rb_.end(), std::back_inserter(common_));
       const Vec3 pa = load(P_, a), pb = load(P_, b);
-      for (std::uint32_t c : common_) {
-        const Vec3 pc = load(P_, c);
-        if (norm(pc - pa) < near && norm(pc - pb) < near) add_fan(c);
+      for (std::uint32_t x : common_) {
+        const Vec3 px = load(P_, x);
+        if (norm(px - pa) < near && norm(px - pb) < near) {
+          fan(x, scratch_);
+          add(scratch_);
+        }
       }
     }
     std::sort(out.begin(), out.end());
@@ -2029,8 +2106,11 @@ class Cleaner {
   // stamps (per vertex, stamp_base_ + the item that last committed with the
   // vertex in its region).
   std::vector<std::unique_ptr<Cleaner>> workers_;
-  std::unique_ptr<std::atomic<std::uint32_t>[]> reserve_;
-  std::vector<std::uint32_t> stamp_;
+  struct Slot {
+    std::atomic<std::uint32_t> reserve;
+    std::uint32_t stamp;
+  };
+  std::unique_ptr<Slot[]> slots_;  // per vertex (one cache line for both)
   std::uint32_t stamp_base_ = 0;
 };
 
@@ -2062,8 +2142,18 @@ CleanupResult cleanup_mesh(PosVec& positions, NormalVec& normals, IndexVec& tria
   host_trace("clean-up: scan", bad.size());
   auto passes = [&] {
     for (int pass = 0; pass < kCleanupPasses && !bad.empty(); ++pass) {
+      // (NBMC_TRACE: each pass' items, repairs and times, on a line of its
+      // own that leaves host_trace's clock alone.)
+      const bool trace = c.trace_on();
+      const auto t0 = trace ? std::chrono::steady_clock::now() : std::chrono::steady_clock::time_point();
       const std::uint64_t repaired = c.repair_pass(bad);
+      const auto t1 = trace ? std::chrono::steady_clock::now() : t0;
+      const std::size_t items = bad.size();
       bad = c.bad_triangles_after(bad);
+      if (trace)
+        std::fprintf(stderr, "[nbmc trace] clean-up pass: items=%zu repaired=%llu %.3f ms, list %.3f ms\n", items,
+                     (unsigned long long)repaired, std::chrono::duration<double, std::milli>(t1 - t0).count(),
+                     std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t1).count());
       if (repaired == 0) break;
     }
   };
