@@ -541,7 +541,28 @@ class Cleaner {
     std::vector<Undo> pass_log;
     std::uint64_t repaired = 0, rounds = 0, lost = 0;
     SpinBarrier barrier(threads);
+    // The items of a round: each thread takes its own range first (in both
+    // steps, so that an item commits where its region's lines are cached),
+    // then what is left of the others'.
+    struct alignas(64) Cursor {
+      std::atomic<std::size_t> next{0};
+    };
+    std::unique_ptr<Cursor[]> cursor_a(new Cursor[threads]), cursor_b(new Cursor[threads]);
+    auto reset_cursors = [&] {
+      for (std::size_t v = 0; v < threads; ++v) {
+        cursor_a[v].next.store(cur.size() * v / threads, std::memory_order_relaxed);
+        cursor_b[v].next.store(cur.size() * v / threads, std::memory_order_relaxed);
+      }
+    };
+    reset_cursors();
     on_threads(threads, [&](std::size_t w) {
+      auto each_item = [&](Cursor* cursor, const auto& f) {
+        const std::size_t m = cur.size();
+        for (std::size_t k = 0; k < threads; ++k) {
+          const std::size_t v = (w + k) % threads, ve = m * (v + 1) / threads;
+          for (std::size_t i; (i = cursor[v].next.fetch_add(1, std::memory_order_relaxed)) < ve;) f(i);
+        }
+      };
       Cleaner& me = *workers_[w];
       auto guarded = [&](const auto& f) {
         if (failed.load(std::memory_order_relaxed)) return;
@@ -558,8 +579,7 @@ class Cleaner {
         if (done) return;
         // Reserve.
         guarded([&] {
-          const std::size_t m = cur.size(), ib = m * w / threads, ie = m * (w + 1) / threads;
-          for (std::size_t i = ib; i < ie; ++i) {
+          each_item(cursor_a.get(), [&](std::size_t i) {
             const std::uint32_t pos = cur[i];
             me.region(std::get<2>(bad[pos]), reg[i]);
             for (std::uint32_t x : reg[i]) {
@@ -568,13 +588,12 @@ class Cleaner {
               while (pos < old && !r.compare_exchange_weak(old, pos, std::memory_order_relaxed)) {
               }
             }
-          }
+          });
         });
         barrier.wait();
         // Commit the items that hold their whole region.
         guarded([&] {
-          const std::size_t m = cur.size(), ib = m * w / threads, ie = m * (w + 1) / threads;
-          for (std::size_t i = ib; i < ie; ++i) {
+          each_item(cursor_b.get(), [&](std::size_t i) {
             const std::uint32_t pos = cur[i];
             bool won = true;
             for (std::uint32_t x : reg[i])
@@ -583,14 +602,14 @@ class Cleaner {
                 break;
               }
             win[i] = won ? 1 : 0;
-            if (!won) continue;
+            if (!won) return;
             const std::uint32_t stamp = base + pos;
             for (std::uint32_t x : reg[i])
               if (slots_[x].stamp > stamp) violation.store(true, std::memory_order_relaxed);
-            if (violation.load(std::memory_order_relaxed)) continue;  // (the pass is undone)
+            if (violation.load(std::memory_order_relaxed)) return;  // (the pass is undone)
             me.repaired_ += me.repair(std::get<2>(bad[pos])) ? 1 : 0;
             for (std::uint32_t x : reg[i]) slots_[x].stamp = stamp;
-          }
+          });
         });
         barrier.wait();
         // Release the reservations.
@@ -630,6 +649,7 @@ class Cleaner {
         cur.swap(next);
         refill();
         done = cur.empty();
+        reset_cursors();
       }
     });
     if (error) std::rethrow_exception(error);
