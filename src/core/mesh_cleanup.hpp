@@ -620,36 +620,37 @@ class Cleaner {
         });
         barrier.wait();
         if (w != 0) continue;
-        // The main thread: take the workers' results, then the next round.
-        ++rounds;
-        if (rounds == hooks.undo_after_round) violation = true;
-        for (std::size_t k = 0; k < threads; ++k) {
-          Cleaner& o = *workers_[k];
-          collapses += o.collapses, flips += o.flips, moves += o.moves, cuts += o.cuts;
-          o.collapses = o.flips = o.moves = o.cuts = 0;
-          repaired += o.repaired_;
-          o.repaired_ = 0;
-          changed_vertices_.insert(changed_vertices_.end(), o.changed_vertices_.begin(), o.changed_vertices_.end());
-          changed_triangles_.insert(changed_triangles_.end(), o.changed_triangles_.begin(), o.changed_triangles_.end());
-          o.changed_vertices_.clear();
-          o.changed_triangles_.clear();
-          for (const auto& e : o.pending_incidence_) add_incidence(e.first, e.second);
-          o.pending_incidence_.clear();
-          pass_log.insert(pass_log.end(), o.log_.begin(), o.log_.end());
-          o.log_.clear();
-        }
-        if (violation || failed) {
-          done = true;
-          continue;
-        }
-        next.clear();
-        for (std::size_t i = 0; i < cur.size(); ++i)
-          if (!win[i]) next.push_back(cur[i]);
-        lost += next.size();
-        cur.swap(next);
-        refill();
-        done = cur.empty();
-        reset_cursors();
+        // The main thread: take the workers' results, then the next round
+        // (done after a failure too, so that no thread waits for ever).
+        guarded([&] {
+          ++rounds;
+          if (rounds == hooks.undo_after_round) violation = true;
+          for (std::size_t k = 0; k < threads; ++k) {
+            Cleaner& o = *workers_[k];
+            collapses += o.collapses, flips += o.flips, moves += o.moves, cuts += o.cuts;
+            o.collapses = o.flips = o.moves = o.cuts = 0;
+            repaired += o.repaired_;
+            o.repaired_ = 0;
+            changed_vertices_.insert(changed_vertices_.end(), o.changed_vertices_.begin(), o.changed_vertices_.end());
+            changed_triangles_.insert(changed_triangles_.end(), o.changed_triangles_.begin(), o.changed_triangles_.end());
+            o.changed_vertices_.clear();
+            o.changed_triangles_.clear();
+            for (const auto& e : o.pending_incidence_) add_incidence(e.first, e.second);
+            o.pending_incidence_.clear();
+            pass_log.insert(pass_log.end(), o.log_.begin(), o.log_.end());
+            o.log_.clear();
+          }
+          if (violation) return;
+          next.clear();
+          for (std::size_t i = 0; i < cur.size(); ++i)
+            if (!win[i]) next.push_back(cur[i]);
+          lost += next.size();
+          cur.swap(next);
+          refill();
+          done = cur.empty();
+          reset_cursors();
+        });
+        if (violation || failed) done = true;
       }
     });
     if (error) std::rethrow_exception(error);
