@@ -652,8 +652,10 @@ TEST(MeshCleanup, RandomPinchesNeverOpenTheMesh) {
 // (needles, caps, pinched holes with and without a cap, so that moves,
 // flips, widenings, collapses and cuts all happen and neighbouring repairs
 // compete for their regions), cleaned with the host thread limit at 1 and
-// at several threads, parallel from a few bad triangles per thread, and
+// at several threads, parallel from a few bad triangles per thread, with
+// rounds of 1 to 64 items per thread (different orders of commits), and
 // once with a pass undone after its second round (run again serially).
+// Every committed repair's writes must lie within its region.
 TEST(MeshCleanup, ParallelRepairsMatchSerial) {
   using nbmc::mesh::detail::repair_pass_hooks;
   TestMesh sphere = icosphere(4);
@@ -694,11 +696,14 @@ TEST(MeshCleanup, ParallelRepairsMatchSerial) {
   }
   const CheckResult before = sphere.check();
   ASSERT_GT(before.degenerate_triangles + before.sliver_triangles, 1000u);
-  auto clean = [&](std::size_t threads, std::size_t undo_after_round, nbmc::mesh::CleanupResult& r) {
+  auto clean = [&](std::size_t threads, std::size_t undo_after_round, std::size_t prefix,
+                   nbmc::mesh::CleanupResult& r) {
     TestMesh m = sphere;
     const auto saved = repair_pass_hooks();
     repair_pass_hooks().min_items = 4;
     repair_pass_hooks().undo_after_round = undo_after_round;
+    repair_pass_hooks().prefix_per_thread = prefix;
+    repair_pass_hooks().check_writes = true;
     {
       nbmc::ScopedHostThreads limit(threads);
       r = nbmc::mesh::cleanup_mesh(m.p, m.n, m.t, 0.05);
@@ -708,21 +713,24 @@ TEST(MeshCleanup, ParallelRepairsMatchSerial) {
     repair_pass_hooks().parallel_passes = done.parallel_passes;
     repair_pass_hooks().rounds = done.rounds;
     repair_pass_hooks().lost = done.lost;
+    repair_pass_hooks().writes_outside = done.writes_outside;
     return m;
   };
   nbmc::mesh::CleanupResult r1;
-  const TestMesh serial = clean(1, 0, r1);
+  const TestMesh serial = clean(1, 0, 0, r1);
   EXPECT_GT(r1.moves, 0u);
   EXPECT_GT(r1.flips, 0u);
   EXPECT_GT(r1.collapses, 0u);
   EXPECT_GT(r1.cuts, 0u);
   const auto at_start = repair_pass_hooks();
-  for (std::size_t threads : {2, 3, 8, 4}) {
+  const std::pair<std::size_t, std::size_t> runs[] = {{2, 0}, {3, 0}, {8, 0}, {2, 1}, {3, 2}, {5, 16}, {8, 4}};
+  for (const auto& run : runs) {
+    const std::size_t threads = run.first, prefix = run.second;
     nbmc::mesh::CleanupResult r;
-    const TestMesh m = clean(threads, threads == 4 ? 2 : 0, r);
-    EXPECT_EQ(m.t, serial.t) << threads << " threads";
-    EXPECT_EQ(m.p, serial.p) << threads << " threads";
-    EXPECT_EQ(m.n, serial.n) << threads << " threads";
+    const TestMesh m = clean(threads, 0, prefix, r);
+    EXPECT_EQ(m.t, serial.t) << threads << " threads, " << prefix << " per round";
+    EXPECT_EQ(m.p, serial.p) << threads << " threads, " << prefix << " per round";
+    EXPECT_EQ(m.n, serial.n) << threads << " threads, " << prefix << " per round";
     EXPECT_EQ(r.collapses, r1.collapses);
     EXPECT_EQ(r.flips, r1.flips);
     EXPECT_EQ(r.moves, r1.moves);
@@ -730,11 +738,20 @@ TEST(MeshCleanup, ParallelRepairsMatchSerial) {
     EXPECT_EQ(r.bad_after, r1.bad_after);
     EXPECT_EQ(r.removed_triangles, r1.removed_triangles);
   }
+  {
+    nbmc::mesh::CleanupResult r;
+    const TestMesh m = clean(4, 2, 0, r);  // a pass undone after its second round
+    EXPECT_EQ(m.t, serial.t);
+    EXPECT_EQ(m.p, serial.p);
+    EXPECT_EQ(m.n, serial.n);
+    EXPECT_EQ(r.collapses + r.flips + r.moves + r.cuts, r1.collapses + r1.flips + r1.moves + r1.cuts);
+  }
   // The parallel passes ran, in several rounds, and neighbours competed.
   const auto& h = repair_pass_hooks();
   EXPECT_GT(h.parallel_passes, at_start.parallel_passes);
   EXPECT_GT(h.rounds, h.parallel_passes);
   EXPECT_GT(h.lost, at_start.lost);
+  EXPECT_EQ(h.writes_outside, at_start.writes_outside);
   std::printf("parallel repairs: %llu bad triangles, %llu moves, %llu flips, %llu collapses, %llu cuts; "
               "%llu parallel passes, %llu rounds, %llu lost\n",
               (unsigned long long)(before.degenerate_triangles + before.sliver_triangles),

@@ -167,6 +167,12 @@ namespace detail {
 struct RepairPassHooks {
   std::size_t min_items = 0;  // 0: kParallelMinItems
   std::size_t undo_after_round = 0;
+  std::size_t prefix_per_thread = 0;  // items per thread in a round (0: kPrefixPerThread)
+  // Check that every write of a committed repair (positions, normals,
+  // triangles' old and new vertices, removed triangles' vertices, merge
+  // chains) lies in its region; writes outside are counted here.
+  bool check_writes = false;
+  std::uint64_t writes_outside = 0;
   // What the parallel passes did while min_items > 0 (added to): passes,
   // rounds, items that lost.
   std::uint64_t parallel_passes = 0, rounds = 0, lost = 0;
@@ -525,7 +531,7 @@ class Cleaner {
       k.collapses = k.flips = k.moves = k.cuts = 0;
       k.repaired_ = 0;
     }
-    const std::size_t prefix = kPrefixPerThread * threads;
+    const std::size_t prefix = (hooks.prefix_per_thread > 0 ? hooks.prefix_per_thread : kPrefixPerThread) * threads;
     std::vector<std::uint32_t> cur, next;  // places in `bad`, ascending
     std::vector<std::vector<std::uint32_t>> reg(prefix);
     std::vector<std::uint8_t> win(prefix);
@@ -535,6 +541,7 @@ class Cleaner {
     };
     refill();
     std::atomic<bool> violation{false}, failed{false};
+    std::atomic<std::uint64_t> writes_outside{0};
     bool done = false;
     std::exception_ptr error;
     std::mutex error_mutex;
@@ -607,8 +614,10 @@ class Cleaner {
             for (std::uint32_t x : reg[i])
               if (slots_[x].stamp > stamp) violation.store(true, std::memory_order_relaxed);
             if (violation.load(std::memory_order_relaxed)) return;  // (the pass is undone)
+            const std::size_t logged = me.log_.size();
             me.repaired_ += me.repair(std::get<2>(bad[pos])) ? 1 : 0;
             for (std::uint32_t x : reg[i]) slots_[x].stamp = stamp;
+            if (hooks.check_writes) writes_outside += me.writes_outside(reg[i], logged);
           });
         });
         barrier.wait();
@@ -667,6 +676,7 @@ class Cleaner {
       ++h.parallel_passes;
       h.rounds += rounds;
       h.lost += lost;
+      h.writes_outside += writes_outside;
     }
     if (trace_on()) {
       std::fprintf(stderr, "[nbmc trace] clean-up rounds: items=%zu threads=%zu rounds=%llu lost=%llu (%.1f%%)%s\n", n,
@@ -2037,6 +2047,30 @@ class Cleaner {
   // a's chain of merged vertices: next_ of its tail, and its tail.
   void log_chain(std::uint32_t a) {
     if (worker_) log_.push_back({Undo::Chain, a, {double(tail_[a]), double(next_[tail_[a]]), 0}});
+  }
+  // For the tests (RepairPassHooks::check_writes): how many of the writes
+  // logged from log_[from] touch a vertex outside `region` (sorted).
+  std::uint64_t writes_outside(const std::vector<std::uint32_t>& region, std::size_t from) const {
+    std::uint64_t n = 0;
+    auto out = [&](double x) { return !std::binary_search(region.begin(), region.end(), std::uint32_t(x)) ? 1 : 0; };
+    for (std::size_t k = from; k < log_.size(); ++k) {
+      const Undo& u = log_[k];
+      const std::uint32_t* w = T_ + 3 * std::size_t(u.i);
+      switch (u.kind) {
+        case Undo::Position:
+        case Undo::Normal:
+        case Undo::Chain:
+          n += out(u.i);
+          break;
+        case Undo::Triangle:
+          for (int j = 0; j < 3; ++j) n += out(u.x[j]) + out(w[j]);
+          break;
+        case Undo::Alive:
+          for (int j = 0; j < 3; ++j) n += out(w[j]);
+          break;
+      }
+    }
+    return n;
   }
   // Puts back what the entries of `log` (in the order written) changed.
   // (Entries a worker added to extra_ stay: fan() skips a triangle that no
