@@ -647,6 +647,119 @@ TEST(MeshCleanup, RandomPinchesNeverOpenTheMesh) {
               (unsigned long long)collapses);
 }
 
+// The repairs on several host threads (deterministic reservations) give
+// exactly the serial repairs' mesh: a sphere with many pinches side by side
+// (needles, caps, pinched holes with and without a cap, so that moves,
+// flips, widenings, collapses and cuts all happen and neighbouring repairs
+// compete for their regions), cleaned with the host thread limit at 1 and
+// at several threads, parallel from a few bad triangles per thread, with
+// rounds of 1 to 64 items per thread (different orders of commits), and
+// once with a pass undone after its second round (run again serially).
+// Every committed repair's writes must lie within its region.
+TEST(MeshCleanup, ParallelRepairsMatchSerial) {
+  using nbmc::mesh::detail::repair_pass_hooks;
+  TestMesh sphere = icosphere(4);
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<float> u(0, 1);
+  {
+    std::vector<std::uint8_t> used(sphere.p.size() / 3, 0);
+    std::uniform_real_distribution<float> s(-1, 1);
+    for (int h = 0; h < 24; ++h) {
+      const std::uint32_t n0 = std::uint32_t(sphere.p.size() / 3);
+      std::vector<int> degree(n0, 0);
+      for (std::uint32_t i : sphere.t) ++degree[i];
+      used.resize(n0, 1);
+      std::uint32_t v = std::uint32_t(rng() % n0);
+      while (degree[v] != 6 || used[v]) v = (v + 1) % n0;
+      for (std::size_t i = 0; i < sphere.t.size(); i += 3)
+        for (int k = 0; k < 3; ++k)
+          if (sphere.t[i + k] == v)
+            for (int j = 0; j < 3; ++j) used[sphere.t[i + j]] = 1;
+      const float scale = std::pow(10.0f, -7 + 3 * (s(rng) + 1) / 2);
+      float off[4][3];
+      for (auto& o : off)
+        for (float& x : o) x = scale * s(rng);
+      split_vertex(sphere, v, off, h % 2 == 0);
+    }
+  }
+  std::uniform_int_distribution<std::size_t> pick(0, sphere.t.size() / 3 - 1);
+  for (int i = 0; i < 1500; ++i) {
+    const std::size_t t = pick(rng);
+    const std::uint32_t a = sphere.t[3 * t], b = sphere.t[3 * t + 1], c = sphere.t[3 * t + 2];
+    const float s = std::pow(10.0f, -1 - 6 * u(rng));
+    const bool needle = rng() % 2 != 0;
+    const float w = 0.2f + 0.6f * u(rng);
+    for (int x = 0; x < 3; ++x) {
+      if (needle) sphere.p[3 * a + x] = sphere.p[3 * b + x] + s * (sphere.p[3 * a + x] - sphere.p[3 * b + x]);
+      else sphere.p[3 * a + x] = (1 - s) * (w * sphere.p[3 * b + x] + (1 - w) * sphere.p[3 * c + x]) + s * sphere.p[3 * a + x];
+    }
+  }
+  const CheckResult before = sphere.check();
+  ASSERT_GT(before.degenerate_triangles + before.sliver_triangles, 1000u);
+  auto clean = [&](std::size_t threads, std::size_t undo_after_round, std::size_t prefix,
+                   nbmc::mesh::CleanupResult& r) {
+    TestMesh m = sphere;
+    const auto saved = repair_pass_hooks();
+    repair_pass_hooks().min_items = 4;
+    repair_pass_hooks().undo_after_round = undo_after_round;
+    repair_pass_hooks().prefix_per_thread = prefix;
+    repair_pass_hooks().check_writes = true;
+    {
+      nbmc::ScopedHostThreads limit(threads);
+      r = nbmc::mesh::cleanup_mesh(m.p, m.n, m.t, 0.05);
+    }
+    const auto done = repair_pass_hooks();
+    repair_pass_hooks() = saved;
+    repair_pass_hooks().parallel_passes = done.parallel_passes;
+    repair_pass_hooks().rounds = done.rounds;
+    repair_pass_hooks().lost = done.lost;
+    repair_pass_hooks().writes_outside = done.writes_outside;
+    return m;
+  };
+  nbmc::mesh::CleanupResult r1;
+  const TestMesh serial = clean(1, 0, 0, r1);
+  EXPECT_GT(r1.moves, 0u);
+  EXPECT_GT(r1.flips, 0u);
+  EXPECT_GT(r1.collapses, 0u);
+  EXPECT_GT(r1.cuts, 0u);
+  const auto at_start = repair_pass_hooks();
+  const std::pair<std::size_t, std::size_t> runs[] = {{2, 0}, {3, 0}, {8, 0}, {2, 1}, {3, 2}, {5, 16}, {8, 4}};
+  for (const auto& run : runs) {
+    const std::size_t threads = run.first, prefix = run.second;
+    nbmc::mesh::CleanupResult r;
+    const TestMesh m = clean(threads, 0, prefix, r);
+    EXPECT_EQ(m.t, serial.t) << threads << " threads, " << prefix << " per round";
+    EXPECT_EQ(m.p, serial.p) << threads << " threads, " << prefix << " per round";
+    EXPECT_EQ(m.n, serial.n) << threads << " threads, " << prefix << " per round";
+    EXPECT_EQ(r.collapses, r1.collapses);
+    EXPECT_EQ(r.flips, r1.flips);
+    EXPECT_EQ(r.moves, r1.moves);
+    EXPECT_EQ(r.cuts, r1.cuts);
+    EXPECT_EQ(r.bad_after, r1.bad_after);
+    EXPECT_EQ(r.removed_triangles, r1.removed_triangles);
+  }
+  {
+    nbmc::mesh::CleanupResult r;
+    const TestMesh m = clean(4, 2, 0, r);  // a pass undone after its second round
+    EXPECT_EQ(m.t, serial.t);
+    EXPECT_EQ(m.p, serial.p);
+    EXPECT_EQ(m.n, serial.n);
+    EXPECT_EQ(r.collapses + r.flips + r.moves + r.cuts, r1.collapses + r1.flips + r1.moves + r1.cuts);
+  }
+  // The parallel passes ran, in several rounds, and neighbours competed.
+  const auto& h = repair_pass_hooks();
+  EXPECT_GT(h.parallel_passes, at_start.parallel_passes);
+  EXPECT_GT(h.rounds, h.parallel_passes);
+  EXPECT_GT(h.lost, at_start.lost);
+  EXPECT_EQ(h.writes_outside, at_start.writes_outside);
+  std::printf("parallel repairs: %llu bad triangles, %llu moves, %llu flips, %llu collapses, %llu cuts; "
+              "%llu parallel passes, %llu rounds, %llu lost\n",
+              (unsigned long long)(before.degenerate_triangles + before.sliver_triangles),
+              (unsigned long long)r1.moves, (unsigned long long)r1.flips, (unsigned long long)r1.collapses,
+              (unsigned long long)r1.cuts, (unsigned long long)(h.parallel_passes - at_start.parallel_passes),
+              (unsigned long long)(h.rounds - at_start.rounds), (unsigned long long)(h.lost - at_start.lost));
+}
+
 // Taubin smoothing: a sphere keeps its size (its vertices stay within 1% of
 // the radius), normals become the unit face normals; a droplet of a few
 // vertices, which lambda|mu would shrink to a point, keeps its volume.

@@ -83,13 +83,30 @@
 //    CleanupResult counts their triangles.
 // Cost: the adjacency, the irregular-vertex marking and one scan of every
 // triangle run on all host threads; after that only the bad triangles and
-// what the repairs changed are looked at again (each pass), and only the
-// components of the bad triangles left are walked.
+// what the repairs changed are looked at again (each pass, on all host
+// threads from 4096 triangles), and only the components of the bad
+// triangles left are walked (serially).
 //
-// Serial and in a fixed order (worst triangle first, then by index), so the
-// result depends only on the input mesh: the same on every backend and
-// thread count. The output keeps the surviving triangles in their order and
-// the surviving vertices in theirs; unreferenced vertices are dropped.
+// In a fixed order (worst triangle first, then by index), so the result
+// depends only on the input mesh: the same on every backend and thread
+// count. That serial order defines the result; a pass of the repairs runs
+// on the host threads (from kParallelMinItems bad triangles per thread; the
+// cluster merges of 5. always serially) by deterministic reservations and
+// gives exactly the serial pass' mesh: in rounds, each of the next items of
+// the list computes its region (the vertices whose positions or triangles
+// its repair may read or write: its triangle's vertices and their
+// one-rings, a needle's widening cluster and its one-ring, in the last
+// round a pinched tube's third vertices' one-rings) and reserves it with
+// its place in the list; an item holding its whole region commits, in
+// parallel with the other such items, and the others wait for the next
+// round, so each item runs after every earlier item whose region meets
+// its own. A stamp per vertex (the last item that committed with it in its
+// region) catches a region that grew, after a later item committed beside
+// it, into that item's; the pass is then undone (per-thread undo logs) and
+// run serially. Counts and changed lists are per thread and merged after
+// each round; the next pass' list is sorted, so their order does not
+// matter. The output keeps the surviving triangles in their order and the
+// surviving vertices in theirs; unreferenced vertices are dropped.
 #pragma once
 
 #include "mesh_check.hpp"
@@ -99,8 +116,16 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
+#include <chrono>
 #include <cstdint>
+#include <cstdio>
+#include <cstdlib>
+#include <exception>
 #include <iterator>
+#include <memory>
+#include <mutex>
+#include <thread>
 #include <tuple>
 #include <utility>
 #include <vector>
@@ -134,13 +159,57 @@ struct CleanupResult {
 
 namespace detail {
 
+// For the tests: repair_pass runs on several threads from this many bad
+// triangles per thread (the library: Cleaner::kParallelMinItems), as does
+// bad_triangles_after from this many triangles looked at (4096), and, when
+// undo_after_round > 0, undoes its pass after that round (as when a region
+// grew) and runs it serially.
+struct RepairPassHooks {
+  std::size_t min_items = 0;  // 0: kParallelMinItems
+  std::size_t undo_after_round = 0;
+  std::size_t prefix_per_thread = 0;  // items per thread in a round (0: kPrefixPerThread)
+  // Check that every write of a committed repair (positions, normals,
+  // triangles' old and new vertices, removed triangles' vertices, merge
+  // chains) lies in its region; writes outside are counted here.
+  bool check_writes = false;
+  std::uint64_t writes_outside = 0;
+  // What the parallel passes did while min_items > 0 (added to): passes,
+  // rounds, items that lost.
+  std::uint64_t parallel_passes = 0, rounds = 0, lost = 0;
+};
+inline RepairPassHooks& repair_pass_hooks() {
+  static RepairPassHooks hooks;
+  return hooks;
+}
+
+// repair_pass' rounds: all of its threads wait here until each has come
+// (spinning a little, then yielding: a round's steps are short).
+class SpinBarrier {
+ public:
+  explicit SpinBarrier(std::size_t n) : n_(n) {}
+  void wait() {
+    const std::size_t gen = gen_.load(std::memory_order_acquire);
+    if (count_.fetch_add(1, std::memory_order_acq_rel) + 1 == n_) {
+      count_.store(0, std::memory_order_relaxed);
+      gen_.fetch_add(1, std::memory_order_release);
+      return;
+    }
+    for (int spin = 0; gen_.load(std::memory_order_acquire) == gen; ++spin)
+      if (spin > 64) std::this_thread::yield();
+  }
+
+ private:
+  std::size_t n_;
+  std::atomic<std::size_t> count_{0}, gen_{0};
+};
+
 // Real: the positions' scalar (float, or double with
 // nbmc_params.double_positions); normals are float either way.
 template <class Real>
 class Cleaner {
  public:
   Cleaner(Real* positions, float* normals, std::size_t nv, std::uint32_t* tri, std::size_t nt)
-      : P_(positions), N_(normals), nv_(nv), T_(tri), nt_(nt), alive_(nt), next_(nv), tail_(nv) {
+      : P_(positions), N_(normals), nv_(nv), T_(tri), nt_(nt), alive_own_(nt), next_own_(nv), tail_own_(nv) {
     // The per-triangle and per-vertex arrays are left unwritten by their
     // allocation and filled here on all host threads: the kernel maps (and
     // clears) a fresh array's pages when they are first written, a few
@@ -240,6 +309,15 @@ class Cleaner {
     host_trace("clean-up: irregular vertices", nv);
   }
 
+  // A worker of repair_pass: the main Cleaner's mesh and arrays, its own
+  // scratch, counts, changed lists and undo log.
+  struct WorkerTag {};
+  Cleaner(Cleaner& m, WorkerTag)
+      : P_(m.P_), N_(m.N_), nv_(m.nv_), T_(m.T_), nt_(m.nt_), alive_(m.alive_own_), irregular_(m.irregular_own_),
+        start_(m.start_own_), next_(m.next_own_), tail_(m.tail_own_), incident_(m.incident_own_),
+        extra_head_(m.extra_head_own_), extra_(m.extra_own_), degenerate_double_area_(m.degenerate_double_area_),
+        worker_(true) {}
+
   std::uint64_t collapses = 0, flips = 0, moves = 0, cuts = 0;
   // Largest turn of a triangle's normal a repair may cause (cosine).
   double cos_limit = kCosMaxNormalTurn;
@@ -281,6 +359,41 @@ class Cleaner {
   // triangle of the mesh; this, the same per triangle of the repairs'
   // neighbourhoods.
   BadList bad_triangles_after(const BadList& before) {
+    // On several host threads: each chunk of what is looked at (the
+    // triangles of `before`, the fans of the changed vertices, the changed
+    // triangles) lists its bad triangles, a triangle looked at twice twice;
+    // sorted and made unique, the same list.
+    const std::size_t nb = before.size(), ncv = changed_vertices_.size(), nct = changed_triangles_.size();
+    const std::size_t total = nb + ncv + nct;
+    const std::size_t min_items = repair_pass_hooks().min_items;
+    const std::size_t chunks = chunk_count(total, min_items > 0 ? min_items : 4096);
+    if (chunks > 1) {
+      std::vector<BadList> part(chunks);
+      for_chunks(total, chunks, [&](std::size_t k, std::size_t b, std::size_t e) {
+        std::vector<std::uint32_t> f;
+        BadList& out = part[k];
+        auto look_at = [&](std::uint32_t t) {
+          if (!alive_[t]) return;
+          const TriangleShape s = shape(t);
+          const int c = triangle_class(s, degenerate_double_area_);
+          if (c) out.emplace_back(-c, s.sin_min_angle, t);
+        };
+        for (std::size_t i = b; i < e; ++i) {
+          if (i < nb) look_at(std::get<2>(before[i]));
+          else if (i < nb + ncv) {
+            fan(changed_vertices_[i - nb], f);
+            for (std::uint32_t t : f) look_at(t);
+          } else look_at(changed_triangles_[i - nb - ncv]);
+        }
+      });
+      changed_vertices_.clear();
+      changed_triangles_.clear();
+      BadList bad;
+      for (const auto& q : part) bad.insert(bad.end(), q.begin(), q.end());
+      std::sort(bad.begin(), bad.end());
+      bad.erase(std::unique(bad.begin(), bad.end()), bad.end());
+      return bad;
+    }
     std::vector<std::uint32_t> look;
     look.reserve(before.size() + 8 * changed_vertices_.size() + changed_triangles_.size());
     for (const auto& b : before) look.push_back(std::get<2>(b));
@@ -362,6 +475,219 @@ class Cleaner {
     if (!m.valid) return false;
     apply_cluster(m);
     return true;
+  }
+
+  // One pass of repair() over `bad`, in its order; returns how many were
+  // repaired. Serial below kParallelMinItems items per thread (and for the
+  // cluster merges); otherwise on the host threads by deterministic
+  // reservations, with exactly the serial pass' result: in rounds, the
+  // next items of the list (the losers of the round before, then new ones,
+  // up to kPrefixPerThread per thread) each find their region (region():
+  // every vertex whose position or triangles repair() may read or write
+  // now) and write their place in the list into each of its vertices,
+  // keeping the smallest; an item that holds all of its region runs
+  // repair() (on a worker: per-thread scratch, counts, changed lists,
+  // deferred incidences), in parallel with the others that do, and the
+  // rest wait for the next round. So an item runs after every earlier one
+  // whose region meets its own. Each vertex is stamped with the last item
+  // that committed with it in its region: an item that finds in its region
+  // the stamp of a later one (a region that grew after a later item
+  // committed next to it) would not see the serial pass' mesh; then the
+  // pass is undone (the workers' undo logs) and run again serially.
+  static constexpr std::size_t kParallelMinItems = 128;
+  static constexpr std::size_t kPrefixPerThread = 64;
+
+
+  std::uint64_t repair_pass(const BadList& bad) {
+    const std::size_t n = bad.size();
+    const RepairPassHooks hooks = repair_pass_hooks();
+    const std::size_t threads =
+        merge_clusters ? 1 : chunk_count(n, hooks.min_items > 0 ? hooks.min_items : kParallelMinItems);
+    if (threads <= 1) {
+      std::uint64_t repaired = 0;
+      for (const auto& b : bad) repaired += repair(std::get<2>(b)) ? 1 : 0;
+      return repaired;
+    }
+    const std::uint64_t saved[4] = {collapses, flips, moves, cuts};
+    const std::size_t saved_vertices = changed_vertices_.size(), saved_triangles = changed_triangles_.size();
+    if (!slots_ || std::uint64_t(stamp_base_) + n + 2 >= kNone) {
+      if (!slots_) slots_.reset(new Slot[nv_]);
+      stamp_base_ = 0;
+      for_chunks(nv_, chunk_count(nv_, 65536), [&](std::size_t, std::size_t b, std::size_t e) {
+        for (std::size_t x = b; x < e; ++x) {
+          slots_[x].reserve.store(kNone, std::memory_order_relaxed);
+          slots_[x].stamp = 0;
+        }
+      });
+    }
+    const std::uint32_t base = stamp_base_ + 1;  // item i's stamp: base + i
+    stamp_base_ = base + std::uint32_t(n);
+    while (workers_.size() < threads) workers_.emplace_back(new Cleaner(*this, WorkerTag{}));
+    for (std::size_t w = 0; w < threads; ++w) {
+      Cleaner& k = *workers_[w];
+      k.cos_limit = cos_limit;
+      k.last_resort = last_resort;
+      k.merge_clusters = merge_clusters;
+      k.collapses = k.flips = k.moves = k.cuts = 0;
+      k.repaired_ = 0;
+    }
+    const std::size_t prefix = (hooks.prefix_per_thread > 0 ? hooks.prefix_per_thread : kPrefixPerThread) * threads;
+    std::vector<std::uint32_t> cur, next;  // places in `bad`, ascending
+    std::vector<std::vector<std::uint32_t>> reg(prefix);
+    std::vector<std::uint8_t> win(prefix);
+    std::size_t fresh = 0;  // the first item not yet in a round
+    auto refill = [&] {
+      while (cur.size() < prefix && fresh < n) cur.push_back(std::uint32_t(fresh++));
+    };
+    refill();
+    std::atomic<bool> violation{false}, failed{false};
+    std::atomic<std::uint64_t> writes_outside{0};
+    bool done = false;
+    std::exception_ptr error;
+    std::mutex error_mutex;
+    std::vector<Undo> pass_log;
+    std::uint64_t repaired = 0, rounds = 0, lost = 0;
+    SpinBarrier barrier(threads);
+    // The items of a round: each thread takes its own range first (in both
+    // steps, so that an item commits where its region's lines are cached),
+    // then what is left of the others'.
+    struct alignas(64) Cursor {
+      std::atomic<std::size_t> next{0};
+    };
+    std::unique_ptr<Cursor[]> cursor_a(new Cursor[threads]), cursor_b(new Cursor[threads]);
+    auto reset_cursors = [&] {
+      for (std::size_t v = 0; v < threads; ++v) {
+        cursor_a[v].next.store(cur.size() * v / threads, std::memory_order_relaxed);
+        cursor_b[v].next.store(cur.size() * v / threads, std::memory_order_relaxed);
+      }
+    };
+    reset_cursors();
+    on_threads(threads, [&](std::size_t w) {
+      auto each_item = [&](Cursor* cursor, const auto& f) {
+        const std::size_t m = cur.size();
+        for (std::size_t k = 0; k < threads; ++k) {
+          const std::size_t v = (w + k) % threads, ve = m * (v + 1) / threads;
+          for (std::size_t i; (i = cursor[v].next.fetch_add(1, std::memory_order_relaxed)) < ve;) f(i);
+        }
+      };
+      Cleaner& me = *workers_[w];
+      auto guarded = [&](const auto& f) {
+        if (failed.load(std::memory_order_relaxed)) return;
+        try {
+          f();
+        } catch (...) {
+          std::lock_guard<std::mutex> lock(error_mutex);
+          if (!error) error = std::current_exception();
+          failed = true;
+        }
+      };
+      for (;;) {
+        barrier.wait();
+        if (done) return;
+        // Reserve.
+        guarded([&] {
+          each_item(cursor_a.get(), [&](std::size_t i) {
+            const std::uint32_t pos = cur[i];
+            me.region(std::get<2>(bad[pos]), reg[i]);
+            for (std::uint32_t x : reg[i]) {
+              std::atomic<std::uint32_t>& r = slots_[x].reserve;
+              std::uint32_t old = r.load(std::memory_order_relaxed);
+              while (pos < old && !r.compare_exchange_weak(old, pos, std::memory_order_relaxed)) {
+              }
+            }
+          });
+        });
+        barrier.wait();
+        // Commit the items that hold their whole region.
+        guarded([&] {
+          each_item(cursor_b.get(), [&](std::size_t i) {
+            const std::uint32_t pos = cur[i];
+            bool won = true;
+            for (std::uint32_t x : reg[i])
+              if (slots_[x].reserve.load(std::memory_order_relaxed) != pos) {
+                won = false;
+                break;
+              }
+            win[i] = won ? 1 : 0;
+            if (!won) return;
+            const std::uint32_t stamp = base + pos;
+            for (std::uint32_t x : reg[i])
+              if (slots_[x].stamp > stamp) violation.store(true, std::memory_order_relaxed);
+            if (violation.load(std::memory_order_relaxed)) return;  // (the pass is undone)
+            const std::size_t logged = me.log_.size();
+            me.repaired_ += me.repair(std::get<2>(bad[pos])) ? 1 : 0;
+            for (std::uint32_t x : reg[i]) slots_[x].stamp = stamp;
+            if (hooks.check_writes) writes_outside += me.writes_outside(reg[i], logged);
+          });
+        });
+        barrier.wait();
+        // Release the reservations.
+        guarded([&] {
+          const std::size_t m = cur.size(), ib = m * w / threads, ie = m * (w + 1) / threads;
+          for (std::size_t i = ib; i < ie; ++i)
+            for (std::uint32_t x : reg[i]) slots_[x].reserve.store(kNone, std::memory_order_relaxed);
+        });
+        barrier.wait();
+        if (w != 0) continue;
+        // The main thread: take the workers' results, then the next round
+        // (done after a failure too, so that no thread waits for ever).
+        guarded([&] {
+          ++rounds;
+          if (rounds == hooks.undo_after_round) violation = true;
+          for (std::size_t k = 0; k < threads; ++k) {
+            Cleaner& o = *workers_[k];
+            collapses += o.collapses, flips += o.flips, moves += o.moves, cuts += o.cuts;
+            o.collapses = o.flips = o.moves = o.cuts = 0;
+            repaired += o.repaired_;
+            o.repaired_ = 0;
+            changed_vertices_.insert(changed_vertices_.end(), o.changed_vertices_.begin(), o.changed_vertices_.end());
+            changed_triangles_.insert(changed_triangles_.end(), o.changed_triangles_.begin(), o.changed_triangles_.end());
+            o.changed_vertices_.clear();
+            o.changed_triangles_.clear();
+            for (const auto& e : o.pending_incidence_) add_incidence(e.first, e.second);
+            o.pending_incidence_.clear();
+            pass_log.insert(pass_log.end(), o.log_.begin(), o.log_.end());
+            o.log_.clear();
+          }
+          if (violation) return;
+          next.clear();
+          for (std::size_t i = 0; i < cur.size(); ++i)
+            if (!win[i]) next.push_back(cur[i]);
+          lost += next.size();
+          cur.swap(next);
+          refill();
+          done = cur.empty();
+          reset_cursors();
+        });
+        if (violation || failed) done = true;
+      }
+    });
+    if (error) std::rethrow_exception(error);
+    if (violation) {
+      undo(pass_log);
+      collapses = saved[0], flips = saved[1], moves = saved[2], cuts = saved[3];
+      changed_vertices_.resize(saved_vertices);
+      changed_triangles_.resize(saved_triangles);
+      repaired = 0;
+      for (const auto& b : bad) repaired += repair(std::get<2>(b)) ? 1 : 0;
+    }
+    if (hooks.min_items > 0) {  // (a test's: the library's clean-ups may run on several threads at once)
+      RepairPassHooks& h = repair_pass_hooks();
+      ++h.parallel_passes;
+      h.rounds += rounds;
+      h.lost += lost;
+      h.writes_outside += writes_outside;
+    }
+    if (trace_on()) {
+      std::fprintf(stderr, "[nbmc trace] clean-up rounds: items=%zu threads=%zu rounds=%llu lost=%llu (%.1f%%)%s\n", n,
+                   threads, (unsigned long long)rounds, (unsigned long long)lost, 100.0 * double(lost) / double(n),
+                   violation ? " (undone, run serially)" : "");
+    }
+    return repaired;
+  }
+  static bool trace_on() {
+    static const bool on = std::getenv("NBMC_TRACE") != nullptr;
+    return on;
   }
 
   // Removes the connected components all of whose triangles are degenerate
@@ -823,6 +1149,7 @@ class Cleaner {
 
   void apply_move(const Candidate& c) {
     for (const auto& m : c.moved) {
+      log_position(m.first);
       P_[3 * std::size_t(m.first)] = Real(m.second.x);
       P_[3 * std::size_t(m.first) + 1] = Real(m.second.y);
       P_[3 * std::size_t(m.first) + 2] = Real(m.second.z);
@@ -845,6 +1172,97 @@ class Cleaner {
       if (k == 0 || l < l_short) l_short = l, k_short = k;
       l_long = std::max(l_long, l);
     }
+  }
+
+  // repair_pass' region of t: the vertices (sorted) whose position, or
+  // whose triangles (their vertex lists, whether alive), repair(t) may
+  // read or write now, so that an item whose region meets no other's
+  // cannot see or change what another does. Reads of the triangles around
+  // a vertex take in their vertex numbers only; positions are read only of
+  // vertices in the region. Per kind (a, b, c: t's vertices, d across the
+  // longest edge):
+  //  - a dead triangle: nothing (it stays dead); one that is good or has an
+  //    irregular vertex: its vertices (repair reads their positions only);
+  //  - moves of one vertex: its fan and one-ring (positions); flips: the
+  //    fans of a, b, c (d is in the one-ring) and a's and b's degrees;
+  //    collapses: the fans of the edge's ends and the opposite vertices'
+  //    degrees, and they rename within the ends' fans: all within t's
+  //    vertices and their one-rings;
+  //  - widening a needle (consider_push): its cluster, found here as it
+  //    would be, and the cluster's one-ring;
+  //  - in the last round, cutting a pinched tube: the one-ring of each
+  //    third vertex c near both ends of the short edge (the cut rewrites
+  //    the fans of a, b and c and checks the fans of their neighbours).
+  // The cluster merges (merge_clusters) have no region: they run serially.
+  void region(std::uint32_t t, std::vector<std::uint32_t>& out) {
+    out.clear();
+    if (!alive_[t]) return;
+    const std::uint32_t* v = T_ + 3 * std::size_t(t);
+    out.assign(v, v + 3);
+    if (irregular_[v[0]] || irregular_[v[1]] || irregular_[v[2]] || tri_class(t) == 0) {
+      std::sort(out.begin(), out.end());
+      return;
+    }
+    auto add = [&](const std::vector<std::uint32_t>& f) {
+      for (std::uint32_t u : f) out.insert(out.end(), T_ + 3 * std::size_t(u), T_ + 3 * std::size_t(u) + 3);
+    };
+    int k_short = 0;
+    double l_short = 0, l_long = 0;
+    needle_edges(v, k_short, l_short, l_long);
+    const double near = kSinOneDegree * l_long;
+    // The fans of the short edge's ends (a, b) in fa_ and fb_, their rings
+    // in ra_ and rb_ (consider_push's first two steps, and the cut's).
+    const std::uint32_t a = v[k_short], b = v[(k_short + 1) % 3], c = v[(k_short + 2) % 3];
+    fan(a, fa_);
+    fan(b, fb_);
+    fan(c, scratch_);
+    add(fa_);
+    add(fb_);
+    add(scratch_);
+    if (l_short > 0) {
+      // consider_push's cluster (its loop, its order).
+      ring(a, fa_, ra_);
+      ring(b, fb_, rb_);
+      cluster_.assign({a, b});
+      for (std::size_t i = 0; i < cluster_.size() && cluster_.size() <= 8; ++i) {
+        const std::uint32_t x = cluster_[i];
+        const std::vector<std::uint32_t>* r = &ra_;
+        if (i == 1) r = &rb_;
+        if (i >= 2) {
+          fan(x, scratch_);
+          add(scratch_);
+          ring(x, scratch_, common_);
+          r = &common_;
+        }
+        const Vec3 px = load(P_, x);
+        for (std::uint32_t u : *r)
+          if (norm(load(P_, u) - px) < near && std::find(cluster_.begin(), cluster_.end(), u) == cluster_.end())
+            cluster_.push_back(u);
+      }
+      // (members found but not looked from: their one-rings too)
+      for (std::size_t i = 2; i < cluster_.size(); ++i) {
+        fan(cluster_[i], scratch_);
+        add(scratch_);
+      }
+    }
+    if (last_resort && l_short < near) {
+      if (!(l_short > 0)) {
+        ring(a, fa_, ra_);
+        ring(b, fb_, rb_);
+      }
+      common_.clear();
+      std::set_intersection(ra_.begin(), ra_.end(), rb_.begin(), rb_.end(), std::back_inserter(common_));
+      const Vec3 pa = load(P_, a), pb = load(P_, b);
+      for (std::uint32_t x : common_) {
+        const Vec3 px = load(P_, x);
+        if (norm(px - pa) < near && norm(px - pb) < near) {
+          fan(x, scratch_);
+          add(scratch_);
+        }
+      }
+    }
+    std::sort(out.begin(), out.end());
+    out.erase(std::unique(out.begin(), out.end()), out.end());
   }
 
   void consider_push(std::uint32_t t, Candidate& best) {
@@ -1095,13 +1513,15 @@ class Cleaner {
   }
 
   void apply_cut(const CutCandidate& c) {
-    for (std::uint32_t u : c.removed) alive_[u] = 0;
+    for (std::uint32_t u : c.removed) log_alive(u), alive_[u] = 0;
     for (const auto& r : c.rewritten) {
-        for (int k = 0; k < 3; ++k) T_[3 * std::size_t(r.first) + k] = r.second[k];
+      log_triangle(r.first);
+      for (int k = 0; k < 3; ++k) T_[3 * std::size_t(r.first) + k] = r.second[k];
       add_incidence(contains(r.second.data(), c.a) ? c.a : c.b, r.first);
     }
     const std::uint32_t ends[2] = {c.a, c.b};  // (nvcc's front end rejects {c.a, c.b} in a range-for)
     for (std::uint32_t x : ends) {
+      log_position(x);
       P_[3 * std::size_t(x)] = Real(c.p.x);
       P_[3 * std::size_t(x) + 1] = Real(c.p.y);
       P_[3 * std::size_t(x) + 2] = Real(c.p.z);
@@ -1480,9 +1900,10 @@ class Cleaner {
   }
 
   void apply_cluster(const ClusterCandidate& c) {
-    for (std::uint32_t u : c.removed) alive_[u] = 0;
+    for (std::uint32_t u : c.removed) log_alive(u), alive_[u] = 0;
     for (const auto& r : c.rewritten) {
-        std::uint32_t owner = kNone;
+      log_triangle(r.first);
+      std::uint32_t owner = kNone;
       for (int k = 0; k < 3; ++k) {
         const std::uint32_t old = T_[3 * std::size_t(r.first) + k];
         if (old != r.second[k]) owner = r.second[k];
@@ -1494,6 +1915,7 @@ class Cleaner {
     for (std::size_t i = 0; i < c.loop_vertices.size(); ++i) {
       const std::uint32_t x = c.loop_vertices[i];
       const Vec3& p = c.positions.empty() ? c.p : c.positions[i];
+      log_position(x);
       P_[3 * std::size_t(x)] = Real(p.x);
       P_[3 * std::size_t(x) + 1] = Real(p.y);
       P_[3 * std::size_t(x) + 2] = Real(p.z);
@@ -1556,11 +1978,16 @@ class Cleaner {
   void apply_collapse(const Candidate& c) {
     const std::uint32_t a = c.a, b = c.b;
     fan(b, fb_);
+    log_alive(c.t1);
+    log_alive(c.t2);
     alive_[c.t1] = alive_[c.t2] = 0;
-    for (std::uint32_t t : fb_)
+    for (std::uint32_t t : fb_) {
+      log_triangle(t);
       for (int k = 0; k < 3; ++k)
         if (T_[3 * std::size_t(t) + k] == b) T_[3 * std::size_t(t) + k] = a;
+    }
     if (N_) {
+      log_normal(a);
       float n[3];
       for (int x = 0; x < 3; ++x)
         n[x] = c.where == 0 ? 0.5f * (N_[3 * std::size_t(a) + x] + N_[3 * std::size_t(b) + x])
@@ -1569,10 +1996,12 @@ class Cleaner {
       const double l = std::sqrt(double(n[0]) * n[0] + double(n[1]) * n[1] + double(n[2]) * n[2]);
       for (int x = 0; x < 3; ++x) N_[3 * std::size_t(a) + x] = l > 0 ? float(n[x] / l) : N_[3 * std::size_t(a) + x];
     }
+    log_position(a);
     P_[3 * std::size_t(a)] = Real(c.p.x);
     P_[3 * std::size_t(a) + 1] = Real(c.p.y);
     P_[3 * std::size_t(a) + 2] = Real(c.p.z);
     // b's triangles now belong to a.
+    log_chain(a);
     next_[tail_[a]] = b;
     tail_[a] = tail_[b];
     changed_vertices_.push_back(a);
@@ -1582,6 +2011,8 @@ class Cleaner {
   void apply_flip(const Candidate& c) {
     std::uint32_t* t1 = T_ + 3 * std::size_t(c.t1);
     std::uint32_t* t2 = T_ + 3 * std::size_t(c.t2);
+    log_triangle(c.t1);
+    log_triangle(c.t2);
     t1[0] = c.c, t1[1] = c.a, t1[2] = c.d;
     t2[0] = c.c, t2[1] = c.d, t2[2] = c.b;
     // t1 now touches d and t2 touches c: extra entries in their lists (a
@@ -1593,7 +2024,87 @@ class Cleaner {
     ++flips;
   }
 
+  // A worker's undo log (repair_pass): the old value of everything its
+  // repairs wrote, so that a pass can be put back as it was.
+  struct Undo {
+    enum Kind : std::uint8_t { Position, Normal, Triangle, Alive, Chain };
+    Kind kind;
+    std::uint32_t i;
+    double x[3];
+  };
+  void log_position(std::uint32_t v) {
+    if (worker_) log_.push_back({Undo::Position, v, {double(P_[3 * std::size_t(v)]), double(P_[3 * std::size_t(v) + 1]), double(P_[3 * std::size_t(v) + 2])}});
+  }
+  void log_normal(std::uint32_t v) {
+    if (worker_) log_.push_back({Undo::Normal, v, {double(N_[3 * std::size_t(v)]), double(N_[3 * std::size_t(v) + 1]), double(N_[3 * std::size_t(v) + 2])}});
+  }
+  void log_triangle(std::uint32_t t) {
+    if (worker_) log_.push_back({Undo::Triangle, t, {double(T_[3 * std::size_t(t)]), double(T_[3 * std::size_t(t) + 1]), double(T_[3 * std::size_t(t) + 2])}});
+  }
+  void log_alive(std::uint32_t t) {
+    if (worker_) log_.push_back({Undo::Alive, t, {double(alive_[t]), 0, 0}});
+  }
+  // a's chain of merged vertices: next_ of its tail, and its tail.
+  void log_chain(std::uint32_t a) {
+    if (worker_) log_.push_back({Undo::Chain, a, {double(tail_[a]), double(next_[tail_[a]]), 0}});
+  }
+  // For the tests (RepairPassHooks::check_writes): how many of the writes
+  // logged from log_[from] touch a vertex outside `region` (sorted).
+  std::uint64_t writes_outside(const std::vector<std::uint32_t>& region, std::size_t from) const {
+    std::uint64_t n = 0;
+    auto out = [&](double x) { return !std::binary_search(region.begin(), region.end(), std::uint32_t(x)) ? 1 : 0; };
+    for (std::size_t k = from; k < log_.size(); ++k) {
+      const Undo& u = log_[k];
+      const std::uint32_t* w = T_ + 3 * std::size_t(u.i);
+      switch (u.kind) {
+        case Undo::Position:
+        case Undo::Normal:
+        case Undo::Chain:
+          n += out(u.i);
+          break;
+        case Undo::Triangle:
+          for (int j = 0; j < 3; ++j) n += out(u.x[j]) + out(w[j]);
+          break;
+        case Undo::Alive:
+          for (int j = 0; j < 3; ++j) n += out(w[j]);
+          break;
+      }
+    }
+    return n;
+  }
+  // Puts back what the entries of `log` (in the order written) changed.
+  // (Entries a worker added to extra_ stay: fan() skips a triangle that no
+  // longer holds the vertex, and one that does is in the vertex's lists.)
+  void undo(const std::vector<Undo>& log) {
+    for (auto it = log.rbegin(); it != log.rend(); ++it) {
+      const Undo& u = *it;
+      const std::size_t i = u.i;
+      switch (u.kind) {
+        case Undo::Position:
+          for (int k = 0; k < 3; ++k) P_[3 * i + k] = Real(u.x[k]);
+          break;
+        case Undo::Normal:
+          for (int k = 0; k < 3; ++k) N_[3 * i + k] = float(u.x[k]);
+          break;
+        case Undo::Triangle:
+          for (int k = 0; k < 3; ++k) T_[3 * i + k] = std::uint32_t(u.x[k]);
+          break;
+        case Undo::Alive:
+          alive_[i] = std::uint8_t(u.x[0]);
+          break;
+        case Undo::Chain:
+          tail_[i] = std::uint32_t(u.x[0]);
+          next_[tail_[i]] = std::uint32_t(u.x[1]);
+          break;
+      }
+    }
+  }
+
   void add_incidence(std::uint32_t v, std::uint32_t t) {
+    if (worker_) {  // (the main Cleaner adds them after the round)
+      pending_incidence_.push_back({v, t});
+      return;
+    }
     if (extra_head_.empty()) extra_head_.assign(nv_, kNone);
     extra_.push_back({t, extra_head_[v]});
     extra_head_[v] = std::uint32_t(extra_.size() - 1);
@@ -1605,11 +2116,23 @@ class Cleaner {
   std::uint32_t* T_;
   std::size_t nt_;
   // (Allocated unwritten, filled on all host threads: see the constructor.)
-  std::vector<std::uint8_t, NoInitAllocator<std::uint8_t>> alive_, irregular_;
-  std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>> start_, next_, tail_;
-  std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>> incident_;
-  std::vector<std::uint32_t> extra_head_;                       // per vertex, into extra_ (after flips)
-  std::vector<std::pair<std::uint32_t, std::uint32_t>> extra_;  // (triangle, next entry)
+  // (The main Cleaner owns them; its workers, repair_pass' per-thread
+  // copies, refer to the main one's through the references below.)
+  using Bytes = std::vector<std::uint8_t, NoInitAllocator<std::uint8_t>>;
+  using Indices = std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>>;
+  using Extra = std::vector<std::pair<std::uint32_t, std::uint32_t>>;
+  Bytes alive_own_, irregular_own_;
+  Indices start_own_, next_own_, tail_own_, incident_own_;
+  std::vector<std::uint32_t> extra_head_own_;
+  Extra extra_own_;
+  Bytes& alive_ = alive_own_;
+  Bytes& irregular_ = irregular_own_;
+  Indices& start_ = start_own_;
+  Indices& next_ = next_own_;
+  Indices& tail_ = tail_own_;
+  Indices& incident_ = incident_own_;
+  std::vector<std::uint32_t>& extra_head_ = extra_head_own_;  // per vertex, into extra_ (after flips)
+  Extra& extra_ = extra_own_;                                 // (triangle, next entry)
   double degenerate_double_area_ = 0;
   std::vector<std::uint32_t> fa_, fb_, ra_, rb_, common_, scratch_, around_, cluster_;
   // prepare_positions: the old class and normal of each triangle of around_,
@@ -1625,6 +2148,25 @@ class Cleaner {
   std::vector<std::uint32_t> changed_vertices_, changed_triangles_;
   std::vector<std::uint8_t> state_;       // per triangle, of the component walks
   std::vector<std::uint32_t> component_;  // the triangles of the current walk
+
+  // repair_pass: a worker (a per-thread Cleaner on the main one's arrays)
+  // logs its writes, defers its new incidences and keeps its own counts
+  // and changed lists, which the main Cleaner takes after each round.
+  bool worker_ = false;
+  std::vector<Undo> log_;
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> pending_incidence_;
+  std::uint64_t repaired_ = 0;
+  // The main Cleaner's: its workers, the reservations (per vertex, the
+  // first item of the round whose region holds it; kNone: none) and the
+  // stamps (per vertex, stamp_base_ + the item that last committed with the
+  // vertex in its region).
+  std::vector<std::unique_ptr<Cleaner>> workers_;
+  struct Slot {
+    std::atomic<std::uint32_t> reserve;
+    std::uint32_t stamp;
+  };
+  std::unique_ptr<Slot[]> slots_;  // per vertex (one cache line for both)
+  std::uint32_t stamp_base_ = 0;
 };
 
 }  // namespace detail
@@ -1655,9 +2197,18 @@ CleanupResult cleanup_mesh(PosVec& positions, NormalVec& normals, IndexVec& tria
   host_trace("clean-up: scan", bad.size());
   auto passes = [&] {
     for (int pass = 0; pass < kCleanupPasses && !bad.empty(); ++pass) {
-      std::uint64_t repaired = 0;
-      for (const auto& b : bad) repaired += c.repair(std::get<2>(b)) ? 1 : 0;
+      // (NBMC_TRACE: each pass' items, repairs and times, on a line of its
+      // own that leaves host_trace's clock alone.)
+      const bool trace = c.trace_on();
+      const auto t0 = trace ? std::chrono::steady_clock::now() : std::chrono::steady_clock::time_point();
+      const std::uint64_t repaired = c.repair_pass(bad);
+      const auto t1 = trace ? std::chrono::steady_clock::now() : t0;
+      const std::size_t items = bad.size();
       bad = c.bad_triangles_after(bad);
+      if (trace)
+        std::fprintf(stderr, "[nbmc trace] clean-up pass: items=%zu repaired=%llu %.3f ms, list %.3f ms\n", items,
+                     (unsigned long long)repaired, std::chrono::duration<double, std::milli>(t1 - t0).count(),
+                     std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t1).count());
       if (repaired == 0) break;
     }
   };
