@@ -109,8 +109,9 @@
 // and fan() reads them, through relaxed atomics (see fan()), so that such a
 // read, whose value does not matter, is no data race. Counts and changed
 // lists are per thread and merged after each round; the next pass' list is
-// sorted, so their order does not matter. The output keeps the surviving triangles in their order and the
-// surviving vertices in theirs; unreferenced vertices are dropped.
+// sorted, so their order does not matter. The output keeps the surviving
+// triangles in their order and the surviving vertices in theirs;
+// unreferenced vertices are dropped.
 #pragma once
 
 #include "mesh_check.hpp"
