@@ -103,10 +103,15 @@
 // its own. A stamp per vertex (the last item that committed with it in its
 // region) catches a region that grew, after a later item committed beside
 // it, into that item's; the pass is then undone (per-thread undo logs) and
-// run serially. Counts and changed lists are per thread and merged after
-// each round; the next pass' list is sorted, so their order does not
-// matter. The output keeps the surviving triangles in their order and the
-// surviving vertices in theirs; unreferenced vertices are dropped.
+// run serially. A vertex's list of triangles may still name one that a
+// flip, cut or merge took from it and that another thread rewrites in the
+// same round: the repairs write the triangles' vertices and alive flags,
+// and fan() reads them, through relaxed atomics (see fan()), so that such a
+// read, whose value does not matter, is no data race. Counts and changed
+// lists are per thread and merged after each round; the next pass' list is
+// sorted, so their order does not matter. The output keeps the surviving
+// triangles in their order and the surviving vertices in theirs;
+// unreferenced vertices are dropped.
 #pragma once
 
 #include "mesh_check.hpp"
@@ -920,10 +925,28 @@ class Cleaner {
 
   // Alive triangles around v: in its own lists and those of the vertices
   // merged into it, that still contain v (flips move triangles away).
+  // Each listed triangle's alive flag and vertices are read through relaxed
+  // atomics (as the repairs write them): in a round of repair_pass, a stale
+  // entry (a triangle that no longer contains v, left by an earlier flip,
+  // cut or merge) may be one that another thread is rewriting or removing
+  // now (its vertices lie in that thread's region, v in this one's). Neither
+  // its old nor its new contents hold v (the other thread's region does not
+  // hold v), so whichever values are read, it is skipped: the result is the
+  // same, and the reads are no data race. Every triangle taken contains v,
+  // which no other thread's region holds, so no other thread writes it in
+  // the round, and the plain reads of it elsewhere race with nothing. A
+  // removed triangle's flag is never written again in a pass (but by an
+  // undo, serially). The lists themselves (start_, incident_, extra_head_,
+  // extra_) change only between rounds, on the main thread, and a chain of
+  // merged vertices (next_, tail_) only by the thread whose region holds its
+  // first vertex, the one whose fan() walks it.
   void fan(std::uint32_t v, std::vector<std::uint32_t>& out) const {
     out.clear();
     auto take = [&](std::uint32_t t) {
-      if (alive_[t] && contains(T_ + 3 * std::size_t(t), v)) out.push_back(t);
+      const std::uint32_t* w = T_ + 3 * std::size_t(t);
+      if (load_relaxed(alive_[t]) &&
+          (load_relaxed(w[0]) == v || load_relaxed(w[1]) == v || load_relaxed(w[2]) == v))
+        out.push_back(t);
     };
     for (std::uint32_t u = v; u != kNone; u = next_[u]) {
       for (std::uint32_t i = start_[u]; i < start_[u + 1]; ++i) take(incident_[i]);
@@ -947,6 +970,25 @@ class Cleaner {
     return scratch_.size();
   }
   static bool contains(const std::uint32_t* v, std::uint32_t x) { return v[0] == x || v[1] == x || v[2] == x; }
+  // The repairs' writes of T_ and alive_, and fan()'s reads of them, are
+  // relaxed atomic accesses (see fan()): on the host, plain loads and stores
+  // of the same width, in the same order.
+  template <class U>
+  static U load_relaxed(const U& x) {
+#if defined(__GNUC__) || defined(__clang__)
+    return __atomic_load_n(&x, __ATOMIC_RELAXED);
+#else
+    return x;
+#endif
+  }
+  template <class U>
+  static void store_relaxed(U& x, U value) {
+#if defined(__GNUC__) || defined(__clang__)
+    __atomic_store_n(&x, value, __ATOMIC_RELAXED);
+#else
+    x = value;
+#endif
+  }
 
   // An edge (a, b) that may be collapsed (the topology; consider_collapse
   // then judges each target position): fa_ and fb_ hold the fans of a and b.
@@ -1513,10 +1555,10 @@ class Cleaner {
   }
 
   void apply_cut(const CutCandidate& c) {
-    for (std::uint32_t u : c.removed) log_alive(u), alive_[u] = 0;
+    for (std::uint32_t u : c.removed) log_alive(u), store_relaxed(alive_[u], std::uint8_t(0));
     for (const auto& r : c.rewritten) {
       log_triangle(r.first);
-      for (int k = 0; k < 3; ++k) T_[3 * std::size_t(r.first) + k] = r.second[k];
+      for (int k = 0; k < 3; ++k) store_relaxed(T_[3 * std::size_t(r.first) + k], r.second[k]);
       add_incidence(contains(r.second.data(), c.a) ? c.a : c.b, r.first);
     }
     const std::uint32_t ends[2] = {c.a, c.b};  // (nvcc's front end rejects {c.a, c.b} in a range-for)
@@ -1900,14 +1942,14 @@ class Cleaner {
   }
 
   void apply_cluster(const ClusterCandidate& c) {
-    for (std::uint32_t u : c.removed) log_alive(u), alive_[u] = 0;
+    for (std::uint32_t u : c.removed) log_alive(u), store_relaxed(alive_[u], std::uint8_t(0));
     for (const auto& r : c.rewritten) {
       log_triangle(r.first);
       std::uint32_t owner = kNone;
       for (int k = 0; k < 3; ++k) {
         const std::uint32_t old = T_[3 * std::size_t(r.first) + k];
         if (old != r.second[k]) owner = r.second[k];
-        T_[3 * std::size_t(r.first) + k] = r.second[k];
+        store_relaxed(T_[3 * std::size_t(r.first) + k], r.second[k]);
       }
       if (owner != kNone) add_incidence(owner, r.first);
       changed_triangles_.push_back(r.first);
@@ -1980,11 +2022,12 @@ class Cleaner {
     fan(b, fb_);
     log_alive(c.t1);
     log_alive(c.t2);
-    alive_[c.t1] = alive_[c.t2] = 0;
+    store_relaxed(alive_[c.t1], std::uint8_t(0));
+    store_relaxed(alive_[c.t2], std::uint8_t(0));
     for (std::uint32_t t : fb_) {
       log_triangle(t);
       for (int k = 0; k < 3; ++k)
-        if (T_[3 * std::size_t(t) + k] == b) T_[3 * std::size_t(t) + k] = a;
+        if (T_[3 * std::size_t(t) + k] == b) store_relaxed(T_[3 * std::size_t(t) + k], a);
     }
     if (N_) {
       log_normal(a);
@@ -2013,8 +2056,8 @@ class Cleaner {
     std::uint32_t* t2 = T_ + 3 * std::size_t(c.t2);
     log_triangle(c.t1);
     log_triangle(c.t2);
-    t1[0] = c.c, t1[1] = c.a, t1[2] = c.d;
-    t2[0] = c.c, t2[1] = c.d, t2[2] = c.b;
+    store_relaxed(t1[0], c.c), store_relaxed(t1[1], c.a), store_relaxed(t1[2], c.d);
+    store_relaxed(t2[0], c.c), store_relaxed(t2[1], c.d), store_relaxed(t2[2], c.b);
     // t1 now touches d and t2 touches c: extra entries in their lists (a
     // and b keep stale entries, which fan() skips).
     add_incidence(c.d, c.t1);
