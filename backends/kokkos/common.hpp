@@ -5,6 +5,8 @@
 #pragma once
 
 #include <Kokkos_Core.hpp>
+
+#include "core/trace.hpp"
 #include <utility>
 #include <memory>
 
@@ -58,8 +60,7 @@ namespace Details {
 // NBMC_TRACE=1 prints the time since the previous trace point (after a
 // fence) to stderr: a poor man's profiler for machines without tools.
 inline void trace(const char* what, std::uint64_t n = 0) {
-  static const bool on = std::getenv("NBMC_TRACE") != nullptr;
-  if (!on) return;
+  if (!host_trace_on()) return;
   static Kokkos::Timer timer;
   Kokkos::fence();
   std::fprintf(stderr, "[nbmc trace] %-28s n=%-10llu %9.3f ms\n", what, (unsigned long long)n, timer.seconds() * 1e3);

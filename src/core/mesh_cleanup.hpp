@@ -334,6 +334,14 @@ class Cleaner {
   bool merge_clusters = false;
 
   using BadList = std::vector<std::tuple<int, double, std::uint32_t>>;
+  // Adds triangle t to `out` as (-class, sin of its smallest angle, t) when
+  // it is alive and bad.
+  void add_if_bad(std::uint32_t t, BadList& out) const {
+    if (!alive_[t]) return;
+    const TriangleShape s = shape(t);
+    const int c = triangle_class(s, degenerate_double_area_);
+    if (c) out.emplace_back(-c, s.sin_min_angle, t);
+  }
 
   // Bad triangles now: (class, sin of the smallest angle, index), worst first.
   // (A scan on all host threads; the sort makes the list independent of them.)
@@ -345,9 +353,7 @@ class Cleaner {
         if (!alive_[t]) continue;
         const std::uint32_t* v = T_ + 3 * t;
         if (surely_good(load(P_, v[0]), load(P_, v[1]), load(P_, v[2]), degenerate_double_area_)) continue;
-        const TriangleShape s = shape(std::uint32_t(t));
-        const int c = triangle_class(s, degenerate_double_area_);
-        if (c) part[k].emplace_back(-c, s.sin_min_angle, std::uint32_t(t));
+        add_if_bad(std::uint32_t(t), part[k]);
       }
     });
     std::vector<std::tuple<int, double, std::uint32_t>> bad;
@@ -377,18 +383,12 @@ class Cleaner {
       for_chunks(total, chunks, [&](std::size_t k, std::size_t b, std::size_t e) {
         std::vector<std::uint32_t> f;
         BadList& out = part[k];
-        auto look_at = [&](std::uint32_t t) {
-          if (!alive_[t]) return;
-          const TriangleShape s = shape(t);
-          const int c = triangle_class(s, degenerate_double_area_);
-          if (c) out.emplace_back(-c, s.sin_min_angle, t);
-        };
         for (std::size_t i = b; i < e; ++i) {
-          if (i < nb) look_at(std::get<2>(before[i]));
+          if (i < nb) add_if_bad(std::get<2>(before[i]), out);
           else if (i < nb + ncv) {
             fan(changed_vertices_[i - nb], f);
-            for (std::uint32_t t : f) look_at(t);
-          } else look_at(changed_triangles_[i - nb - ncv]);
+            for (std::uint32_t t : f) add_if_bad(t, out);
+          } else add_if_bad(changed_triangles_[i - nb - ncv], out);
         }
       });
       changed_vertices_.clear();
@@ -412,12 +412,7 @@ class Cleaner {
     std::sort(look.begin(), look.end());
     look.erase(std::unique(look.begin(), look.end()), look.end());
     BadList bad;
-    for (std::uint32_t t : look) {
-      if (!alive_[t]) continue;
-      const TriangleShape s = shape(t);
-      const int c = triangle_class(s, degenerate_double_area_);
-      if (c) bad.emplace_back(-c, s.sin_min_angle, t);
-    }
+    for (std::uint32_t t : look) add_if_bad(t, bad);
     std::sort(bad.begin(), bad.end());
     return bad;
   }
@@ -501,7 +496,6 @@ class Cleaner {
   // pass is undone (the workers' undo logs) and run again serially.
   static constexpr std::size_t kParallelMinItems = 128;
   static constexpr std::size_t kPrefixPerThread = 64;
-
 
   std::uint64_t repair_pass(const BadList& bad) {
     const std::size_t n = bad.size();
@@ -683,16 +677,12 @@ class Cleaner {
       h.lost += lost;
       h.writes_outside += writes_outside;
     }
-    if (trace_on()) {
+    if (host_trace_on()) {
       std::fprintf(stderr, "[nbmc trace] clean-up rounds: items=%zu threads=%zu rounds=%llu lost=%llu (%.1f%%)%s\n", n,
                    threads, (unsigned long long)rounds, (unsigned long long)lost, 100.0 * double(lost) / double(n),
                    violation ? " (undone, run serially)" : "");
     }
     return repaired;
-  }
-  static bool trace_on() {
-    static const bool on = std::getenv("NBMC_TRACE") != nullptr;
-    return on;
   }
 
   // Removes the connected components all of whose triangles are degenerate
@@ -2242,7 +2232,7 @@ CleanupResult cleanup_mesh(PosVec& positions, NormalVec& normals, IndexVec& tria
     for (int pass = 0; pass < kCleanupPasses && !bad.empty(); ++pass) {
       // (NBMC_TRACE: each pass' items, repairs and times, on a line of its
       // own that leaves host_trace's clock alone.)
-      const bool trace = c.trace_on();
+      const bool trace = host_trace_on();
       const auto t0 = trace ? std::chrono::steady_clock::now() : std::chrono::steady_clock::time_point();
       const std::uint64_t repaired = c.repair_pass(bad);
       const auto t1 = trace ? std::chrono::steady_clock::now() : t0;

@@ -11,9 +11,14 @@
 
 namespace nbmc {
 
-inline void host_trace(const char* what, std::uint64_t n = 0) {
+// Whether NBMC_TRACE is set (read once).
+inline bool host_trace_on() {
   static const bool on = std::getenv("NBMC_TRACE") != nullptr;
-  if (!on) return;
+  return on;
+}
+
+inline void host_trace(const char* what, std::uint64_t n = 0) {
+  if (!host_trace_on()) return;
   using clock = std::chrono::steady_clock;
   static thread_local clock::time_point last = clock::now();
   const clock::time_point now = clock::now();
