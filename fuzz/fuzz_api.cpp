@@ -620,6 +620,18 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
       prm.aniso_neighbours = aniso_neighbours;
     }
   }
+  // Appended draws (the distance guard), after the YT10 ones: max_distance
+  // from 0 (off) to beyond R, or (guard_corrupt) NaN, infinite or negative.
+  // Zeros (a used-up input): the default.
+  const bool guard_set = in.one_in(2);
+  const double guard_distance = in.range(0.0, 6.0);
+  const unsigned guard_corrupt = in.small_below(24);
+  if (guard_set) prm.max_distance = guard_distance * L;
+  if (guard_set && guard_corrupt < 3) {
+    const double bad[] = {std::numeric_limits<double>::quiet_NaN(), std::numeric_limits<double>::infinity(),
+                          -0.5 * L};
+    prm.max_distance = bad[guard_corrupt];
+  }
 
   // Keep the work small: an estimate of the field evaluations (band or dense
   // vertices times the most neighbours any particle has within R) bounds the
@@ -742,7 +754,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
               std::isfinite(eff.aniso_kr) && eff.aniso_kr >= 1 && std::isfinite(eff.aniso_ks) && eff.aniso_ks > 0 &&
               std::isfinite(eff.aniso_kn) && eff.aniso_kn > 0 && eff.aniso_kn <= 1.5 &&
               std::isfinite(eff.aniso_lambda) && eff.aniso_lambda >= 0 && eff.aniso_lambda <= 1 &&
-              eff.aniso_neighbours >= 0 &&
+              eff.aniso_neighbours >= 0 && std::isfinite(eff.max_distance) && eff.max_distance >= 0 &&
               (eff.isolated == NBMC_ISOLATED_KEEP || eff.isolated == NBMC_ISOLATED_DROP ||
                eff.isolated == NBMC_ISOLATED_SPHERE) &&
               eff.min_cluster >= 1 && eff.decimate_fraction > 0 && eff.decimate_fraction <= 1 &&
@@ -811,12 +823,13 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
   char desc[512];
   std::snprintf(desc, sizeof desc,
                 "n=%zu r=%g offset=%g %s stride=%llu count=%llu bad=%ld unit=%s cell=%g R=%g band=%g surf=%g iso=%g "
-                "method=%d field=%d t=[%g,%g] iso_t=%g aniso=[%g,%g,%g,%g,%d] color=%g nbr=%d normals=%d bbox=%d "
+                "method=%d field=%d t=[%g,%g] iso_t=%g aniso=[%g,%g,%g,%g,%d] guard=%g color=%g nbr=%d normals=%d bbox=%d "
                 "budget=%llu cancel=%d",
                 n, r, offset, f64 ? "f64" : "f32", (unsigned long long)stride, (unsigned long long)count, bad_index,
                 absolute ? "abs" : "rel", prm.cell_size, prm.influence_radius, prm.band_width, prm.surface_radius,
                 prm.iso_radius, prm.method, prm.field, prm.t_low, prm.t_high, prm.iso_threshold, prm.aniso_kr,
-                prm.aniso_ks, prm.aniso_kn, prm.aniso_lambda, int(prm.aniso_neighbours), prm.color_threshold,
+                prm.aniso_ks, prm.aniso_kn, prm.aniso_lambda, int(prm.aniso_neighbours), prm.max_distance,
+                prm.color_threshold,
                 prm.neighbour_threshold, prm.compute_normals, prm.use_bbox, (unsigned long long)budget, cancel_at);
   g_case = desc;
 

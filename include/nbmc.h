@@ -327,6 +327,16 @@ typedef struct nbmc_params {
                                counted) give an anisotropic kernel, fewer a sphere; >= 0;
                                default 25 (Yu & Turk) */
   int32_t reserved2;        /* 0 */
+  /* Appended with the distance guard (older callers: the default). */
+  double max_distance;      /* rho: where no particle lies within rho (a length, like cell_size), the
+                               field is raised so that the surface stays within about rho of the
+                               particles (bench/RESULTS.md: every vertex within rho + 0.4 r at
+                               cell r): bridges between splashes and fillets in concave corners
+                               that lie farther out are cut back to balls of radius rho around the
+                               particles. With per-particle radii each particle's rho scales with
+                               its radius. NBMC_METHOD_SSP07, ZB05 and SPH; ignored by YT10 (its
+                               kernels keep its surface close). >= 0; 0 or >= influence_radius:
+                               off; default 1.5 (1.5 r) */
 } nbmc_params;
 
 /* Fills *params with the defaults (spacing is 0 and must be set). */

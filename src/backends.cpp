@@ -317,6 +317,8 @@ Params resolve_params(const nbmc_params& in) {
           "aniso_lambda must lie in [0, 1] (got " + num(in.aniso_lambda) + ")");
   require(in.aniso_neighbours >= 0,
           "aniso_neighbours must be >= 0 (got " + std::to_string(in.aniso_neighbours) + ")");
+  require(std::isfinite(in.max_distance) && in.max_distance >= 0,
+          "max_distance must be a finite length >= 0 (0: no distance guard; got " + num(in.max_distance) + ")");
   require(std::isfinite(in.color_threshold) && in.color_threshold >= 0, "color_threshold must be >= 0");
   require(in.neighbour_threshold >= 0, "neighbour_threshold must be >= 0");
   Params p;
@@ -343,6 +345,7 @@ Params resolve_params(const nbmc_params& in) {
   p.aniso_kn = in.aniso_kn;
   p.aniso_lambda = in.aniso_lambda;
   p.aniso_neighbours = in.aniso_neighbours;
+  p.max_distance = length(in, in.max_distance, r);
   p.drop_isolated = in.isolated == NBMC_ISOLATED_DROP || in.isolated == NBMC_ISOLATED_SPHERE;
   p.min_cluster = std::uint32_t(in.min_cluster);
   p.color_threshold = in.color_threshold;

@@ -414,6 +414,7 @@ void nbmc_params_init(nbmc_params* p) {
   p->aniso_kn = 0.5;
   p->aniso_lambda = 0.3;
   p->aniso_neighbours = 25;
+  p->max_distance = 1.5;
 }
 
 int32_t nbmc_context_reconstruct(nbmc_context* ctx, const nbmc_params* params, nbmc_mesh** mesh) {

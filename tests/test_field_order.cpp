@@ -120,6 +120,7 @@ Params make_params(double r, double cell, int method) {
   p.band_width = 2 * r;
   p.surface_radius = 2 * r;
   p.iso_radius = r;
+  p.max_distance = 1.5 * r;  // the distance guard (its k_max in every backend's sums)
   p.method = nbmc::Method(method);
   return p;
 }
@@ -274,7 +275,8 @@ Outcome run(const Exec& space, const Points& xyz, const Params& p, bool dense, c
   const Grid g = make_grid(lo, hi, p);
   Neighbourhood<Host> nbh;
   build_neighbourhood(space, tracker, xyz.data(), n, {}, g, nbh, Method::radii ? radii.data() : nullptr);
-  FieldConstants fc = field_constants(p.influence_radius, p.iso_radius, p.t_low, p.t_high, p.iso_threshold);
+  FieldConstants fc =
+      field_constants(p.influence_radius, p.iso_radius, p.t_low, p.t_high, p.iso_threshold, guard_ratio(p));
   if (Method::radii)
     attach_radii(space, tracker, Kokkos::View<const double*, Host>(radii.data(), radii.size()), p, nbh);
   const bool sph = p.method == nbmc::Method::SPH;

@@ -70,6 +70,9 @@ TEST(Baselines, ScatterAndGatherFieldsAgree) {
     gather.field = NBMC_FIELD_DENSE;
     scatter.field = NBMC_FIELD_SCATTER;
     gather.method = scatter.method = method;
+    // The raw meshes: the clean-up's choices (angles against 1 degree) can
+    // flip on the last bit of a position.
+    gather.cleanup = scatter.cleanup = 0;
     const Points p = blob(r);
     const Result a = reconstruct(p, gather), b = reconstruct(p, scatter);
     ASSERT_EQ(a.status, NBMC_OK) << a.message;

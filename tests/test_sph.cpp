@@ -97,6 +97,7 @@ TEST(Sph, SingleParticleIsTheSplineLevelSphere) {
       nbmc_params prm = sph_params(r, R, t);
       prm.cell_size = 0.05;
       prm.cleanup = 0;
+      prm.max_distance = 0;  // the level sphere lies up to 2.4 r out: no distance guard
       const Points p = {0.3, -0.2, 0.1};
       const Result res = reconstruct(p, prm);
       ASSERT_EQ(res.status, NBMC_OK) << res.message;

@@ -45,6 +45,7 @@
 
 #include <cstdint>
 #include <cstring>
+#include <type_traits>
 
 namespace nbmc {
 namespace Details {
@@ -140,10 +141,52 @@ struct FieldConstants {
   float t_low = 0.4f, t_high = 3.5f;
   float iso_threshold = 0.6f;  // SPH, YT10: iso level of the normalised density
   float outside = 0;     // phi where no particle contributes
+  // The distance guard (nbmc_params.max_distance): rho / R, 0 = off.
+  float guard_ratio = 0;
 };
 
+// The distance guard. A method with a guard keeps, besides its sums, the
+// largest k of a vertex, k_max = 1 - |d|^2 / R_j^2 of its nearest particle
+// (with radii, of the particle nearest in units of its own support). Where
+// no particle lies within rho (rho_j = rho R_j / R with radii, rho / R =
+// guard_ratio), that is where sqrt(1 - k_max) > rho / R, phi is raised to
+// the guard's value, so that the surface stays within about rho of the
+// particles (bench/RESULTS.md: within rho + 0.4 r at cell r). In units of
+// R the guard is u = sqrt(1 - k_max) - rho / R, the distance to that
+// particle minus rho over R: the distance methods (SSP07, ZB05) compare R u
+// with their phi, the SPH density (dimensionless) u itself. The guard is a
+// maximum (an intersection of the surface with the union of the balls of
+// radius rho around the particles): exact, the same on every backend.
+
+// max(a, b) lane-wise (T a float or a host SIMD vector of floats). It is
+// exact and does not depend on the order; a particle that does not
+// contribute (k = 0) leaves k_max (never below +0) as it is, as every sum.
+template <class T>
+KOKKOS_INLINE_FUNCTION T lane_max(T a, T b) {
+#if defined(__GNUC__) && !defined(__clang__)
+  return b > a ? b : a;  // vectors too: GCC's vector ?: (one maxps)
+#else
+  if constexpr (std::is_same<T, float>::value) {
+    return b > a ? b : a;
+  } else {
+    const auto m = b > a;
+    using I = decltype(m);
+    return (T)(((I)b & m) | ((I)a & ~m));
+  }
+#endif
+}
+
+// phi raised to the guard (scale: R for the distance methods, 1 for the
+// density) where the guard is on.
+KOKKOS_INLINE_FUNCTION float distance_guard(float phi, float k_max, float scale, const FieldConstants& c) {
+  if (!(c.guard_ratio > 0.f)) return phi;
+  const float g = scale * (Kokkos::Experimental::sqrt(1.f - k_max) - c.guard_ratio);
+  return g > phi ? g : phi;
+}
+
+// guard_ratio: max_distance / R (Params, guard_ratio()), 0 = no guard.
 inline FieldConstants field_constants(double R, double iso_radius, double t_low, double t_high,
-                                      double iso_threshold = 0.6) {
+                                      double iso_threshold = 0.6, double guard_ratio = 0) {
   FieldConstants f;
   f.R = float(R);
   f.inv_R2 = float(1.0 / (R * R));
@@ -152,6 +195,7 @@ inline FieldConstants field_constants(double R, double iso_radius, double t_low,
   f.t_high = float(t_high);
   f.iso_threshold = float(iso_threshold);
   f.outside = float(R);
+  f.guard_ratio = float(guard_ratio);
   return f;
 }
 

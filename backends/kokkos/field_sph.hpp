@@ -122,13 +122,15 @@ struct FieldSPHT {
   static constexpr const char* name = "sph";
   static constexpr int P = 1;  // the weight 1 / D_j
   static constexpr bool radii = Radii;
-  // a[0] = sum_j W~_j / D_j
-  static constexpr int N = 1;
+  // a[0] = sum_j W~_j / D_j, a[1] = the largest k (the distance guard)
+  static constexpr int KM = 1;
+  static constexpr int N = 2;
   // T is float, or a host SIMD vector of floats (same formula, lane-wise).
   template <class T>
   KOKKOS_INLINE_FUNCTION static void add(T* a, T /*dx*/, T /*dy*/, T /*dz*/, T k, const float* w,
                                          T /*q: in k already*/) {
     a[0] += sph_kernel(k) * lanes_of<T>(w[0]);
+    a[KM] = lane_max(a[KM], k);
   }
   // Adds particles [b, e) (SoA coordinates, weights W) at vertex x, one after
   // the other (see field_common.hpp); returns how many contribute. Same
@@ -137,7 +139,7 @@ struct FieldSPHT {
                                                          const float* W, const float* Q, std::uint32_t b,
                                                          std::uint32_t e, float x0, float x1, float x2,
                                                          float inv_R2) {
-    float a0 = a[0];
+    float a0 = a[0], km = a[KM];
     std::uint32_t count = 0;
     for (std::uint32_t j = b; j < e; ++j) {
       const float dx = X[j] - x0, dy = Y[j] - x1, dz = Z[j] - x2;
@@ -147,12 +149,14 @@ struct FieldSPHT {
       const float k = s2 < 1.f ? 1.f - s2 : 0.f;
       count += s2 < 1.f ? 1u : 0u;
       a0 += sph_kernel(k) * W[j];
+      km = lane_max(km, k);
     }
     a[0] = a0;
+    a[KM] = km;
     return count;
   }
   KOKKOS_INLINE_FUNCTION static float value(const float* a, const FieldConstants& c) {
-    return c.iso_threshold - a[0];
+    return distance_guard(c.iso_threshold - a[0], a[KM], 1.f, c);
   }
 };
 using FieldSPH = FieldSPHT<false>;

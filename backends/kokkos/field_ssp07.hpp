@@ -46,7 +46,9 @@ struct FieldSSP07T {
   // a[7..15] = sum d_a k^2 d_b (row-major); radii: a[4..15] times q_j, a[16] = sum k^3 r_j
   static constexpr int P = Radii ? 1 : 0;  // radii: the particle's radius r_j
   static constexpr bool radii = Radii;
-  static constexpr int N = Radii ? 17 : 16;
+  static constexpr int RS = 16;                // radii: sum k^3 r_j
+  static constexpr int KM = Radii ? 17 : 16;   // largest k (the distance guard)
+  static constexpr int N = KM + 1;
   // T is float, or a host SIMD vector of floats (same formula, lane-wise).
   template <class T>
   KOKKOS_INLINE_FUNCTION static void add(T* a, T dx, T dy, T dz, T k, const float* pd, T q) {
@@ -57,12 +59,13 @@ struct FieldSSP07T {
     a[2] += w * dy;
     a[3] += w * dz;
     if constexpr (Radii) {
-      a[16] += w * lanes_of<T>(pd[0]);
+      a[RS] += w * lanes_of<T>(pd[0]);
       k2 = k2 * q;
     } else {
       (void)pd;
       (void)q;
     }
+    a[KM] = lane_max(a[KM], k);
     const T gx = k2 * dx, gy = k2 * dy, gz = k2 * dz;
     a[4] += gx;
     a[5] += gy;
@@ -81,7 +84,8 @@ struct FieldSSP07T {
     float w0 = a[0], d0 = a[1], d1 = a[2], d2 = a[3], g0 = a[4], g1 = a[5], g2 = a[6];
     float m00 = a[7], m01 = a[8], m02 = a[9], m10 = a[10], m11 = a[11], m12 = a[12], m20 = a[13], m21 = a[14],
           m22 = a[15];
-    float rs = Radii ? a[N - 1] : 0.f;
+    float rs = Radii ? a[RS] : 0.f;
+    float km = a[KM];
     std::uint32_t count = 0;
     for (std::uint32_t j = b; j < e; ++j) {
       const float dx = X[j] - x0, dy = Y[j] - x1, dz = Z[j] - x2;
@@ -107,10 +111,12 @@ struct FieldSSP07T {
       m00 += dx * gx; m01 += dx * gy; m02 += dx * gz;
       m10 += dy * gx; m11 += dy * gy; m12 += dy * gz;
       m20 += dz * gx; m21 += dz * gy; m22 += dz * gz;
+      km = lane_max(km, k);
     }
     a[0] = w0; a[1] = d0; a[2] = d1; a[3] = d2; a[4] = g0; a[5] = g1; a[6] = g2;
     a[7] = m00; a[8] = m01; a[9] = m02; a[10] = m10; a[11] = m11; a[12] = m12; a[13] = m20; a[14] = m21; a[15] = m22;
-    if constexpr (Radii) a[N - 1] = rs;
+    if constexpr (Radii) a[RS] = rs;
+    a[KM] = km;
     (void)Rj;
     return count;
   }
@@ -137,8 +143,8 @@ struct FieldSSP07T {
       g = g < 0.f ? 0.f : (g > 1.f ? 1.f : g);
       f = g * g * g - 3.f * g * g + 3.f * g;
     }
-    const float rbar = Radii ? a[N - 1] * inv : c.iso_radius;
-    return Kokkos::Experimental::sqrt(x * x + y * y + z * z) - rbar * f;
+    const float rbar = Radii ? a[RS] * inv : c.iso_radius;
+    return distance_guard(Kokkos::Experimental::sqrt(x * x + y * y + z * z) - rbar * f, a[KM], c.R, c);
   }
 };
 using FieldSSP07 = FieldSSP07T<false>;

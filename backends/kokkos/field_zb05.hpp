@@ -18,7 +18,9 @@ struct FieldZB05T {
   // a[0] = sum k^3, a[1..3] = sum k^3 d; radii: a[4] = sum k^3 r_j
   static constexpr int P = Radii ? 1 : 0;  // radii: the particle's radius r_j
   static constexpr bool radii = Radii;
-  static constexpr int N = Radii ? 5 : 4;
+  static constexpr int RS = 4;                 // radii: sum k^3 r_j
+  static constexpr int KM = Radii ? 5 : 4;     // largest k (the distance guard)
+  static constexpr int N = KM + 1;
   // T is float, or a host SIMD vector of floats (same formula, lane-wise).
   template <class T>
   KOKKOS_INLINE_FUNCTION static void add(T* a, T dx, T dy, T dz, T k, const float* pd, T /*q: in k already*/) {
@@ -27,8 +29,9 @@ struct FieldZB05T {
     a[1] += w * dx;
     a[2] += w * dy;
     a[3] += w * dz;
-    if constexpr (Radii) a[4] += w * lanes_of<T>(pd[0]);
+    if constexpr (Radii) a[RS] += w * lanes_of<T>(pd[0]);
     else (void)pd;
+    a[KM] = lane_max(a[KM], k);
   }
   // Adds particles [b, e) (SoA coordinates) at vertex x, one after the other (the
   // order of the sums is part of the result: see field_common.hpp); returns how
@@ -38,7 +41,8 @@ struct FieldZB05T {
                                                          std::uint32_t e, float x0, float x1, float x2,
                                                          float inv_R2) {
     float a0 = a[0], a1 = a[1], a2 = a[2], a3 = a[3];
-    float rs = Radii ? a[N - 1] : 0.f;
+    float rs = Radii ? a[RS] : 0.f;
+    float km = a[KM];
     std::uint32_t count = 0;
     for (std::uint32_t j = b; j < e; ++j) {
       const float dx = X[j] - x0, dy = Y[j] - x1, dz = Z[j] - x2;
@@ -53,9 +57,11 @@ struct FieldZB05T {
       a2 += w * dy;
       a3 += w * dz;
       if constexpr (Radii) rs += w * Rj[j];
+      km = lane_max(km, k);
     }
     a[0] = a0; a[1] = a1; a[2] = a2; a[3] = a3;
-    if constexpr (Radii) a[N - 1] = rs;
+    if constexpr (Radii) a[RS] = rs;
+    a[KM] = km;
     (void)Rj;
     return count;
   }
@@ -63,8 +69,8 @@ struct FieldZB05T {
     if (!(a[0] > 0)) return c.outside;
     const float inv = 1.f / a[0];
     const float x = a[1] * inv, y = a[2] * inv, z = a[3] * inv;
-    const float rbar = Radii ? a[N - 1] * inv : c.iso_radius;
-    return Kokkos::Experimental::sqrt(x * x + y * y + z * z) - rbar;
+    const float rbar = Radii ? a[RS] * inv : c.iso_radius;
+    return distance_guard(Kokkos::Experimental::sqrt(x * x + y * y + z * z) - rbar, a[KM], c.R, c);
   }
 };
 using FieldZB05 = FieldZB05T<false>;

@@ -332,7 +332,8 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
     tracker.require(need, "the field and triangulation of " + std::to_string(band.n_vertices) +
                               " band vertices (estimated)");
   }
-  FieldConstants fc = field_constants(p.influence_radius, p.iso_radius, p.t_low, p.t_high, p.iso_threshold);
+  FieldConstants fc = field_constants(p.influence_radius, p.iso_radius, p.t_low, p.t_high, p.iso_threshold,
+                                      guard_ratio(p));
   // The passes over the particles: the SPH density's weights, YT10's kernels
   // (which also narrow the radius the field visits; YT10 has no radii
   // variant, params.hpp refuses it with per-particle radii).

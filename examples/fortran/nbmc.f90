@@ -195,6 +195,7 @@ module nbmc
     real(c_double)     :: aniso_lambda = 0
     integer(c_int32_t) :: aniso_neighbours = 0
     integer(c_int32_t) :: reserved2 = 0
+    real(c_double)     :: max_distance = 0        ! appended (distance guard)
   end type nbmc_params
 
   type, bind(c), public :: nbmc_stats

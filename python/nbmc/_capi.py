@@ -129,6 +129,8 @@ class Params(Structure):
         ("aniso_lambda", c_double),
         ("aniso_neighbours", c_int32),
         ("reserved2", c_int32),
+        # appended with the distance guard
+        ("max_distance", c_double),
     ]
 
 

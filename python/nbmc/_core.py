@@ -63,7 +63,7 @@ def stage_name(stage: int) -> str:
 # ---------------------------------------------------------------- parameters
 # Keyword arguments of reconstruct() that map onto nbmc_params, named like the
 # CLI's options (--cell-size -> cell_size); 'normals' is the inverse of --no-normals.
-_LENGTHS = ("cell_size", "influence_radius", "band_width", "surface_radius", "iso_radius")
+_LENGTHS = ("cell_size", "influence_radius", "band_width", "surface_radius", "iso_radius", "max_distance")
 _ANISO = ("aniso_kr", "aniso_ks", "aniso_kn", "aniso_lambda")
 _PARAM_KEYS = _LENGTHS + ("method", "field", "t_low", "t_high", "iso_threshold", "color_threshold",
                           "neighbour_threshold", "normals", "length_unit", "isolated", "min_cluster",
@@ -932,7 +932,7 @@ def reconstruct(points: Any, spacing: Optional[float] = None, *,
                 decimate: Optional[float] = None,
                 aniso_kr: Optional[float] = None, aniso_ks: Optional[float] = None,
                 aniso_kn: Optional[float] = None, aniso_neighbours: Optional[int] = None,
-                aniso_lambda: Optional[float] = None,
+                aniso_lambda: Optional[float] = None, max_distance: Optional[float] = None,
                 backend: Union[str, int] = "auto", threads: Optional[int] = None,
                 device_id: int = 0, memory_budget: Union[int, str, None] = None,
                 mesh_memory: str = "host", progress: Optional[ProgressFn] = None,
@@ -971,6 +971,12 @@ def reconstruct(points: Any, spacing: Optional[float] = None, *,
         within ``influence_radius`` (in (0, 1.5]), and the smoothing of the
         kernel centres (in [0, 1]); defaults {aniso_kr}, {aniso_ks},
         {aniso_kn}, {aniso_neighbours}, {aniso_lambda}.
+    max_distance
+        "ssp07", "zb05", "sph": keep the surface within about this distance
+        of the particles (a length like ``cell_size``): where no particle lies
+        within it the field is raised, so bridges between splashes and
+        fillets in concave corners are cut back; 0: off; default
+        {max_distance}.
     field
         "narrow-band", or the baselines "dense" and "scatter"; default {field!r}.
     t_low, t_high, color_threshold, neighbour_threshold
@@ -1039,7 +1045,8 @@ def reconstruct(points: Any, spacing: Optional[float] = None, *,
                                min_cluster=min_cluster, double_positions=double_positions,
                                cleanup=cleanup, smooth=smooth, smooth_weights=smooth_weights,
                                decimate=decimate, aniso_kr=aniso_kr, aniso_ks=aniso_ks, aniso_kn=aniso_kn,
-                               aniso_neighbours=aniso_neighbours, aniso_lambda=aniso_lambda)
+                               aniso_neighbours=aniso_neighbours, aniso_lambda=aniso_lambda,
+                               max_distance=max_distance)
 
 
 def _show_library_defaults(fn: Callable[..., Any]) -> None:

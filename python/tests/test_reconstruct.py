@@ -185,7 +185,7 @@ def test_absolute_lengths_match_relative(points, mesh):
     d = nbmc.defaults()
     m = nbmc.reconstruct(points, spacing=r, length_unit="absolute", threads=1,
                          **{k: d[k] * r for k in ("cell_size", "influence_radius", "band_width",
-                                                 "surface_radius", "iso_radius")})
+                                                 "surface_radius", "iso_radius", "max_distance")})
     assert m.triangle_count == pytest.approx(mesh.triangle_count, rel=0.01)
 
 

@@ -1349,6 +1349,11 @@ int main(int argc, char** argv) {
                   "SPH, YT10: iso level of the normalised density, a fraction of the rest density in (0, 1) "
                   "(splashsurf's --surface-threshold)")
       ->capture_default_str();
+  rec->add_option("--max-distance", p.max_distance,
+                  "ssp07, zb05, sph: keep the surface within about this distance of the particles (the field "
+                  "is raised where no particle lies within it: bridges between splashes and fillets in concave "
+                  "corners are cut back); 0: off")
+      ->capture_default_str();
   rec->add_option("--aniso-kr", p.aniso_kr,
                   "YT10: k_r, largest ratio of a kernel's longest to its shortest axis (>= 1; Yu & Turk: 4)")
       ->capture_default_str();

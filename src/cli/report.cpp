@@ -205,9 +205,12 @@ std::string format_report(const Report& r) {
   line("backend", r.backend);
   const nbmc_params& q = r.params;
   line("method", std::string(method_name(q.method)) +
-                    (q.method == NBMC_METHOD_SPH    ? printf_string(" (iso threshold %g)", q.iso_threshold)
+                    (q.method == NBMC_METHOD_SPH ? printf_string(" (iso threshold %g)", q.iso_threshold)
                      : q.method == NBMC_METHOD_YT10 ? yt10_settings(q)
                                                     : std::string()) +
+                    (q.method != NBMC_METHOD_YT10 && q.max_distance > 0 && q.max_distance < q.influence_radius
+                         ? printf_string(", max distance %g", q.max_distance)
+                         : std::string()) +
                     ", " + field_name(q.field) + " field");
   line("mesh", (r.params.cleanup ? "cleaned up (" + grouped(s.raw_triangle_count) + " triangles before, " +
                                        grouped(s.cleanup_bad_triangles_before) + " bad: " +
@@ -350,7 +353,7 @@ std::string format_json(const Report& r) {
       {"iso_radius", p.iso_radius},     {"t_low", p.t_low},           {"t_high", p.t_high},
       {"color_threshold", p.color_threshold}, {"iso_threshold", p.iso_threshold},
       {"aniso_kr", p.aniso_kr},         {"aniso_ks", p.aniso_ks},     {"aniso_kn", p.aniso_kn},
-      {"aniso_lambda", p.aniso_lambda}};
+      {"aniso_lambda", p.aniso_lambda}, {"max_distance", p.max_distance}};
   for (const auto& [k, v] : reals) o += std::string(", \"") + k + "\": " + json_number(v);
   o += ", \"method\": " + json_string(method_name(p.method));
   o += ", \"field\": " + json_string(field_name(p.field));

@@ -79,6 +79,9 @@ struct Params {
   // YT10: Yu & Turk's anisotropy (nbmc_params.aniso_*; backends/kokkos/field_yt10.hpp)
   double aniso_kr = 4, aniso_ks = 1, aniso_kn = 0.5, aniso_lambda = 0.3;
   int aniso_neighbours = 25;
+  // The distance guard's rho (nbmc_params.max_distance), absolute; 0: off
+  // (backends/kokkos/field_common.hpp).
+  double max_distance = 0;
   bool drop_isolated = false;  // NBMC_ISOLATED_DROP
   std::uint32_t min_cluster = 10;
   double color_threshold = 0.75;
@@ -102,6 +105,15 @@ struct Params {
 // neighbour search and the ghost layers use.
 constexpr double kYt10MaxAxis = 1.5;
 constexpr double kYt10MaxShift = 0.2;
+
+// The distance guard's rho / R for the field kernels (FieldConstants::
+// guard_ratio; 0: none). YT10 has no guard; rho >= R would never raise a
+// value to the outside (every particle the field sees lies within R), so it
+// is off there too.
+inline double guard_ratio(const Params& p) {
+  if (p.method == Method::YT10 || !(p.max_distance > 0) || !(p.max_distance < p.influence_radius)) return 0;
+  return p.max_distance / p.influence_radius;
+}
 
 // The normalised-density fields (SPH, YT10): a pass over the particles
 // before the field, whose per-particle values (SPH: the density; YT10: the
@@ -140,6 +152,7 @@ inline void scale_for_radii(Params& p, double r_min, double r_max) {
   p.band_width *= f;
   p.surface_radius *= f;
   p.iso_radius *= f;
+  p.max_distance *= f;
   p.spacing = r_max;
   p.radius_ref = r_min < r_max ? r_max : 0;
 }

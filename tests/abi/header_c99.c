@@ -108,6 +108,7 @@ int main(void) {
   CHECK(NBMC_ISOLATED_SPHERE == 2 && NBMC_SMOOTH_FEATURE == 1);
   CHECK(NBMC_METHOD_YT10 == 3 && params.aniso_kr == 4.0 && params.aniso_ks == 1.0 && params.aniso_kn == 0.5);
   CHECK(params.aniso_lambda == 0.3 && params.aniso_neighbours == 25 && params.reserved2 == 0);
+  CHECK(params.max_distance == 1.5);
   memset(&stats, 0xff, sizeof stats);
   nbmc_stats_init(&stats);
   CHECK(stats.struct_size == sizeof(nbmc_stats) && stats.triangle_count == 0);

@@ -152,6 +152,8 @@ pub struct nbmc_params {
     pub aniso_lambda: f64,
     pub aniso_neighbours: i32,
     pub reserved2: i32,
+    // appended with the distance guard
+    pub max_distance: f64,
 }
 
 #[repr(C)]

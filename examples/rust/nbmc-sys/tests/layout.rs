@@ -155,7 +155,8 @@ fn rust_layouts() -> Vec<Layout> {
             aniso_kn,
             aniso_lambda,
             aniso_neighbours,
-            reserved2
+            reserved2,
+            max_distance
         }),
         layout!(nbmc_stats {
             struct_size,

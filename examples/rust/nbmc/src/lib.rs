@@ -344,6 +344,10 @@ pub struct Params {
     /// `Method::Yt10` (lambda): smoothing of the kernel centres, in [0, 1]
     /// (default 0.3).
     pub aniso_lambda: f64,
+    /// `Method::Ssp07`, `Zb05`, `Sph`: keep the surface within about this
+    /// distance of the particles (bridges between splashes and fillets in
+    /// concave corners are cut back); 0: off (default 1.5 r).
+    pub max_distance: f64,
     /// Colour-field gradient threshold of the surface test (default 0.75).
     pub color_threshold: f64,
     /// Fewer neighbours than this means surface (default 25).
@@ -391,6 +395,7 @@ impl Params {
             aniso_kn: p.aniso_kn,
             aniso_neighbours: p.aniso_neighbours,
             aniso_lambda: p.aniso_lambda,
+            max_distance: p.max_distance,
             color_threshold: p.color_threshold,
             neighbour_threshold: p.neighbour_threshold,
             compute_normals: p.compute_normals != 0,
@@ -425,6 +430,7 @@ impl Params {
         p.aniso_kn = self.aniso_kn;
         p.aniso_neighbours = self.aniso_neighbours;
         p.aniso_lambda = self.aniso_lambda;
+        p.max_distance = self.max_distance;
         p.color_threshold = self.color_threshold;
         p.neighbour_threshold = self.neighbour_threshold;
         p.compute_normals = i32::from(self.compute_normals);

@@ -145,6 +145,7 @@ fn params_follow_the_library_defaults() {
     abs.band_width *= SPACING;
     abs.surface_radius *= SPACING;
     abs.iso_radius *= SPACING;
+    abs.max_distance *= SPACING;
     abs.compute_normals = false;
     let m = ctx.reconstruct(&abs).unwrap();
     assert_eq!(m.triangle_count(), rel.triangle_count());
