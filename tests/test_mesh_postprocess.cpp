@@ -697,13 +697,14 @@ TEST(MeshCleanup, ParallelRepairsMatchSerial) {
   const CheckResult before = sphere.check();
   ASSERT_GT(before.degenerate_triangles + before.sliver_triangles, 1000u);
   auto clean = [&](std::size_t threads, std::size_t undo_after_round, std::size_t prefix,
-                   nbmc::mesh::CleanupResult& r) {
+                   nbmc::mesh::CleanupResult& r, bool check_skips = false) {
     TestMesh m = sphere;
     const auto saved = repair_pass_hooks();
     repair_pass_hooks().min_items = 4;
     repair_pass_hooks().undo_after_round = undo_after_round;
     repair_pass_hooks().prefix_per_thread = prefix;
     repair_pass_hooks().check_writes = true;
+    repair_pass_hooks().check_skips = check_skips;
     {
       nbmc::ScopedHostThreads limit(threads);
       r = nbmc::mesh::cleanup_mesh(m.p, m.n, m.t, 0.05);
@@ -714,6 +715,8 @@ TEST(MeshCleanup, ParallelRepairsMatchSerial) {
     repair_pass_hooks().rounds = done.rounds;
     repair_pass_hooks().lost = done.lost;
     repair_pass_hooks().writes_outside = done.writes_outside;
+    repair_pass_hooks().skipped = done.skipped;
+    repair_pass_hooks().skip_mismatches = done.skip_mismatches;
     return m;
   };
   nbmc::mesh::CleanupResult r1;
@@ -746,6 +749,20 @@ TEST(MeshCleanup, ParallelRepairsMatchSerial) {
     EXPECT_EQ(m.n, serial.n);
     EXPECT_EQ(r.collapses + r.flips + r.moves + r.cuts, r1.collapses + r1.flips + r1.moves + r1.cuts);
   }
+  // Skipped retries (a triangle whose repair failed, nothing in its region
+  // changed since): with check_skips each is repaired anyway, and none
+  // succeeds, so the mesh is the one without skips, at any thread count.
+  for (const std::size_t threads : {std::size_t(1), std::size_t(3)}) {
+    const auto before_skips = repair_pass_hooks();
+    nbmc::mesh::CleanupResult r;
+    const TestMesh m = clean(threads, 0, 0, r, true);
+    const auto& s = repair_pass_hooks();
+    EXPECT_GT(s.skipped, before_skips.skipped) << threads << " threads";
+    EXPECT_EQ(s.skip_mismatches, before_skips.skip_mismatches) << threads << " threads";
+    EXPECT_EQ(m.t, serial.t) << threads << " threads";
+    EXPECT_EQ(m.p, serial.p) << threads << " threads";
+    EXPECT_EQ(m.n, serial.n) << threads << " threads";
+  }
   // The parallel passes ran, in several rounds, and neighbours competed.
   const auto& h = repair_pass_hooks();
   EXPECT_GT(h.parallel_passes, at_start.parallel_passes);
@@ -753,11 +770,12 @@ TEST(MeshCleanup, ParallelRepairsMatchSerial) {
   EXPECT_GT(h.lost, at_start.lost);
   EXPECT_EQ(h.writes_outside, at_start.writes_outside);
   std::printf("parallel repairs: %llu bad triangles, %llu moves, %llu flips, %llu collapses, %llu cuts; "
-              "%llu parallel passes, %llu rounds, %llu lost\n",
+              "%llu parallel passes, %llu rounds, %llu lost; %llu retries skipped\n",
               (unsigned long long)(before.degenerate_triangles + before.sliver_triangles),
               (unsigned long long)r1.moves, (unsigned long long)r1.flips, (unsigned long long)r1.collapses,
               (unsigned long long)r1.cuts, (unsigned long long)(h.parallel_passes - at_start.parallel_passes),
-              (unsigned long long)(h.rounds - at_start.rounds), (unsigned long long)(h.lost - at_start.lost));
+              (unsigned long long)(h.rounds - at_start.rounds), (unsigned long long)(h.lost - at_start.lost),
+              (unsigned long long)(h.skipped - at_start.skipped));
 }
 
 // Taubin smoothing: a sphere keeps its size (its vertices stay within 1% of

@@ -181,6 +181,11 @@ struct RepairPassHooks {
   // What the parallel passes did while min_items > 0 (added to): passes,
   // rounds, items that lost.
   std::uint64_t parallel_passes = 0, rounds = 0, lost = 0;
+  // Items skipped because their earlier failure must repeat (added to,
+  // always). With check_skips, such an item is repaired anyway and counted
+  // in skip_mismatches if that succeeds (it must never).
+  bool check_skips = false;
+  std::uint64_t skipped = 0, skip_mismatches = 0;
 };
 inline RepairPassHooks& repair_pass_hooks() {
   static RepairPassHooks hooks;
@@ -321,7 +326,7 @@ class Cleaner {
       : P_(m.P_), N_(m.N_), nv_(m.nv_), T_(m.T_), nt_(m.nt_), alive_(m.alive_own_), irregular_(m.irregular_own_),
         start_(m.start_own_), next_(m.next_own_), tail_(m.tail_own_), incident_(m.incident_own_),
         extra_head_(m.extra_head_own_), extra_(m.extra_own_), degenerate_double_area_(m.degenerate_double_area_),
-        worker_(true) {}
+        worker_(true), mod_(m.mod_own_) {}
 
   std::uint64_t collapses = 0, flips = 0, moves = 0, cuts = 0;
   // Largest turn of a triangle's normal a repair may cause (cosine).
@@ -502,10 +507,56 @@ class Cleaner {
     const RepairPassHooks hooks = repair_pass_hooks();
     const std::size_t threads =
         merge_clusters ? 1 : chunk_count(n, hooks.min_items > 0 ? hooks.min_items : kParallelMinItems);
+    // The items' times (time_base + place) and outcomes (for the next
+    // pass' skips).
+    const std::uint32_t time_base = start_times(n);
+    outcome_.assign(n, 0);
+    skipped_ = 0;
+    std::uint64_t skip_mismatches = 0;
+    // repair() of item `pos` at its time, unless its failure must repeat
+    // (region: repair's region now, or null to find it here).
+    auto attempt = [&](Cleaner& me, std::size_t pos, const std::vector<std::uint32_t>* region) {
+      const std::uint32_t t = std::get<2>(bad[pos]);
+      const std::uint32_t failed_at = failed_before(t);
+      if (failed_at != 0) {
+        if (!region) {
+          me.region(t, me.region_);
+          region = &me.region_;
+        }
+        if (unchanged_since(*region, failed_at)) {
+          if (!hooks.check_skips) {
+            outcome_[pos] = failed_at;
+            ++me.skipped_;
+            return false;
+          }
+          me.now_ = time_base + std::uint32_t(pos);
+          const bool ok = me.repair(t);
+          if (ok) ++me.skip_mismatches_;
+          outcome_[pos] = ok ? 0 : failed_at;
+          ++me.skipped_;
+          return ok;
+        }
+      }
+      me.now_ = time_base + std::uint32_t(pos);
+      const bool ok = me.repair(t);
+      outcome_[pos] = ok ? 0 : me.now_;
+      return ok;
+    };
+    auto finish = [&](std::uint64_t repaired) {
+      record_failures(bad);
+      if (hooks.min_items > 0 || hooks.check_skips) {  // (a test's, as below)
+        RepairPassHooks& h = repair_pass_hooks();
+        h.skipped += skipped_;
+        h.skip_mismatches += skip_mismatches;
+      }
+      return repaired;
+    };
     if (threads <= 1) {
       std::uint64_t repaired = 0;
-      for (const auto& b : bad) repaired += repair(std::get<2>(b)) ? 1 : 0;
-      return repaired;
+      skip_mismatches_ = 0;
+      for (std::size_t pos = 0; pos < n; ++pos) repaired += attempt(*this, pos, nullptr) ? 1 : 0;
+      skip_mismatches = skip_mismatches_;
+      return finish(repaired);
     }
     const std::uint64_t saved[4] = {collapses, flips, moves, cuts};
     const std::size_t saved_vertices = changed_vertices_.size(), saved_triangles = changed_triangles_.size();
@@ -529,6 +580,7 @@ class Cleaner {
       k.merge_clusters = merge_clusters;
       k.collapses = k.flips = k.moves = k.cuts = 0;
       k.repaired_ = 0;
+      k.skipped_ = k.skip_mismatches_ = 0;
     }
     const std::size_t prefix = (hooks.prefix_per_thread > 0 ? hooks.prefix_per_thread : kPrefixPerThread) * threads;
     std::vector<std::uint32_t> cur, next;  // places in `bad`, ascending
@@ -614,7 +666,7 @@ class Cleaner {
               if (slots_[x].stamp > stamp) violation.store(true, std::memory_order_relaxed);
             if (violation.load(std::memory_order_relaxed)) return;  // (the pass is undone)
             const std::size_t logged = me.log_.size();
-            me.repaired_ += me.repair(std::get<2>(bad[pos])) ? 1 : 0;
+            me.repaired_ += attempt(me, pos, &reg[i]) ? 1 : 0;
             for (std::uint32_t x : reg[i]) slots_[x].stamp = stamp;
             if (hooks.check_writes) writes_outside += me.writes_outside(reg[i], logged);
           });
@@ -639,6 +691,8 @@ class Cleaner {
             o.collapses = o.flips = o.moves = o.cuts = 0;
             repaired += o.repaired_;
             o.repaired_ = 0;
+            skipped_ += o.skipped_, skip_mismatches += o.skip_mismatches_;
+            o.skipped_ = o.skip_mismatches_ = 0;
             changed_vertices_.insert(changed_vertices_.end(), o.changed_vertices_.begin(), o.changed_vertices_.end());
             changed_triangles_.insert(changed_triangles_.end(), o.changed_triangles_.begin(), o.changed_triangles_.end());
             o.changed_vertices_.clear();
@@ -668,7 +722,11 @@ class Cleaner {
       changed_vertices_.resize(saved_vertices);
       changed_triangles_.resize(saved_triangles);
       repaired = 0;
-      for (const auto& b : bad) repaired += repair(std::get<2>(b)) ? 1 : 0;
+      skipped_ = skip_mismatches_ = 0;
+      // (The undone repairs' times stay on their vertices: later than any
+      // failure before this pass, they can only prevent a skip.)
+      for (std::size_t pos = 0; pos < n; ++pos) repaired += attempt(*this, pos, nullptr) ? 1 : 0;
+      skip_mismatches = skip_mismatches_;
     }
     if (hooks.min_items > 0) {  // (a test's: the library's clean-ups may run on several threads at once)
       RepairPassHooks& h = repair_pass_hooks();
@@ -682,8 +740,59 @@ class Cleaner {
                    threads, (unsigned long long)rounds, (unsigned long long)lost, 100.0 * double(lost) / double(n),
                    violation ? " (undone, run serially)" : "");
     }
-    return repaired;
+    return finish(repaired);
   }
+  // Items of the last pass skipped (their failure had to repeat).
+  std::size_t last_skipped() const { return skipped_; }
+
+  // Skipping hopeless retries. repair(t) reads only its region (region():
+  // the positions and triangles of its vertices; the tests check its
+  // writes), and what it finds there decides. A repair stamps each vertex
+  // whose position or triangles it changes with its time (touch): its
+  // place in the serial order of all passes (time_next_ on), so the same
+  // at any thread count (a parallel pass commits the items whose regions
+  // meet in that order). A triangle whose repair failed at time f, with
+  // no vertex of its region (now) stamped f or later, has the same region
+  // as then, unchanged: its repair fails again, under the same limits, and
+  // is skipped (recorded again with f). Not in the cluster merges
+  // (consider_cluster reads beyond region()); the records are dropped when
+  // the limits change and when components are removed.
+  std::uint32_t start_times(std::size_t n) {
+    const int key = (cos_limit == kCosMaxNormalTurn ? 0 : cos_limit == kCosMaxNormalTurnLast ? 1 : 2) +
+                    3 * (last_resort ? 1 : 0) + 6 * (merge_clusters ? 1 : 0);
+    if (key != failed_key_) failed_.clear(), failed_key_ = key;
+    if (mod_.empty() || std::uint64_t(time_next_) + n + 1 >= kNone) {
+      if (mod_.empty()) mod_.resize(nv_);
+      for_chunks(nv_, chunk_count(nv_, 65536), [&](std::size_t, std::size_t b, std::size_t e) {
+        std::fill(mod_.begin() + b, mod_.begin() + e, 0u);
+      });
+      failed_.clear();
+      time_next_ = 1;
+    }
+    const std::uint32_t base = time_next_;
+    time_next_ += std::uint32_t(n);
+    now_ = 0;  // (the main Cleaner's, for add_incidence after a round)
+    return base;
+  }
+  // When repair(t) last failed (in the pass before, or skipped since), or 0.
+  std::uint32_t failed_before(std::uint32_t t) const {
+    if (merge_clusters) return 0;
+    const auto it = std::lower_bound(failed_.begin(), failed_.end(), std::make_pair(t, std::uint32_t(0)));
+    return it != failed_.end() && it->first == t ? it->second : 0;
+  }
+  bool unchanged_since(const std::vector<std::uint32_t>& region, std::uint32_t time) const {
+    for (std::uint32_t x : region)
+      if (mod_[x] >= time) return false;
+    return true;
+  }
+  void record_failures(const BadList& bad) {
+    failed_.clear();
+    if (merge_clusters) return;
+    for (std::size_t pos = 0; pos < bad.size(); ++pos)
+      if (outcome_[pos] != 0) failed_.push_back({std::get<2>(bad[pos]), outcome_[pos]});
+    std::sort(failed_.begin(), failed_.end());
+  }
+  void forget_failures() { failed_.clear(); }
 
   // Removes the connected components all of whose triangles are degenerate
   // (marching cubes leaves such specks where the field barely dips below
@@ -694,6 +803,7 @@ class Cleaner {
   // walked from them, and a walk stops at the first triangle that is not
   // degenerate. Returns the triangles removed.
   std::uint64_t drop_degenerate_components(const BadList& bad) {
+    forget_failures();
     std::uint64_t removed = 0;
     for (const auto& b : bad) {
       const std::uint32_t t0 = std::get<2>(b);
@@ -718,6 +828,7 @@ class Cleaner {
   // component is walked from its bad triangles (`bad`: all of them), and a
   // walk stops when it passes the size limit. Returns the triangles removed.
   std::uint64_t drop_small_bad_components(const BadList& bad, double max_volume) {
+    forget_failures();
     state_.assign(nt_, kUnseen);  // (kSolid meant "not all degenerate" above)
     std::uint64_t removed = 0;
     for (const auto& b : bad) {
@@ -2065,20 +2176,36 @@ class Cleaner {
     std::uint32_t i;
     double x[3];
   };
+  // Every write of a repair goes through one of these (before it), which
+  // also stamps the vertices whose position or triangles it changes with
+  // the repair's time (touch): a triangle's old vertices here, its new ones
+  // are vertices whose position the same repair writes (a collapse's or a
+  // cut's kept ends, a merge's loop vertices) or were its old ones (flips).
+  void touch(std::uint32_t v) {
+    if (!mod_.empty() && mod_[v] < now_) mod_[v] = now_;
+  }
+  void touch_triangle(std::uint32_t t) {
+    for (int k = 0; k < 3; ++k) touch(T_[3 * std::size_t(t) + k]);
+  }
   void log_position(std::uint32_t v) {
+    touch(v);
     if (worker_) log_.push_back({Undo::Position, v, {double(P_[3 * std::size_t(v)]), double(P_[3 * std::size_t(v) + 1]), double(P_[3 * std::size_t(v) + 2])}});
   }
   void log_normal(std::uint32_t v) {
+    touch(v);
     if (worker_) log_.push_back({Undo::Normal, v, {double(N_[3 * std::size_t(v)]), double(N_[3 * std::size_t(v) + 1]), double(N_[3 * std::size_t(v) + 2])}});
   }
   void log_triangle(std::uint32_t t) {
+    touch_triangle(t);
     if (worker_) log_.push_back({Undo::Triangle, t, {double(T_[3 * std::size_t(t)]), double(T_[3 * std::size_t(t) + 1]), double(T_[3 * std::size_t(t) + 2])}});
   }
   void log_alive(std::uint32_t t) {
+    touch_triangle(t);
     if (worker_) log_.push_back({Undo::Alive, t, {double(alive_[t]), 0, 0}});
   }
   // a's chain of merged vertices: next_ of its tail, and its tail.
   void log_chain(std::uint32_t a) {
+    touch(a);
     if (worker_) log_.push_back({Undo::Chain, a, {double(tail_[a]), double(next_[tail_[a]]), 0}});
   }
   // For the tests (RepairPassHooks::check_writes): how many of the writes
@@ -2194,6 +2321,19 @@ class Cleaner {
   // stamps (per vertex, stamp_base_ + the item that last committed with the
   // vertex in its region).
   std::vector<std::unique_ptr<Cleaner>> workers_;
+  // Skipping hopeless retries (start_times): per vertex, the time of the
+  // last repair that changed its position or triangles (the main
+  // Cleaner's; its workers write it through mod_); the current item's
+  // time (each Cleaner's own); per item of the pass, 0 (repaired) or when
+  // it failed; the failures of the last pass (triangle, time), sorted, and
+  // under which limits.
+  std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>> mod_own_;
+  std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>>& mod_ = mod_own_;
+  std::uint32_t now_ = 0, time_next_ = 1;
+  std::vector<std::uint32_t> outcome_, region_;
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> failed_;
+  int failed_key_ = -1;
+  std::uint64_t skipped_ = 0, skip_mismatches_ = 0;
   struct Slot {
     std::atomic<std::uint32_t> reserve;
     std::uint32_t stamp;
@@ -2239,8 +2379,9 @@ CleanupResult cleanup_mesh(PosVec& positions, NormalVec& normals, IndexVec& tria
       const std::size_t items = bad.size();
       bad = c.bad_triangles_after(bad);
       if (trace)
-        std::fprintf(stderr, "[nbmc trace] clean-up pass: items=%zu repaired=%llu %.3f ms, list %.3f ms\n", items,
-                     (unsigned long long)repaired, std::chrono::duration<double, std::milli>(t1 - t0).count(),
+        std::fprintf(stderr, "[nbmc trace] clean-up pass: items=%zu skipped=%zu repaired=%llu %.3f ms, list %.3f ms\n",
+                     items, c.last_skipped(), (unsigned long long)repaired,
+                     std::chrono::duration<double, std::milli>(t1 - t0).count(),
                      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t1).count());
       if (repaired == 0) break;
     }
