@@ -491,6 +491,99 @@ TEST(MeshCleanup, PinchedCapBeyondTheCutIsMerged) {
   EXPECT_EQ(again.t, m.t);
 }
 
+// A needle whose short edge fails the link condition (its ends share a
+// third neighbour), beside triangles of just over one degree (1.05 to 1.2):
+// YT10 on cbd1654k at cell r/2, three rings around one of its last slivers
+// as the repair rounds leave it (an open patch: its border's vertices are
+// left alone). No move, flip, collapse or cut works, and the cluster merge
+// found no point for the cluster's vertex, common to its two loops, that
+// keeps those triangles good: the sliver stayed. Each loop's vertex now has
+// a point of its own (one found by the pattern search).
+TEST(MeshCleanup, NeedleBesideNearOneDegreeTrianglesIsMerged) {
+  TestMesh m;
+  m.p = {-0.507562399f, 0.156678408f, 0.131805241f,
+        -0.507562399f, 0.156585038f, 0.132068455f,
+        -0.509851515f, 0.156678408f, 0.132068455f,
+        -0.509982407f, 0.156678408f, 0.132981032f,
+        -0.507443309f, 0.156678408f, 0.132068455f,
+        -0.507562399f, 0.156731591f, 0.132068455f,
+        -0.509831905f, 0.156668231f, 0.134395048f,
+        -0.507562399f, 0.1565983f, 0.134488463f,
+        -0.509993613f, 0.156678408f, 0.134488463f,
+        -0.509832025f, 0.156700343f, 0.134395048f,
+        -0.509982407f, 0.156678408f, 0.134501159f,
+        -0.507139564f, 0.156678408f, 0.134488463f,
+        -0.507562399f, 0.156907797f, 0.134488463f,
+        -0.507589102f, 0.156662807f, 0.137031481f,
+        -0.507602036f, 0.156678408f, 0.136908457f,
+        -0.507420361f, 0.156678408f, 0.136908457f,
+        -0.507591546f, 0.156688333f, 0.137030363f,
+        -0.505142391f, 0.156678408f, 0.137694821f,
+        -0.507562399f, 0.156273395f, 0.139328465f,
+        -0.505142391f, 0.156192735f, 0.139328465f,
+        -0.508312881f, 0.156678408f, 0.139328465f,
+        -0.507562399f, 0.15687637f, 0.139328465f,
+        -0.504447401f, 0.156678408f, 0.139328465f,
+        -0.505142391f, 0.156869099f, 0.139328465f,
+        -0.507562399f, 0.155599356f, 0.141748458f,
+        -0.505142391f, 0.154928252f, 0.141748458f,
+        -0.512402415f, 0.158321142f, 0.141748458f,
+        -0.509242773f, 0.156678408f, 0.141748458f,
+        -0.509982407f, 0.156678408f, 0.14318414f,
+        -0.507562399f, 0.157201916f, 0.141748458f,
+        -0.503601313f, 0.156678408f, 0.141748458f,
+        -0.505142391f, 0.157239243f, 0.141748458f,
+        -0.510983109f, 0.159098402f, 0.141748458f,
+        -0.503032267f, 0.159098402f, 0.141748458f,
+        -0.509982407f, 0.156391859f, 0.144168466f,
+        -0.507562399f, 0.155585617f, 0.144168466f,
+        -0.505142391f, 0.155596495f, 0.144168466f,
+        -0.510481715f, 0.156678408f, 0.144168466f,
+        -0.509982407f, 0.157465756f, 0.144168466f,
+        -0.507562399f, 0.157143131f, 0.144168466f,
+        -0.50472939f, 0.156678408f, 0.144168466f,
+        -0.505142391f, 0.15684998f, 0.144168466f,
+        -0.505142391f, 0.156678408f, 0.14466162f,
+        -0.509982407f, 0.156321198f, 0.14658846f,
+        -0.507562399f, 0.156058699f, 0.14658846f,
+        -0.509982407f, 0.15709272f, 0.14658846f,
+        -0.507086933f, 0.156678408f, 0.14658846f,
+        -0.507562399f, 0.15677321f, 0.14658846f,
+        -0.502722442f, 0.159098402f, 0.140764818f,
+        -0.502722442f, 0.157984063f, 0.141748458f};
+  m.t = {2, 1, 0, 4, 0, 1, 2, 0, 5, 4, 5, 0, 8, 6, 3, 2, 3, 7,
+        3, 6, 7, 2, 7, 1, 4, 1, 11, 1, 7, 11, 8, 3, 9, 2, 5, 12,
+        2, 12, 3, 12, 9, 3, 4, 11, 5, 11, 12, 5, 8, 10, 6, 14, 13, 7,
+        14, 7, 10, 7, 6, 10, 11, 7, 15, 7, 13, 15, 8, 9, 10, 14, 10, 12,
+        10, 9, 12, 14, 12, 15, 11, 15, 12, 14, 15, 16, 14, 20, 13, 20, 18, 13,
+        15, 13, 18, 15, 18, 17, 18, 19, 17, 22, 17, 19, 14, 16, 20, 16, 21, 20,
+        15, 17, 21, 17, 23, 21, 15, 21, 16, 22, 23, 17, 20, 27, 18, 27, 24, 18,
+        18, 24, 19, 24, 25, 19, 22, 19, 30, 19, 25, 30, 20, 21, 27, 21, 29, 27,
+        21, 23, 29, 23, 31, 29, 22, 30, 49, 22, 49, 48, 22, 48, 23, 48, 33, 23,
+        33, 31, 23, 37, 34, 28, 27, 28, 35, 28, 34, 35, 27, 35, 24, 24, 35, 25,
+        35, 36, 25, 30, 25, 40, 25, 36, 40, 32, 26, 28, 26, 37, 28, 32, 28, 38,
+        27, 29, 39, 27, 39, 28, 39, 38, 28, 29, 31, 39, 31, 41, 39, 30, 40, 49,
+        34, 43, 35, 43, 44, 35, 46, 42, 35, 42, 36, 35, 46, 35, 44, 38, 39, 45,
+        39, 47, 45, 46, 47, 39, 46, 39, 42, 39, 41, 42};
+  const CheckResult in = m.check();
+  ASSERT_TRUE(in.manifold && in.oriented);
+  ASSERT_EQ(in.sliver_triangles, 1u);
+  ASSERT_EQ(in.degenerate_triangles, 0u);
+  TestMesh again = m;
+  const auto r = nbmc::mesh::cleanup_mesh(m.p, m.n, m.t);
+  const CheckResult out = m.check();
+  EXPECT_TRUE(out.manifold && out.oriented);
+  EXPECT_EQ(out.boundary_edges, in.boundary_edges);
+  EXPECT_EQ(out.degenerate_triangles + out.sliver_triangles, 0u);
+  EXPECT_EQ(r.bad_after, 0u);
+  EXPECT_EQ(r.cuts, 1u);  // (two loops around the cluster)
+  EXPECT_GT(out.min_angle_degrees, 1.0);
+  // (a function of its input)
+  nbmc::mesh::cleanup_mesh(again.p, again.n, again.t);
+  EXPECT_EQ(again.p, m.p);
+  EXPECT_EQ(again.t, m.t);
+}
+
 // Random holes as above (closed by a triangle or a cap, their vertices 1e-7
 // to 1e-4 apart in random directions) at several vertices of a sphere: the
 // clean-up, its last round included, keeps the mesh closed, manifold,

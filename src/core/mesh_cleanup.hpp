@@ -55,9 +55,18 @@
 //    edges below sin(1 degree) times it) is merged: the triangles with two
 //    or three vertices in it go; those with one form loops of their
 //    opposite edges around it, and each loop keeps one of its vertices, all
-//    at the cluster's centre or at one of its vertices (the best). One
+//    at the cluster's centre or at one of its vertices (the best). When no
+//    such common point works (YT10's needles beside triangles of just over
+//    a degree, which every such point makes bad or turns over), each loop's
+//    vertex gets a point of its own: the best for the loop's triangles among
+//    the centre, the cluster's vertices, their pairwise midpoints and the
+//    centre of the loop's own cluster vertices, else the first that works
+//    found by a pattern search (axis steps, halved when none helps) that
+//    maximizes the least margin of the loop's good triangles to the rules'
+//    limits, within a quarter of the needle's long edge of the centre. One
 //    loop: a collapse of several vertices (the topology is kept); more: a
-//    cut, the parts touching at a point. When the shared neighbours lie
+//    cut, the parts touching at a point (or nearly, with points of their
+//    own). When the shared neighbours lie
 //    near the needle's far vertex instead (a strip of slivers between two
 //    pinches, YT10's sheets thinner than a cell), both ends are merged at
 //    once, each at its centre. As in the last round, a triangle that was
@@ -1685,14 +1694,16 @@ class Cleaner {
   // those with one form closed loops of their opposite edges around K, and
   // each loop gets one vertex of K (the lowest-numbered among its
   // triangles' not taken by an earlier loop), all at K's centre or all at
-  // one of K's vertices (the best). One loop: a collapse of K (the surface
+  // one of K's vertices (the best); when none of these works, each at a
+  // point of its own (see the header: more candidates, a pattern search). One loop: a collapse of K (the surface
   // keeps its topology); two or more: a cut, the parts touching at a point.
   // Every vertex around keeps one closed fan of at least three triangles,
   // and the geometry is checked as for the other repairs.
   struct ClusterCandidate {
     bool valid = false;
     Vec3 p;
-    std::vector<Vec3> positions;  // of loop_vertices, when a strip's two ends are merged (else all at p)
+    std::vector<Vec3> positions;  // of loop_vertices, when they differ (else all at p)
+    bool strip = false;           // a strip's two ends merged (consider_strip)
     std::vector<std::uint32_t> cluster, removed, loop_vertices;
     std::vector<std::pair<std::uint32_t, std::array<std::uint32_t, 3>>> rewritten;  // kept triangles, new vertices
   };
@@ -1830,15 +1841,13 @@ class Cleaner {
       const std::uint32_t* w = T_ + 3 * std::size_t(r.first);
       ref = ref + cross(load(P_, w[1]) - load(P_, w[0]), load(P_, w[2]) - load(P_, w[0]));
     }
-    Vec3 centre;
-    for (std::uint32_t x : K) centre = centre + load(P_, x);
-    centre = (1.0 / double(K.size())) * centre;
-    double best_score = -1;
-    for (std::size_t i = 0; i <= K.size(); ++i) {
-      const Vec3 c = i == 0 ? centre : load(P_, K[i - 1]);
-      const Vec3 p = Vec3{double(Real(c.x)), double(Real(c.y)), double(Real(c.z))};
+    // The smallest angle's sine over the rewritten triangles of the loop
+    // kept by `owner` (kNone: all), with K's vertex at p; -1 when one of
+    // them breaks a rule.
+    auto score_at = [&](const Vec3& p, std::uint32_t owner) {
       double score = 2;
       for (const auto& r : cand.rewritten) {
+        if (owner != kNone && !contains(r.second.data(), owner)) continue;
         Vec3 q[3], o[3];
         for (int k = 0; k < 3; ++k) {
           o[k] = load(P_, T_[3 * std::size_t(r.first) + k]);
@@ -1853,16 +1862,116 @@ class Cleaner {
         if (c_old != 0 && c_new != 0 && (c_new != 2 || c_old == 2)) continue;
         const Vec3 n_new = cross(q[1] - q[0], q[2] - q[0]);
         const Vec3 n_ref = c_old == 0 ? cross(o[1] - o[0], o[2] - o[0]) : ref;
-        if (c_new == 2 || (c_old == 0 && c_new != 0) ||
-            dot(n_new, n_ref) <= cos_limit * norm(n_new) * norm(n_ref)) {
-          score = -1;
-          break;
-        }
+        if (c_new == 2 || (c_old == 0 && c_new != 0) || dot(n_new, n_ref) <= cos_limit * norm(n_new) * norm(n_ref))
+          return -1.0;
         score = std::min(score, s_new.sin_min_angle);
       }
+      return score;
+    };
+    auto rounded = [](const Vec3& c) { return Vec3{double(Real(c.x)), double(Real(c.y)), double(Real(c.z))}; };
+    Vec3 centre;
+    for (std::uint32_t x : K) centre = centre + load(P_, x);
+    centre = (1.0 / double(K.size())) * centre;
+    double best_score = -1;
+    for (std::size_t i = 0; i <= K.size(); ++i) {
+      const Vec3 p = rounded(i == 0 ? centre : load(P_, K[i - 1]));
+      const double score = score_at(p, kNone);
       if (score > best_score) best_score = score, cand.p = p;
     }
-    if (!(best_score > 0)) return;
+    if (!(best_score > 0)) {
+      // No common point works (YT10's needles beside triangles of just
+      // over a degree, which every move of K's vertex makes bad or turns
+      // over): each loop's vertex at the best point for its own
+      // triangles (they touch only that loop's vertex), among K's centre,
+      // K's vertices, the midpoints of two of them and the centre of the
+      // loop's own vertices of K.
+      std::vector<Vec3> points = {centre};
+      for (std::uint32_t x : K) points.push_back(load(P_, x));
+      for (std::size_t i = 0; i < K.size(); ++i)
+        for (std::size_t j = i + 1; j < K.size(); ++j) points.push_back(0.5 * (load(P_, K[i]) + load(P_, K[j])));
+      const std::size_t shared = points.size();
+      for (std::uint32_t owner : cand.loop_vertices) {
+        points.resize(shared);
+        // (the loop's triangles' vertices in K, before the merge)
+        std::vector<std::uint32_t> own;
+        for (const auto& r : cand.rewritten)
+          if (contains(r.second.data(), owner))
+            for (int k = 0; k < 3; ++k) {
+              const std::uint32_t x = T_[3 * std::size_t(r.first) + k];
+              if (in_k(x) && std::find(own.begin(), own.end(), x) == own.end()) own.push_back(x);
+            }
+        std::sort(own.begin(), own.end());
+        Vec3 c;
+        for (std::uint32_t x : own) c = c + load(P_, x);
+        points.push_back((1.0 / double(own.size())) * c);
+        double loop_best = -1;
+        Vec3 at;
+        for (const Vec3& q : points) {
+          const Vec3 p = rounded(q);
+          const double score = score_at(p, owner);
+          if (score > loop_best) loop_best = score, at = p;
+        }
+        if (!(loop_best > 0)) {
+          // None of them: a pattern search (steps along the axes, halved
+          // when none improves) for a point that keeps its good triangles
+          // within the rules' limits (the smallest angle's sine above
+          // sin(1 degree), the normal's turn below the limit: the least
+          // margin, maximized), from the best of them, within
+          // kClusterReach times the needle's long edge of K's centre; the
+          // first that works.
+          auto margin = [&](const Vec3& p) {
+            double m = 1;
+            for (const auto& r : cand.rewritten) {
+              if (!contains(r.second.data(), owner)) continue;
+              Vec3 q[3], o[3];
+              for (int k = 0; k < 3; ++k) {
+                o[k] = load(P_, T_[3 * std::size_t(r.first) + k]);
+                q[k] = in_k(r.second[k]) ? p : o[k];
+              }
+              if (triangle_class(triangle_shape(o[0], o[1], o[2]), degenerate_double_area_) != 0) continue;
+              const Vec3 n_new = cross(q[1] - q[0], q[2] - q[0]), n_old = cross(o[1] - o[0], o[2] - o[0]);
+              const double ln = norm(n_new) * norm(n_old);
+              m = std::min({m, triangle_shape(q[0], q[1], q[2]).sin_min_angle - kSinOneDegree,
+                            ln > 0 ? dot(n_new, n_old) / ln - cos_limit : -1.0});
+            }
+            return m;
+          };
+          const double reach = kClusterReach * l_long;
+          Vec3 p = points[0];
+          double m = margin(p);
+          for (std::size_t i = 1; i < points.size(); ++i) {
+            const double mi = margin(points[i]);
+            if (mi > m) m = mi, p = points[i];
+          }
+          double h = 0;
+          for (std::uint32_t x : K) h = std::max(h, norm(load(P_, x) - centre));
+          const Vec3 dirs[6] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
+          for (int step = 0; step < 200 && h > 1e-3 * reach; ++step) {
+            int best_dir = -1;
+            double best_m = m;
+            for (int d = 0; d < 6; ++d) {
+              const Vec3 q = p + h * dirs[d];
+              if (norm(q - centre) > reach) continue;
+              const double mq = margin(q);
+              if (mq > best_m) best_m = mq, best_dir = d;
+            }
+            if (best_dir < 0) {
+              h *= 0.5;
+              continue;
+            }
+            p = p + h * dirs[best_dir], m = best_m;
+            if (m > 0 && score_at(rounded(p), owner) > 0) break;  // (the first that works)
+          }
+          if (m > 0) {
+            const Vec3 q = rounded(p);
+            const double score = score_at(q, owner);
+            if (score > loop_best) loop_best = score, at = q;
+          }
+        }
+        if (!(loop_best > 0)) return;
+        cand.positions.push_back(at);
+      }
+    }
     cand.cluster = std::move(K);
     cand.valid = true;
     best = std::move(cand);
@@ -2038,6 +2147,7 @@ class Cleaner {
     for (std::uint32_t x : cand.loop_vertices) cand.positions.push_back(at[end_of(x)]);
     cand.cluster = near_end;
     cand.cluster.insert(cand.cluster.end(), far_end.begin(), far_end.end());
+    cand.strip = true;
     cand.valid = true;
     best = std::move(cand);
   }
@@ -2064,7 +2174,7 @@ class Cleaner {
       P_[3 * std::size_t(x) + 2] = Real(p.z);
       changed_vertices_.push_back(x);
     }
-    if (c.loop_vertices.size() == 1 || !c.positions.empty()) ++collapses;
+    if (c.loop_vertices.size() == 1 || c.strip) ++collapses;
     else ++cuts;
   }
 
