@@ -584,6 +584,68 @@ TEST(MeshCleanup, NeedleBesideNearOneDegreeTrianglesIsMerged) {
   EXPECT_EQ(again.t, m.t);
 }
 
+// The same on a strip: a needle whose short edge's ends share, besides its
+// opposite vertices, a vertex near them and one near the needle's far
+// vertex (YT10's sheet thinner than a cell between two pinches), on
+// cbd1654k at cell r/2 (three rings around its last sliver as the repair
+// rounds leave it). Merging both ends folds the two triangles of each
+// vertex between the pinches onto one another (both now go), and the
+// ends' centres make triangles of just over a degree bad (each loop vertex
+// now gets a point of its own). Before, the sliver stayed.
+TEST(MeshCleanup, StripBesideNearOneDegreeTrianglesIsMerged) {
+  TestMesh m;
+  m.p = {-0.27282241f, 0.372058392f, 0.37158975f,
+        -0.27282241f, 0.371981472f, 0.371648461f,
+        -0.272923201f, 0.372058392f, 0.371648461f,
+        -0.271973759f, 0.372058392f, 0.371648461f,
+        -0.27282241f, 0.372146875f, 0.371648461f,
+        -0.27282241f, 0.372058392f, 0.372527748f,
+        -0.270578951f, 0.372058392f, 0.374068469f,
+        -0.270626485f, 0.372058392f, 0.376488447f,
+        -0.271832734f, 0.372058392f, 0.378908455f,
+        -0.27282241f, 0.372058392f, 0.380273432f,
+        -0.270402431f, 0.372058392f, 0.373900741f,
+        -0.270402431f, 0.372049481f, 0.374068469f,
+        -0.270402431f, 0.372076154f, 0.374068469f,
+        -0.270402431f, 0.371997297f, 0.376488447f,
+        -0.270332754f, 0.372058392f, 0.376488447f,
+        -0.270402431f, 0.372449696f, 0.376488447f,
+        -0.270402431f, 0.371344835f, 0.378908455f,
+        -0.269761205f, 0.372058392f, 0.378908455f,
+        -0.270402431f, 0.373041689f, 0.378908455f,
+        -0.27282241f, 0.371732175f, 0.381328464f,
+        -0.273153663f, 0.372058392f, 0.381328464f,
+        -0.27282241f, 0.372362167f, 0.381328464f,
+        -0.27282241f, 0.372058392f, 0.38223207f,
+        -0.270402431f, 0.369914114f, 0.381328464f,
+        -0.269056201f, 0.372058392f, 0.381328464f,
+        -0.270402431f, 0.372935086f, 0.381328464f,
+        -0.270402431f, 0.372058392f, 0.382330596f};
+  m.t = {2, 1, 0, 3, 0, 1, 2, 0, 4, 3, 4, 0, 2, 5, 1, 3, 1, 10,
+        1, 5, 11, 5, 6, 11, 1, 11, 10, 2, 4, 5, 3, 10, 4, 10, 12, 4,
+        12, 6, 4, 6, 5, 4, 6, 7, 11, 7, 13, 11, 6, 12, 7, 12, 15, 7,
+        7, 8, 13, 8, 16, 13, 7, 15, 8, 15, 18, 8, 20, 19, 9, 8, 9, 23,
+        9, 19, 23, 8, 23, 16, 20, 9, 21, 8, 18, 25, 8, 25, 9, 25, 21, 9,
+        12, 10, 11, 12, 11, 14, 11, 13, 14, 14, 15, 12, 14, 13, 17, 13, 16, 17,
+        14, 17, 15, 17, 18, 15, 17, 16, 24, 16, 23, 24, 17, 24, 18, 24, 25, 18,
+        19, 22, 23, 22, 26, 23, 21, 25, 22, 25, 26, 22, 24, 23, 26, 24, 26, 25};
+  const CheckResult in = m.check();
+  ASSERT_TRUE(in.manifold && in.oriented);
+  ASSERT_EQ(in.sliver_triangles, 1u);
+  ASSERT_EQ(in.degenerate_triangles, 0u);
+  TestMesh again = m;
+  const auto r = nbmc::mesh::cleanup_mesh(m.p, m.n, m.t);
+  const CheckResult out = m.check();
+  EXPECT_TRUE(out.manifold && out.oriented);
+  EXPECT_EQ(out.boundary_edges, in.boundary_edges);
+  EXPECT_EQ(out.degenerate_triangles + out.sliver_triangles, 0u);
+  EXPECT_EQ(r.bad_after, 0u);
+  EXPECT_GE(out.min_angle_degrees, 1.0);
+  nbmc::mesh::cleanup_mesh(again.p, again.n, again.t);
+  EXPECT_EQ(again.p, m.p);
+  EXPECT_EQ(again.t, m.t);
+}
+
 // Random holes as above (closed by a triangle or a cap, their vertices 1e-7
 // to 1e-4 apart in random directions) at several vertices of a sphere: the
 // clean-up, its last round included, keeps the mesh closed, manifold,

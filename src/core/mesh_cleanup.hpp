@@ -66,12 +66,15 @@
 //    limits, within a quarter of the needle's long edge of the centre. One
 //    loop: a collapse of several vertices (the topology is kept); more: a
 //    cut, the parts touching at a point (or nearly, with points of their
-//    own). When the shared neighbours lie
-//    near the needle's far vertex instead (a strip of slivers between two
-//    pinches, YT10's sheets thinner than a cell), both ends are merged at
-//    once, each at its centre. As in the last round, a triangle that was
-//    bad may stay bad (its normal is noise) and one that was degenerate may
-//    stay degenerate; every vertex around keeps one closed fan.
+//    own). When the shared neighbours lie near the needle's far vertex
+//    instead (a strip of slivers between two pinches, YT10's sheets thinner
+//    than a cell), both ends are merged at once, each at its centre (else
+//    each loop vertex in turn at a point of its own, found as above); a
+//    vertex between the pinches joined to both ends on both of its sides
+//    has two triangles that fold onto one another: both go (the strip is
+//    cut through). As in the last round, a triangle that was bad may stay
+//    bad (its normal is noise) and one that was degenerate may stay
+//    degenerate; every vertex around keeps one closed fan.
 // Every repair must make the bad triangle good (or remove it), keep every
 // good triangle good, create no degenerate triangle (but for the last
 // resorts in 3. and 5.), and turn no triangle's normal beyond the round's limit.
@@ -1984,10 +1987,11 @@ class Cleaner {
   // of an end's vertices at its centre: `near_end` (a, b and the shared
   // neighbours close to them) and o with the far ones (each with what is
   // joined to it by edges shorter than sin(1 degree) times the long edge);
-  // the triangles with two vertices in one end go, and each end keeps one
-  // vertex per loop of the triangles around it. Every vertex around, the
-  // kept ones included, must keep one closed fan; the geometry is checked
-  // as above.
+  // the triangles with two vertices in one end go, so do two that become
+  // one another's reverse, and each end keeps one vertex per loop of the
+  // triangles around it. Every vertex around, the kept ones included, must
+  // keep one closed fan; the geometry is checked as above, with the ends'
+  // centres first, else with points of the loop vertices' own.
   void consider_strip(std::vector<std::uint32_t> near_end, const std::vector<std::uint32_t>& far,
                       const std::vector<std::uint32_t>& opposite, double l_long, ClusterCandidate& best) {
     const double reach = kClusterReach * l_long, near = kSinOneDegree * l_long;
@@ -2048,6 +2052,38 @@ class Cleaner {
       }
       if (count[0] >= 2 || count[1] >= 2) cand.removed.push_back(u);
       else cand.rewritten.push_back({u, nw});
+    }
+    {
+      // Two kept triangles that become one another's reverse (a vertex
+      // between the pinches, joined to both ends on both of its sides)
+      // fold onto each other: both go. (Before, such a pair always failed
+      // the loops below.) The same triangle twice: no merge.
+      std::vector<std::pair<std::array<std::uint32_t, 3>, std::uint32_t>> keys;  // (sorted vertices, index)
+      for (std::size_t i = 0; i < cand.rewritten.size(); ++i) {
+        std::array<std::uint32_t, 3> k = cand.rewritten[i].second;
+        std::sort(k.begin(), k.end());
+        keys.push_back({k, std::uint32_t(i)});
+      }
+      std::sort(keys.begin(), keys.end());
+      std::vector<std::uint8_t> folded(cand.rewritten.size(), 0);
+      for (std::size_t i = 0; i + 1 < keys.size(); ++i) {
+        if (keys[i].first != keys[i + 1].first) continue;
+        if (i + 2 < keys.size() && keys[i + 2].first == keys[i].first) return;
+        const auto& w = cand.rewritten[keys[i].second].second;
+        const auto& x = cand.rewritten[keys[i + 1].second].second;
+        // (the same cyclic order: the same triangle, not its reverse)
+        if (x == w || x == std::array<std::uint32_t, 3>{w[1], w[2], w[0]} ||
+            x == std::array<std::uint32_t, 3>{w[2], w[0], w[1]})
+          return;
+        folded[keys[i].second] = folded[keys[i + 1].second] = 1;
+        ++i;
+      }
+      std::size_t kept = 0;
+      for (std::size_t i = 0; i < cand.rewritten.size(); ++i) {
+        if (folded[i]) cand.removed.push_back(cand.rewritten[i].first);
+        else cand.rewritten[kept++] = cand.rewritten[i];
+      }
+      cand.rewritten.resize(kept);
     }
     std::sort(cand.removed.begin(), cand.removed.end());
     // Topology: the merged vertices and every vertex around keep one
@@ -2127,24 +2163,111 @@ class Cleaner {
       const std::uint32_t* w = T_ + 3 * std::size_t(r.first);
       ref = ref + cross(load(P_, w[1]) - load(P_, w[0]), load(P_, w[2]) - load(P_, w[0]));
     }
-    for (const auto& r : cand.rewritten) {
-      Vec3 q[3], o3[3];
+    // The loop vertices' points (in loop_vertices' order); whether the
+    // rewritten triangles keep the rules with them, and (margin) the least
+    // margin of the good ones to the rules' limits.
+    std::vector<Vec3> ps;
+    for (std::uint32_t x : cand.loop_vertices) ps.push_back(at[end_of(x)]);
+    auto point_of = [&](std::uint32_t x) {
+      return ps[std::size_t(std::find(cand.loop_vertices.begin(), cand.loop_vertices.end(), x) -
+                            cand.loop_vertices.begin())];
+    };
+    auto shapes = [&](const std::pair<std::uint32_t, std::array<std::uint32_t, 3>>& r, Vec3* q, Vec3* o3) {
       for (int k = 0; k < 3; ++k) {
         o3[k] = load(P_, T_[3 * std::size_t(r.first) + k]);
-        const int g = end_of(T_[3 * std::size_t(r.first) + k]);
-        q[k] = g < 0 ? o3[k] : at[g];
+        q[k] = end_of(r.second[k]) < 0 ? o3[k] : point_of(r.second[k]);
       }
-      const TriangleShape s_old = triangle_shape(o3[0], o3[1], o3[2]);
-      const TriangleShape s_new = triangle_shape(q[0], q[1], q[2]);
-      const int c_old = triangle_class(s_old, degenerate_double_area_);
-      const int c_new = triangle_class(s_new, degenerate_double_area_);
-      if (c_old != 0 && c_new != 0 && (c_new != 2 || c_old == 2)) continue;
-      const Vec3 n_new = cross(q[1] - q[0], q[2] - q[0]);
-      const Vec3 n_ref = c_old == 0 ? cross(o3[1] - o3[0], o3[2] - o3[0]) : ref;
-      if (c_new == 2 || (c_old == 0 && c_new != 0) || dot(n_new, n_ref) <= cos_limit * norm(n_new) * norm(n_ref))
-        return;
+    };
+    auto works = [&] {
+      for (const auto& r : cand.rewritten) {
+        Vec3 q[3], o3[3];
+        shapes(r, q, o3);
+        const TriangleShape s_old = triangle_shape(o3[0], o3[1], o3[2]);
+        const TriangleShape s_new = triangle_shape(q[0], q[1], q[2]);
+        const int c_old = triangle_class(s_old, degenerate_double_area_);
+        const int c_new = triangle_class(s_new, degenerate_double_area_);
+        if (c_old != 0 && c_new != 0 && (c_new != 2 || c_old == 2)) continue;
+        const Vec3 n_new = cross(q[1] - q[0], q[2] - q[0]);
+        const Vec3 n_ref = c_old == 0 ? cross(o3[1] - o3[0], o3[2] - o3[0]) : ref;
+        if (c_new == 2 || (c_old == 0 && c_new != 0) || dot(n_new, n_ref) <= cos_limit * norm(n_new) * norm(n_ref))
+          return false;
+      }
+      return true;
+    };
+    if (!works()) {
+      // Not at the centres (YT10's strips beside triangles of just over a
+      // degree): each loop vertex in turn, the others kept, at the best of
+      // its end's centre, the end's vertices and their midpoints, then
+      // moved by a pattern search (as in consider_cluster) within
+      // kClusterReach times the long edge of its end's centre, each
+      // maximizing the least margin of all the good triangles to the
+      // rules' limits, until the whole works.
+      auto margin = [&] {
+        double m = 1;
+        for (const auto& r : cand.rewritten) {
+          Vec3 q[3], o3[3];
+          shapes(r, q, o3);
+          if (triangle_class(triangle_shape(o3[0], o3[1], o3[2]), degenerate_double_area_) != 0) continue;
+          const Vec3 n_new = cross(q[1] - q[0], q[2] - q[0]), n_old = cross(o3[1] - o3[0], o3[2] - o3[0]);
+          const double ln = norm(n_new) * norm(n_old);
+          m = std::min({m, triangle_shape(q[0], q[1], q[2]).sin_min_angle - kSinOneDegree,
+                        ln > 0 ? dot(n_new, n_old) / ln - cos_limit : -1.0});
+        }
+        return m;
+      };
+      auto rounded = [](const Vec3& c) { return Vec3{double(Real(c.x)), double(Real(c.y)), double(Real(c.z))}; };
+      const Vec3 dirs[6] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
+      bool ok = false;
+      for (std::size_t i = 0; i < ps.size() && !ok; ++i) {
+        const std::vector<std::uint32_t>& e = *ends[end_of(cand.loop_vertices[i])];
+        const Vec3 centre = at[end_of(cand.loop_vertices[i])];
+        std::vector<Vec3> points = {centre};
+        for (std::uint32_t x : e) points.push_back(load(P_, x));
+        for (std::size_t j = 0; j < e.size(); ++j)
+          for (std::size_t k = j + 1; k < e.size(); ++k) points.push_back(0.5 * (load(P_, e[j]) + load(P_, e[k])));
+        double m = -2;
+        Vec3 p = centre;
+        for (const Vec3& q : points) {
+          ps[i] = rounded(q);
+          const double mq = margin();
+          if (mq > m) m = mq, p = ps[i];
+        }
+        ps[i] = p;
+        if (m > 0 && works()) {
+          ok = true;
+          break;
+        }
+        double h = 0;
+        for (std::uint32_t x : e) h = std::max(h, norm(load(P_, x) - centre));
+        for (int step = 0; step < 200 && h > 1e-3 * reach; ++step) {
+          int best_dir = -1;
+          double best_m = m;
+          for (int d = 0; d < 6; ++d) {
+            const Vec3 q = p + h * dirs[d];
+            if (norm(q - centre) > reach) continue;
+            ps[i] = q;
+            const double mq = margin();
+            if (mq > best_m) best_m = mq, best_dir = d;
+          }
+          if (best_dir < 0) {
+            h *= 0.5;
+            ps[i] = p;
+            continue;
+          }
+          p = p + h * dirs[best_dir], m = best_m;
+          ps[i] = rounded(p);
+          if (m > 0 && works()) {
+            ok = true;
+            break;
+          }
+          ps[i] = p;
+        }
+        ps[i] = rounded(p);
+        if (!ok && m > 0 && works()) ok = true;
+      }
+      if (!ok) return;
     }
-    for (std::uint32_t x : cand.loop_vertices) cand.positions.push_back(at[end_of(x)]);
+    cand.positions = ps;
     cand.cluster = near_end;
     cand.cluster.insert(cand.cluster.end(), far_end.begin(), far_end.end());
     cand.strip = true;
