@@ -97,7 +97,10 @@
 // triangle run on all host threads; after that only the bad triangles and
 // what the repairs changed are looked at again (each pass, on all host
 // threads from 4096 triangles), and only the components of the bad
-// triangles left are walked (serially).
+// triangles left are walked (serially). A bad triangle whose repair failed
+// is not tried again in the round's later passes while no vertex of its
+// region (below) changes: its repair would fail again (exactly: see
+// start_times).
 //
 // In a fixed order (worst triangle first, then by index), so the result
 // depends only on the input mesh: the same on every backend and thread
