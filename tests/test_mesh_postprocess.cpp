@@ -491,6 +491,161 @@ TEST(MeshCleanup, PinchedCapBeyondTheCutIsMerged) {
   EXPECT_EQ(again.t, m.t);
 }
 
+// A needle whose short edge fails the link condition (its ends share a
+// third neighbour), beside triangles of just over one degree (1.05 to 1.2):
+// YT10 on cbd1654k at cell r/2, three rings around one of its last slivers
+// as the repair rounds leave it (an open patch: its border's vertices are
+// left alone). No move, flip, collapse or cut works, and the cluster merge
+// found no point for the cluster's vertex, common to its two loops, that
+// keeps those triangles good: the sliver stayed. Each loop's vertex now has
+// a point of its own (one found by the pattern search).
+TEST(MeshCleanup, NeedleBesideNearOneDegreeTrianglesIsMerged) {
+  TestMesh m;
+  m.p = {-0.507562399f, 0.156678408f, 0.131805241f,
+        -0.507562399f, 0.156585038f, 0.132068455f,
+        -0.509851515f, 0.156678408f, 0.132068455f,
+        -0.509982407f, 0.156678408f, 0.132981032f,
+        -0.507443309f, 0.156678408f, 0.132068455f,
+        -0.507562399f, 0.156731591f, 0.132068455f,
+        -0.509831905f, 0.156668231f, 0.134395048f,
+        -0.507562399f, 0.1565983f, 0.134488463f,
+        -0.509993613f, 0.156678408f, 0.134488463f,
+        -0.509832025f, 0.156700343f, 0.134395048f,
+        -0.509982407f, 0.156678408f, 0.134501159f,
+        -0.507139564f, 0.156678408f, 0.134488463f,
+        -0.507562399f, 0.156907797f, 0.134488463f,
+        -0.507589102f, 0.156662807f, 0.137031481f,
+        -0.507602036f, 0.156678408f, 0.136908457f,
+        -0.507420361f, 0.156678408f, 0.136908457f,
+        -0.507591546f, 0.156688333f, 0.137030363f,
+        -0.505142391f, 0.156678408f, 0.137694821f,
+        -0.507562399f, 0.156273395f, 0.139328465f,
+        -0.505142391f, 0.156192735f, 0.139328465f,
+        -0.508312881f, 0.156678408f, 0.139328465f,
+        -0.507562399f, 0.15687637f, 0.139328465f,
+        -0.504447401f, 0.156678408f, 0.139328465f,
+        -0.505142391f, 0.156869099f, 0.139328465f,
+        -0.507562399f, 0.155599356f, 0.141748458f,
+        -0.505142391f, 0.154928252f, 0.141748458f,
+        -0.512402415f, 0.158321142f, 0.141748458f,
+        -0.509242773f, 0.156678408f, 0.141748458f,
+        -0.509982407f, 0.156678408f, 0.14318414f,
+        -0.507562399f, 0.157201916f, 0.141748458f,
+        -0.503601313f, 0.156678408f, 0.141748458f,
+        -0.505142391f, 0.157239243f, 0.141748458f,
+        -0.510983109f, 0.159098402f, 0.141748458f,
+        -0.503032267f, 0.159098402f, 0.141748458f,
+        -0.509982407f, 0.156391859f, 0.144168466f,
+        -0.507562399f, 0.155585617f, 0.144168466f,
+        -0.505142391f, 0.155596495f, 0.144168466f,
+        -0.510481715f, 0.156678408f, 0.144168466f,
+        -0.509982407f, 0.157465756f, 0.144168466f,
+        -0.507562399f, 0.157143131f, 0.144168466f,
+        -0.50472939f, 0.156678408f, 0.144168466f,
+        -0.505142391f, 0.15684998f, 0.144168466f,
+        -0.505142391f, 0.156678408f, 0.14466162f,
+        -0.509982407f, 0.156321198f, 0.14658846f,
+        -0.507562399f, 0.156058699f, 0.14658846f,
+        -0.509982407f, 0.15709272f, 0.14658846f,
+        -0.507086933f, 0.156678408f, 0.14658846f,
+        -0.507562399f, 0.15677321f, 0.14658846f,
+        -0.502722442f, 0.159098402f, 0.140764818f,
+        -0.502722442f, 0.157984063f, 0.141748458f};
+  m.t = {2, 1, 0, 4, 0, 1, 2, 0, 5, 4, 5, 0, 8, 6, 3, 2, 3, 7,
+        3, 6, 7, 2, 7, 1, 4, 1, 11, 1, 7, 11, 8, 3, 9, 2, 5, 12,
+        2, 12, 3, 12, 9, 3, 4, 11, 5, 11, 12, 5, 8, 10, 6, 14, 13, 7,
+        14, 7, 10, 7, 6, 10, 11, 7, 15, 7, 13, 15, 8, 9, 10, 14, 10, 12,
+        10, 9, 12, 14, 12, 15, 11, 15, 12, 14, 15, 16, 14, 20, 13, 20, 18, 13,
+        15, 13, 18, 15, 18, 17, 18, 19, 17, 22, 17, 19, 14, 16, 20, 16, 21, 20,
+        15, 17, 21, 17, 23, 21, 15, 21, 16, 22, 23, 17, 20, 27, 18, 27, 24, 18,
+        18, 24, 19, 24, 25, 19, 22, 19, 30, 19, 25, 30, 20, 21, 27, 21, 29, 27,
+        21, 23, 29, 23, 31, 29, 22, 30, 49, 22, 49, 48, 22, 48, 23, 48, 33, 23,
+        33, 31, 23, 37, 34, 28, 27, 28, 35, 28, 34, 35, 27, 35, 24, 24, 35, 25,
+        35, 36, 25, 30, 25, 40, 25, 36, 40, 32, 26, 28, 26, 37, 28, 32, 28, 38,
+        27, 29, 39, 27, 39, 28, 39, 38, 28, 29, 31, 39, 31, 41, 39, 30, 40, 49,
+        34, 43, 35, 43, 44, 35, 46, 42, 35, 42, 36, 35, 46, 35, 44, 38, 39, 45,
+        39, 47, 45, 46, 47, 39, 46, 39, 42, 39, 41, 42};
+  const CheckResult in = m.check();
+  ASSERT_TRUE(in.manifold && in.oriented);
+  ASSERT_EQ(in.sliver_triangles, 1u);
+  ASSERT_EQ(in.degenerate_triangles, 0u);
+  TestMesh again = m;
+  const auto r = nbmc::mesh::cleanup_mesh(m.p, m.n, m.t);
+  const CheckResult out = m.check();
+  EXPECT_TRUE(out.manifold && out.oriented);
+  EXPECT_EQ(out.boundary_edges, in.boundary_edges);
+  EXPECT_EQ(out.degenerate_triangles + out.sliver_triangles, 0u);
+  EXPECT_EQ(r.bad_after, 0u);
+  EXPECT_EQ(r.cuts, 1u);  // (two loops around the cluster)
+  EXPECT_GT(out.min_angle_degrees, 1.0);
+  // (a function of its input)
+  nbmc::mesh::cleanup_mesh(again.p, again.n, again.t);
+  EXPECT_EQ(again.p, m.p);
+  EXPECT_EQ(again.t, m.t);
+}
+
+// The same on a strip: a needle whose short edge's ends share, besides its
+// opposite vertices, a vertex near them and one near the needle's far
+// vertex (YT10's sheet thinner than a cell between two pinches), on
+// cbd1654k at cell r/2 (three rings around its last sliver as the repair
+// rounds leave it). Merging both ends folds the two triangles of each
+// vertex between the pinches onto one another (both now go), and the
+// ends' centres make triangles of just over a degree bad (each loop vertex
+// now gets a point of its own). Before, the sliver stayed.
+TEST(MeshCleanup, StripBesideNearOneDegreeTrianglesIsMerged) {
+  TestMesh m;
+  m.p = {-0.27282241f, 0.372058392f, 0.37158975f,
+        -0.27282241f, 0.371981472f, 0.371648461f,
+        -0.272923201f, 0.372058392f, 0.371648461f,
+        -0.271973759f, 0.372058392f, 0.371648461f,
+        -0.27282241f, 0.372146875f, 0.371648461f,
+        -0.27282241f, 0.372058392f, 0.372527748f,
+        -0.270578951f, 0.372058392f, 0.374068469f,
+        -0.270626485f, 0.372058392f, 0.376488447f,
+        -0.271832734f, 0.372058392f, 0.378908455f,
+        -0.27282241f, 0.372058392f, 0.380273432f,
+        -0.270402431f, 0.372058392f, 0.373900741f,
+        -0.270402431f, 0.372049481f, 0.374068469f,
+        -0.270402431f, 0.372076154f, 0.374068469f,
+        -0.270402431f, 0.371997297f, 0.376488447f,
+        -0.270332754f, 0.372058392f, 0.376488447f,
+        -0.270402431f, 0.372449696f, 0.376488447f,
+        -0.270402431f, 0.371344835f, 0.378908455f,
+        -0.269761205f, 0.372058392f, 0.378908455f,
+        -0.270402431f, 0.373041689f, 0.378908455f,
+        -0.27282241f, 0.371732175f, 0.381328464f,
+        -0.273153663f, 0.372058392f, 0.381328464f,
+        -0.27282241f, 0.372362167f, 0.381328464f,
+        -0.27282241f, 0.372058392f, 0.38223207f,
+        -0.270402431f, 0.369914114f, 0.381328464f,
+        -0.269056201f, 0.372058392f, 0.381328464f,
+        -0.270402431f, 0.372935086f, 0.381328464f,
+        -0.270402431f, 0.372058392f, 0.382330596f};
+  m.t = {2, 1, 0, 3, 0, 1, 2, 0, 4, 3, 4, 0, 2, 5, 1, 3, 1, 10,
+        1, 5, 11, 5, 6, 11, 1, 11, 10, 2, 4, 5, 3, 10, 4, 10, 12, 4,
+        12, 6, 4, 6, 5, 4, 6, 7, 11, 7, 13, 11, 6, 12, 7, 12, 15, 7,
+        7, 8, 13, 8, 16, 13, 7, 15, 8, 15, 18, 8, 20, 19, 9, 8, 9, 23,
+        9, 19, 23, 8, 23, 16, 20, 9, 21, 8, 18, 25, 8, 25, 9, 25, 21, 9,
+        12, 10, 11, 12, 11, 14, 11, 13, 14, 14, 15, 12, 14, 13, 17, 13, 16, 17,
+        14, 17, 15, 17, 18, 15, 17, 16, 24, 16, 23, 24, 17, 24, 18, 24, 25, 18,
+        19, 22, 23, 22, 26, 23, 21, 25, 22, 25, 26, 22, 24, 23, 26, 24, 26, 25};
+  const CheckResult in = m.check();
+  ASSERT_TRUE(in.manifold && in.oriented);
+  ASSERT_EQ(in.sliver_triangles, 1u);
+  ASSERT_EQ(in.degenerate_triangles, 0u);
+  TestMesh again = m;
+  const auto r = nbmc::mesh::cleanup_mesh(m.p, m.n, m.t);
+  const CheckResult out = m.check();
+  EXPECT_TRUE(out.manifold && out.oriented);
+  EXPECT_EQ(out.boundary_edges, in.boundary_edges);
+  EXPECT_EQ(out.degenerate_triangles + out.sliver_triangles, 0u);
+  EXPECT_EQ(r.bad_after, 0u);
+  EXPECT_GE(out.min_angle_degrees, 1.0);
+  nbmc::mesh::cleanup_mesh(again.p, again.n, again.t);
+  EXPECT_EQ(again.p, m.p);
+  EXPECT_EQ(again.t, m.t);
+}
+
 // Random holes as above (closed by a triangle or a cap, their vertices 1e-7
 // to 1e-4 apart in random directions) at several vertices of a sphere: the
 // clean-up, its last round included, keeps the mesh closed, manifold,
@@ -697,13 +852,14 @@ TEST(MeshCleanup, ParallelRepairsMatchSerial) {
   const CheckResult before = sphere.check();
   ASSERT_GT(before.degenerate_triangles + before.sliver_triangles, 1000u);
   auto clean = [&](std::size_t threads, std::size_t undo_after_round, std::size_t prefix,
-                   nbmc::mesh::CleanupResult& r) {
+                   nbmc::mesh::CleanupResult& r, bool check_skips = false) {
     TestMesh m = sphere;
     const auto saved = repair_pass_hooks();
     repair_pass_hooks().min_items = 4;
     repair_pass_hooks().undo_after_round = undo_after_round;
     repair_pass_hooks().prefix_per_thread = prefix;
     repair_pass_hooks().check_writes = true;
+    repair_pass_hooks().check_skips = check_skips;
     {
       nbmc::ScopedHostThreads limit(threads);
       r = nbmc::mesh::cleanup_mesh(m.p, m.n, m.t, 0.05);
@@ -714,6 +870,8 @@ TEST(MeshCleanup, ParallelRepairsMatchSerial) {
     repair_pass_hooks().rounds = done.rounds;
     repair_pass_hooks().lost = done.lost;
     repair_pass_hooks().writes_outside = done.writes_outside;
+    repair_pass_hooks().skipped = done.skipped;
+    repair_pass_hooks().skip_mismatches = done.skip_mismatches;
     return m;
   };
   nbmc::mesh::CleanupResult r1;
@@ -746,6 +904,20 @@ TEST(MeshCleanup, ParallelRepairsMatchSerial) {
     EXPECT_EQ(m.n, serial.n);
     EXPECT_EQ(r.collapses + r.flips + r.moves + r.cuts, r1.collapses + r1.flips + r1.moves + r1.cuts);
   }
+  // Skipped retries (a triangle whose repair failed, nothing in its region
+  // changed since): with check_skips each is repaired anyway, and none
+  // succeeds, so the mesh is the one without skips, at any thread count.
+  for (const std::size_t threads : {std::size_t(1), std::size_t(3)}) {
+    const auto before_skips = repair_pass_hooks();
+    nbmc::mesh::CleanupResult r;
+    const TestMesh m = clean(threads, 0, 0, r, true);
+    const auto& s = repair_pass_hooks();
+    EXPECT_GT(s.skipped, before_skips.skipped) << threads << " threads";
+    EXPECT_EQ(s.skip_mismatches, before_skips.skip_mismatches) << threads << " threads";
+    EXPECT_EQ(m.t, serial.t) << threads << " threads";
+    EXPECT_EQ(m.p, serial.p) << threads << " threads";
+    EXPECT_EQ(m.n, serial.n) << threads << " threads";
+  }
   // The parallel passes ran, in several rounds, and neighbours competed.
   const auto& h = repair_pass_hooks();
   EXPECT_GT(h.parallel_passes, at_start.parallel_passes);
@@ -753,11 +925,12 @@ TEST(MeshCleanup, ParallelRepairsMatchSerial) {
   EXPECT_GT(h.lost, at_start.lost);
   EXPECT_EQ(h.writes_outside, at_start.writes_outside);
   std::printf("parallel repairs: %llu bad triangles, %llu moves, %llu flips, %llu collapses, %llu cuts; "
-              "%llu parallel passes, %llu rounds, %llu lost\n",
+              "%llu parallel passes, %llu rounds, %llu lost; %llu retries skipped\n",
               (unsigned long long)(before.degenerate_triangles + before.sliver_triangles),
               (unsigned long long)r1.moves, (unsigned long long)r1.flips, (unsigned long long)r1.collapses,
               (unsigned long long)r1.cuts, (unsigned long long)(h.parallel_passes - at_start.parallel_passes),
-              (unsigned long long)(h.rounds - at_start.rounds), (unsigned long long)(h.lost - at_start.lost));
+              (unsigned long long)(h.rounds - at_start.rounds), (unsigned long long)(h.lost - at_start.lost),
+              (unsigned long long)(h.skipped - at_start.skipped));
 }
 
 // Taubin smoothing: a sphere keeps its size (its vertices stay within 1% of

@@ -55,14 +55,26 @@
 //    edges below sin(1 degree) times it) is merged: the triangles with two
 //    or three vertices in it go; those with one form loops of their
 //    opposite edges around it, and each loop keeps one of its vertices, all
-//    at the cluster's centre or at one of its vertices (the best). One
+//    at the cluster's centre or at one of its vertices (the best). When no
+//    such common point works (YT10's needles beside triangles of just over
+//    a degree, which every such point makes bad or turns over), each loop's
+//    vertex gets a point of its own: the best for the loop's triangles among
+//    the centre, the cluster's vertices, their pairwise midpoints and the
+//    centre of the loop's own cluster vertices, else the first that works
+//    found by a pattern search (axis steps, halved when none helps) that
+//    maximizes the least margin of the loop's good triangles to the rules'
+//    limits, within a quarter of the needle's long edge of the centre. One
 //    loop: a collapse of several vertices (the topology is kept); more: a
-//    cut, the parts touching at a point. When the shared neighbours lie
-//    near the needle's far vertex instead (a strip of slivers between two
-//    pinches, YT10's sheets thinner than a cell), both ends are merged at
-//    once, each at its centre. As in the last round, a triangle that was
-//    bad may stay bad (its normal is noise) and one that was degenerate may
-//    stay degenerate; every vertex around keeps one closed fan.
+//    cut, the parts touching at a point (or nearly, with points of their
+//    own). When the shared neighbours lie near the needle's far vertex
+//    instead (a strip of slivers between two pinches, YT10's sheets thinner
+//    than a cell), both ends are merged at once, each at its centre (else
+//    each loop vertex in turn at a point of its own, found as above); a
+//    vertex between the pinches joined to both ends on both of its sides
+//    has two triangles that fold onto one another: both go (the strip is
+//    cut through). As in the last round, a triangle that was bad may stay
+//    bad (its normal is noise) and one that was degenerate may stay
+//    degenerate; every vertex around keeps one closed fan.
 // Every repair must make the bad triangle good (or remove it), keep every
 // good triangle good, create no degenerate triangle (but for the last
 // resorts in 3. and 5.), and turn no triangle's normal beyond the round's limit.
@@ -85,7 +97,10 @@
 // triangle run on all host threads; after that only the bad triangles and
 // what the repairs changed are looked at again (each pass, on all host
 // threads from 4096 triangles), and only the components of the bad
-// triangles left are walked (serially).
+// triangles left are walked (serially). A bad triangle whose repair failed
+// is not tried again in the round's later passes while no vertex of its
+// region (below) changes: its repair would fail again (exactly: see
+// start_times).
 //
 // In a fixed order (worst triangle first, then by index), so the result
 // depends only on the input mesh: the same on every backend and thread
@@ -181,6 +196,11 @@ struct RepairPassHooks {
   // What the parallel passes did while min_items > 0 (added to): passes,
   // rounds, items that lost.
   std::uint64_t parallel_passes = 0, rounds = 0, lost = 0;
+  // Items skipped because their earlier failure must repeat (added to,
+  // always). With check_skips, such an item is repaired anyway and counted
+  // in skip_mismatches if that succeeds (it must never).
+  bool check_skips = false;
+  std::uint64_t skipped = 0, skip_mismatches = 0;
 };
 inline RepairPassHooks& repair_pass_hooks() {
   static RepairPassHooks hooks;
@@ -321,7 +341,7 @@ class Cleaner {
       : P_(m.P_), N_(m.N_), nv_(m.nv_), T_(m.T_), nt_(m.nt_), alive_(m.alive_own_), irregular_(m.irregular_own_),
         start_(m.start_own_), next_(m.next_own_), tail_(m.tail_own_), incident_(m.incident_own_),
         extra_head_(m.extra_head_own_), extra_(m.extra_own_), degenerate_double_area_(m.degenerate_double_area_),
-        worker_(true) {}
+        worker_(true), mod_(m.mod_own_) {}
 
   std::uint64_t collapses = 0, flips = 0, moves = 0, cuts = 0;
   // Largest turn of a triangle's normal a repair may cause (cosine).
@@ -502,10 +522,56 @@ class Cleaner {
     const RepairPassHooks hooks = repair_pass_hooks();
     const std::size_t threads =
         merge_clusters ? 1 : chunk_count(n, hooks.min_items > 0 ? hooks.min_items : kParallelMinItems);
+    // The items' times (time_base + place) and outcomes (for the next
+    // pass' skips).
+    const std::uint32_t time_base = start_times(n);
+    outcome_.assign(n, 0);
+    skipped_ = 0;
+    std::uint64_t skip_mismatches = 0;
+    // repair() of item `pos` at its time, unless its failure must repeat
+    // (region: repair's region now, or null to find it here).
+    auto attempt = [&](Cleaner& me, std::size_t pos, const std::vector<std::uint32_t>* region) {
+      const std::uint32_t t = std::get<2>(bad[pos]);
+      const std::uint32_t failed_at = failed_before(t);
+      if (failed_at != 0) {
+        if (!region) {
+          me.region(t, me.region_);
+          region = &me.region_;
+        }
+        if (unchanged_since(*region, failed_at)) {
+          if (!hooks.check_skips) {
+            outcome_[pos] = failed_at;
+            ++me.skipped_;
+            return false;
+          }
+          me.now_ = time_base + std::uint32_t(pos);
+          const bool ok = me.repair(t);
+          if (ok) ++me.skip_mismatches_;
+          outcome_[pos] = ok ? 0 : failed_at;
+          ++me.skipped_;
+          return ok;
+        }
+      }
+      me.now_ = time_base + std::uint32_t(pos);
+      const bool ok = me.repair(t);
+      outcome_[pos] = ok ? 0 : me.now_;
+      return ok;
+    };
+    auto finish = [&](std::uint64_t repaired) {
+      record_failures(bad);
+      if (hooks.min_items > 0 || hooks.check_skips) {  // (a test's, as below)
+        RepairPassHooks& h = repair_pass_hooks();
+        h.skipped += skipped_;
+        h.skip_mismatches += skip_mismatches;
+      }
+      return repaired;
+    };
     if (threads <= 1) {
       std::uint64_t repaired = 0;
-      for (const auto& b : bad) repaired += repair(std::get<2>(b)) ? 1 : 0;
-      return repaired;
+      skip_mismatches_ = 0;
+      for (std::size_t pos = 0; pos < n; ++pos) repaired += attempt(*this, pos, nullptr) ? 1 : 0;
+      skip_mismatches = skip_mismatches_;
+      return finish(repaired);
     }
     const std::uint64_t saved[4] = {collapses, flips, moves, cuts};
     const std::size_t saved_vertices = changed_vertices_.size(), saved_triangles = changed_triangles_.size();
@@ -529,6 +595,7 @@ class Cleaner {
       k.merge_clusters = merge_clusters;
       k.collapses = k.flips = k.moves = k.cuts = 0;
       k.repaired_ = 0;
+      k.skipped_ = k.skip_mismatches_ = 0;
     }
     const std::size_t prefix = (hooks.prefix_per_thread > 0 ? hooks.prefix_per_thread : kPrefixPerThread) * threads;
     std::vector<std::uint32_t> cur, next;  // places in `bad`, ascending
@@ -614,7 +681,7 @@ class Cleaner {
               if (slots_[x].stamp > stamp) violation.store(true, std::memory_order_relaxed);
             if (violation.load(std::memory_order_relaxed)) return;  // (the pass is undone)
             const std::size_t logged = me.log_.size();
-            me.repaired_ += me.repair(std::get<2>(bad[pos])) ? 1 : 0;
+            me.repaired_ += attempt(me, pos, &reg[i]) ? 1 : 0;
             for (std::uint32_t x : reg[i]) slots_[x].stamp = stamp;
             if (hooks.check_writes) writes_outside += me.writes_outside(reg[i], logged);
           });
@@ -639,6 +706,8 @@ class Cleaner {
             o.collapses = o.flips = o.moves = o.cuts = 0;
             repaired += o.repaired_;
             o.repaired_ = 0;
+            skipped_ += o.skipped_, skip_mismatches += o.skip_mismatches_;
+            o.skipped_ = o.skip_mismatches_ = 0;
             changed_vertices_.insert(changed_vertices_.end(), o.changed_vertices_.begin(), o.changed_vertices_.end());
             changed_triangles_.insert(changed_triangles_.end(), o.changed_triangles_.begin(), o.changed_triangles_.end());
             o.changed_vertices_.clear();
@@ -668,7 +737,11 @@ class Cleaner {
       changed_vertices_.resize(saved_vertices);
       changed_triangles_.resize(saved_triangles);
       repaired = 0;
-      for (const auto& b : bad) repaired += repair(std::get<2>(b)) ? 1 : 0;
+      skipped_ = skip_mismatches_ = 0;
+      // (The undone repairs' times stay on their vertices: later than any
+      // failure before this pass, they can only prevent a skip.)
+      for (std::size_t pos = 0; pos < n; ++pos) repaired += attempt(*this, pos, nullptr) ? 1 : 0;
+      skip_mismatches = skip_mismatches_;
     }
     if (hooks.min_items > 0) {  // (a test's: the library's clean-ups may run on several threads at once)
       RepairPassHooks& h = repair_pass_hooks();
@@ -682,8 +755,59 @@ class Cleaner {
                    threads, (unsigned long long)rounds, (unsigned long long)lost, 100.0 * double(lost) / double(n),
                    violation ? " (undone, run serially)" : "");
     }
-    return repaired;
+    return finish(repaired);
   }
+  // Items of the last pass skipped (their failure had to repeat).
+  std::size_t last_skipped() const { return skipped_; }
+
+  // Skipping hopeless retries. repair(t) reads only its region (region():
+  // the positions and triangles of its vertices; the tests check its
+  // writes), and what it finds there decides. A repair stamps each vertex
+  // whose position or triangles it changes with its time (touch): its
+  // place in the serial order of all passes (time_next_ on), so the same
+  // at any thread count (a parallel pass commits the items whose regions
+  // meet in that order). A triangle whose repair failed at time f, with
+  // no vertex of its region (now) stamped f or later, has the same region
+  // as then, unchanged: its repair fails again, under the same limits, and
+  // is skipped (recorded again with f). Not in the cluster merges
+  // (consider_cluster reads beyond region()); the records are dropped when
+  // the limits change and when components are removed.
+  std::uint32_t start_times(std::size_t n) {
+    const int key = (cos_limit == kCosMaxNormalTurn ? 0 : cos_limit == kCosMaxNormalTurnLast ? 1 : 2) +
+                    3 * (last_resort ? 1 : 0) + 6 * (merge_clusters ? 1 : 0);
+    if (key != failed_key_) failed_.clear(), failed_key_ = key;
+    if (mod_.empty() || std::uint64_t(time_next_) + n + 1 >= kNone) {
+      if (mod_.empty()) mod_.resize(nv_);
+      for_chunks(nv_, chunk_count(nv_, 65536), [&](std::size_t, std::size_t b, std::size_t e) {
+        std::fill(mod_.begin() + b, mod_.begin() + e, 0u);
+      });
+      failed_.clear();
+      time_next_ = 1;
+    }
+    const std::uint32_t base = time_next_;
+    time_next_ += std::uint32_t(n);
+    now_ = 0;  // (the main Cleaner's, for add_incidence after a round)
+    return base;
+  }
+  // When repair(t) last failed (in the pass before, or skipped since), or 0.
+  std::uint32_t failed_before(std::uint32_t t) const {
+    if (merge_clusters) return 0;
+    const auto it = std::lower_bound(failed_.begin(), failed_.end(), std::make_pair(t, std::uint32_t(0)));
+    return it != failed_.end() && it->first == t ? it->second : 0;
+  }
+  bool unchanged_since(const std::vector<std::uint32_t>& region, std::uint32_t time) const {
+    for (std::uint32_t x : region)
+      if (mod_[x] >= time) return false;
+    return true;
+  }
+  void record_failures(const BadList& bad) {
+    failed_.clear();
+    if (merge_clusters) return;
+    for (std::size_t pos = 0; pos < bad.size(); ++pos)
+      if (outcome_[pos] != 0) failed_.push_back({std::get<2>(bad[pos]), outcome_[pos]});
+    std::sort(failed_.begin(), failed_.end());
+  }
+  void forget_failures() { failed_.clear(); }
 
   // Removes the connected components all of whose triangles are degenerate
   // (marching cubes leaves such specks where the field barely dips below
@@ -694,6 +818,7 @@ class Cleaner {
   // walked from them, and a walk stops at the first triangle that is not
   // degenerate. Returns the triangles removed.
   std::uint64_t drop_degenerate_components(const BadList& bad) {
+    forget_failures();
     std::uint64_t removed = 0;
     for (const auto& b : bad) {
       const std::uint32_t t0 = std::get<2>(b);
@@ -718,6 +843,7 @@ class Cleaner {
   // component is walked from its bad triangles (`bad`: all of them), and a
   // walk stops when it passes the size limit. Returns the triangles removed.
   std::uint64_t drop_small_bad_components(const BadList& bad, double max_volume) {
+    forget_failures();
     state_.assign(nt_, kUnseen);  // (kSolid meant "not all degenerate" above)
     std::uint64_t removed = 0;
     for (const auto& b : bad) {
@@ -1574,14 +1700,16 @@ class Cleaner {
   // those with one form closed loops of their opposite edges around K, and
   // each loop gets one vertex of K (the lowest-numbered among its
   // triangles' not taken by an earlier loop), all at K's centre or all at
-  // one of K's vertices (the best). One loop: a collapse of K (the surface
+  // one of K's vertices (the best); when none of these works, each at a
+  // point of its own (see the header: more candidates, a pattern search). One loop: a collapse of K (the surface
   // keeps its topology); two or more: a cut, the parts touching at a point.
   // Every vertex around keeps one closed fan of at least three triangles,
   // and the geometry is checked as for the other repairs.
   struct ClusterCandidate {
     bool valid = false;
     Vec3 p;
-    std::vector<Vec3> positions;  // of loop_vertices, when a strip's two ends are merged (else all at p)
+    std::vector<Vec3> positions;  // of loop_vertices, when they differ (else all at p)
+    bool strip = false;           // a strip's two ends merged (consider_strip)
     std::vector<std::uint32_t> cluster, removed, loop_vertices;
     std::vector<std::pair<std::uint32_t, std::array<std::uint32_t, 3>>> rewritten;  // kept triangles, new vertices
   };
@@ -1719,15 +1847,13 @@ class Cleaner {
       const std::uint32_t* w = T_ + 3 * std::size_t(r.first);
       ref = ref + cross(load(P_, w[1]) - load(P_, w[0]), load(P_, w[2]) - load(P_, w[0]));
     }
-    Vec3 centre;
-    for (std::uint32_t x : K) centre = centre + load(P_, x);
-    centre = (1.0 / double(K.size())) * centre;
-    double best_score = -1;
-    for (std::size_t i = 0; i <= K.size(); ++i) {
-      const Vec3 c = i == 0 ? centre : load(P_, K[i - 1]);
-      const Vec3 p = Vec3{double(Real(c.x)), double(Real(c.y)), double(Real(c.z))};
+    // The smallest angle's sine over the rewritten triangles of the loop
+    // kept by `owner` (kNone: all), with K's vertex at p; -1 when one of
+    // them breaks a rule.
+    auto score_at = [&](const Vec3& p, std::uint32_t owner) {
       double score = 2;
       for (const auto& r : cand.rewritten) {
+        if (owner != kNone && !contains(r.second.data(), owner)) continue;
         Vec3 q[3], o[3];
         for (int k = 0; k < 3; ++k) {
           o[k] = load(P_, T_[3 * std::size_t(r.first) + k]);
@@ -1742,16 +1868,116 @@ class Cleaner {
         if (c_old != 0 && c_new != 0 && (c_new != 2 || c_old == 2)) continue;
         const Vec3 n_new = cross(q[1] - q[0], q[2] - q[0]);
         const Vec3 n_ref = c_old == 0 ? cross(o[1] - o[0], o[2] - o[0]) : ref;
-        if (c_new == 2 || (c_old == 0 && c_new != 0) ||
-            dot(n_new, n_ref) <= cos_limit * norm(n_new) * norm(n_ref)) {
-          score = -1;
-          break;
-        }
+        if (c_new == 2 || (c_old == 0 && c_new != 0) || dot(n_new, n_ref) <= cos_limit * norm(n_new) * norm(n_ref))
+          return -1.0;
         score = std::min(score, s_new.sin_min_angle);
       }
+      return score;
+    };
+    auto rounded = [](const Vec3& c) { return Vec3{double(Real(c.x)), double(Real(c.y)), double(Real(c.z))}; };
+    Vec3 centre;
+    for (std::uint32_t x : K) centre = centre + load(P_, x);
+    centre = (1.0 / double(K.size())) * centre;
+    double best_score = -1;
+    for (std::size_t i = 0; i <= K.size(); ++i) {
+      const Vec3 p = rounded(i == 0 ? centre : load(P_, K[i - 1]));
+      const double score = score_at(p, kNone);
       if (score > best_score) best_score = score, cand.p = p;
     }
-    if (!(best_score > 0)) return;
+    if (!(best_score > 0)) {
+      // No common point works (YT10's needles beside triangles of just
+      // over a degree, which every move of K's vertex makes bad or turns
+      // over): each loop's vertex at the best point for its own
+      // triangles (they touch only that loop's vertex), among K's centre,
+      // K's vertices, the midpoints of two of them and the centre of the
+      // loop's own vertices of K.
+      std::vector<Vec3> points = {centre};
+      for (std::uint32_t x : K) points.push_back(load(P_, x));
+      for (std::size_t i = 0; i < K.size(); ++i)
+        for (std::size_t j = i + 1; j < K.size(); ++j) points.push_back(0.5 * (load(P_, K[i]) + load(P_, K[j])));
+      const std::size_t shared = points.size();
+      for (std::uint32_t owner : cand.loop_vertices) {
+        points.resize(shared);
+        // (the loop's triangles' vertices in K, before the merge)
+        std::vector<std::uint32_t> own;
+        for (const auto& r : cand.rewritten)
+          if (contains(r.second.data(), owner))
+            for (int k = 0; k < 3; ++k) {
+              const std::uint32_t x = T_[3 * std::size_t(r.first) + k];
+              if (in_k(x) && std::find(own.begin(), own.end(), x) == own.end()) own.push_back(x);
+            }
+        std::sort(own.begin(), own.end());
+        Vec3 c;
+        for (std::uint32_t x : own) c = c + load(P_, x);
+        points.push_back((1.0 / double(own.size())) * c);
+        double loop_best = -1;
+        Vec3 at;
+        for (const Vec3& q : points) {
+          const Vec3 p = rounded(q);
+          const double score = score_at(p, owner);
+          if (score > loop_best) loop_best = score, at = p;
+        }
+        if (!(loop_best > 0)) {
+          // None of them: a pattern search (steps along the axes, halved
+          // when none improves) for a point that keeps its good triangles
+          // within the rules' limits (the smallest angle's sine above
+          // sin(1 degree), the normal's turn below the limit: the least
+          // margin, maximized), from the best of them, within
+          // kClusterReach times the needle's long edge of K's centre; the
+          // first that works.
+          auto margin = [&](const Vec3& p) {
+            double m = 1;
+            for (const auto& r : cand.rewritten) {
+              if (!contains(r.second.data(), owner)) continue;
+              Vec3 q[3], o[3];
+              for (int k = 0; k < 3; ++k) {
+                o[k] = load(P_, T_[3 * std::size_t(r.first) + k]);
+                q[k] = in_k(r.second[k]) ? p : o[k];
+              }
+              if (triangle_class(triangle_shape(o[0], o[1], o[2]), degenerate_double_area_) != 0) continue;
+              const Vec3 n_new = cross(q[1] - q[0], q[2] - q[0]), n_old = cross(o[1] - o[0], o[2] - o[0]);
+              const double ln = norm(n_new) * norm(n_old);
+              m = std::min({m, triangle_shape(q[0], q[1], q[2]).sin_min_angle - kSinOneDegree,
+                            ln > 0 ? dot(n_new, n_old) / ln - cos_limit : -1.0});
+            }
+            return m;
+          };
+          const double reach = kClusterReach * l_long;
+          Vec3 p = points[0];
+          double m = margin(p);
+          for (std::size_t i = 1; i < points.size(); ++i) {
+            const double mi = margin(points[i]);
+            if (mi > m) m = mi, p = points[i];
+          }
+          double h = 0;
+          for (std::uint32_t x : K) h = std::max(h, norm(load(P_, x) - centre));
+          const Vec3 dirs[6] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
+          for (int step = 0; step < 200 && h > 1e-3 * reach; ++step) {
+            int best_dir = -1;
+            double best_m = m;
+            for (int d = 0; d < 6; ++d) {
+              const Vec3 q = p + h * dirs[d];
+              if (norm(q - centre) > reach) continue;
+              const double mq = margin(q);
+              if (mq > best_m) best_m = mq, best_dir = d;
+            }
+            if (best_dir < 0) {
+              h *= 0.5;
+              continue;
+            }
+            p = p + h * dirs[best_dir], m = best_m;
+            if (m > 0 && score_at(rounded(p), owner) > 0) break;  // (the first that works)
+          }
+          if (m > 0) {
+            const Vec3 q = rounded(p);
+            const double score = score_at(q, owner);
+            if (score > loop_best) loop_best = score, at = q;
+          }
+        }
+        if (!(loop_best > 0)) return;
+        cand.positions.push_back(at);
+      }
+    }
     cand.cluster = std::move(K);
     cand.valid = true;
     best = std::move(cand);
@@ -1764,10 +1990,11 @@ class Cleaner {
   // of an end's vertices at its centre: `near_end` (a, b and the shared
   // neighbours close to them) and o with the far ones (each with what is
   // joined to it by edges shorter than sin(1 degree) times the long edge);
-  // the triangles with two vertices in one end go, and each end keeps one
-  // vertex per loop of the triangles around it. Every vertex around, the
-  // kept ones included, must keep one closed fan; the geometry is checked
-  // as above.
+  // the triangles with two vertices in one end go, so do two that become
+  // one another's reverse, and each end keeps one vertex per loop of the
+  // triangles around it. Every vertex around, the kept ones included, must
+  // keep one closed fan; the geometry is checked as above, with the ends'
+  // centres first, else with points of the loop vertices' own.
   void consider_strip(std::vector<std::uint32_t> near_end, const std::vector<std::uint32_t>& far,
                       const std::vector<std::uint32_t>& opposite, double l_long, ClusterCandidate& best) {
     const double reach = kClusterReach * l_long, near = kSinOneDegree * l_long;
@@ -1828,6 +2055,38 @@ class Cleaner {
       }
       if (count[0] >= 2 || count[1] >= 2) cand.removed.push_back(u);
       else cand.rewritten.push_back({u, nw});
+    }
+    {
+      // Two kept triangles that become one another's reverse (a vertex
+      // between the pinches, joined to both ends on both of its sides)
+      // fold onto each other: both go. (Before, such a pair always failed
+      // the loops below.) The same triangle twice: no merge.
+      std::vector<std::pair<std::array<std::uint32_t, 3>, std::uint32_t>> keys;  // (sorted vertices, index)
+      for (std::size_t i = 0; i < cand.rewritten.size(); ++i) {
+        std::array<std::uint32_t, 3> k = cand.rewritten[i].second;
+        std::sort(k.begin(), k.end());
+        keys.push_back({k, std::uint32_t(i)});
+      }
+      std::sort(keys.begin(), keys.end());
+      std::vector<std::uint8_t> folded(cand.rewritten.size(), 0);
+      for (std::size_t i = 0; i + 1 < keys.size(); ++i) {
+        if (keys[i].first != keys[i + 1].first) continue;
+        if (i + 2 < keys.size() && keys[i + 2].first == keys[i].first) return;
+        const auto& w = cand.rewritten[keys[i].second].second;
+        const auto& x = cand.rewritten[keys[i + 1].second].second;
+        // (the same cyclic order: the same triangle, not its reverse)
+        if (x == w || x == std::array<std::uint32_t, 3>{w[1], w[2], w[0]} ||
+            x == std::array<std::uint32_t, 3>{w[2], w[0], w[1]})
+          return;
+        folded[keys[i].second] = folded[keys[i + 1].second] = 1;
+        ++i;
+      }
+      std::size_t kept = 0;
+      for (std::size_t i = 0; i < cand.rewritten.size(); ++i) {
+        if (folded[i]) cand.removed.push_back(cand.rewritten[i].first);
+        else cand.rewritten[kept++] = cand.rewritten[i];
+      }
+      cand.rewritten.resize(kept);
     }
     std::sort(cand.removed.begin(), cand.removed.end());
     // Topology: the merged vertices and every vertex around keep one
@@ -1907,26 +2166,114 @@ class Cleaner {
       const std::uint32_t* w = T_ + 3 * std::size_t(r.first);
       ref = ref + cross(load(P_, w[1]) - load(P_, w[0]), load(P_, w[2]) - load(P_, w[0]));
     }
-    for (const auto& r : cand.rewritten) {
-      Vec3 q[3], o3[3];
+    // The loop vertices' points (in loop_vertices' order); whether the
+    // rewritten triangles keep the rules with them, and (margin) the least
+    // margin of the good ones to the rules' limits.
+    std::vector<Vec3> ps;
+    for (std::uint32_t x : cand.loop_vertices) ps.push_back(at[end_of(x)]);
+    auto point_of = [&](std::uint32_t x) {
+      return ps[std::size_t(std::find(cand.loop_vertices.begin(), cand.loop_vertices.end(), x) -
+                            cand.loop_vertices.begin())];
+    };
+    auto shapes = [&](const std::pair<std::uint32_t, std::array<std::uint32_t, 3>>& r, Vec3* q, Vec3* o3) {
       for (int k = 0; k < 3; ++k) {
         o3[k] = load(P_, T_[3 * std::size_t(r.first) + k]);
-        const int g = end_of(T_[3 * std::size_t(r.first) + k]);
-        q[k] = g < 0 ? o3[k] : at[g];
+        q[k] = end_of(r.second[k]) < 0 ? o3[k] : point_of(r.second[k]);
       }
-      const TriangleShape s_old = triangle_shape(o3[0], o3[1], o3[2]);
-      const TriangleShape s_new = triangle_shape(q[0], q[1], q[2]);
-      const int c_old = triangle_class(s_old, degenerate_double_area_);
-      const int c_new = triangle_class(s_new, degenerate_double_area_);
-      if (c_old != 0 && c_new != 0 && (c_new != 2 || c_old == 2)) continue;
-      const Vec3 n_new = cross(q[1] - q[0], q[2] - q[0]);
-      const Vec3 n_ref = c_old == 0 ? cross(o3[1] - o3[0], o3[2] - o3[0]) : ref;
-      if (c_new == 2 || (c_old == 0 && c_new != 0) || dot(n_new, n_ref) <= cos_limit * norm(n_new) * norm(n_ref))
-        return;
+    };
+    auto works = [&] {
+      for (const auto& r : cand.rewritten) {
+        Vec3 q[3], o3[3];
+        shapes(r, q, o3);
+        const TriangleShape s_old = triangle_shape(o3[0], o3[1], o3[2]);
+        const TriangleShape s_new = triangle_shape(q[0], q[1], q[2]);
+        const int c_old = triangle_class(s_old, degenerate_double_area_);
+        const int c_new = triangle_class(s_new, degenerate_double_area_);
+        if (c_old != 0 && c_new != 0 && (c_new != 2 || c_old == 2)) continue;
+        const Vec3 n_new = cross(q[1] - q[0], q[2] - q[0]);
+        const Vec3 n_ref = c_old == 0 ? cross(o3[1] - o3[0], o3[2] - o3[0]) : ref;
+        if (c_new == 2 || (c_old == 0 && c_new != 0) || dot(n_new, n_ref) <= cos_limit * norm(n_new) * norm(n_ref))
+          return false;
+      }
+      return true;
+    };
+    if (!works()) {
+      // Not at the centres (YT10's strips beside triangles of just over a
+      // degree): each loop vertex in turn, the others kept, at the best of
+      // its end's centre, the end's vertices and their midpoints, then
+      // moved by a pattern search (as in consider_cluster) within
+      // kClusterReach times the long edge of its end's centre, each
+      // maximizing the least margin of all the good triangles to the
+      // rules' limits, until the whole works.
+      auto margin = [&] {
+        double m = 1;
+        for (const auto& r : cand.rewritten) {
+          Vec3 q[3], o3[3];
+          shapes(r, q, o3);
+          if (triangle_class(triangle_shape(o3[0], o3[1], o3[2]), degenerate_double_area_) != 0) continue;
+          const Vec3 n_new = cross(q[1] - q[0], q[2] - q[0]), n_old = cross(o3[1] - o3[0], o3[2] - o3[0]);
+          const double ln = norm(n_new) * norm(n_old);
+          m = std::min({m, triangle_shape(q[0], q[1], q[2]).sin_min_angle - kSinOneDegree,
+                        ln > 0 ? dot(n_new, n_old) / ln - cos_limit : -1.0});
+        }
+        return m;
+      };
+      auto rounded = [](const Vec3& c) { return Vec3{double(Real(c.x)), double(Real(c.y)), double(Real(c.z))}; };
+      const Vec3 dirs[6] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
+      bool ok = false;
+      for (std::size_t i = 0; i < ps.size() && !ok; ++i) {
+        const std::vector<std::uint32_t>& e = *ends[end_of(cand.loop_vertices[i])];
+        const Vec3 centre = at[end_of(cand.loop_vertices[i])];
+        std::vector<Vec3> points = {centre};
+        for (std::uint32_t x : e) points.push_back(load(P_, x));
+        for (std::size_t j = 0; j < e.size(); ++j)
+          for (std::size_t k = j + 1; k < e.size(); ++k) points.push_back(0.5 * (load(P_, e[j]) + load(P_, e[k])));
+        double m = -2;
+        Vec3 p = centre;
+        for (const Vec3& q : points) {
+          ps[i] = rounded(q);
+          const double mq = margin();
+          if (mq > m) m = mq, p = ps[i];
+        }
+        ps[i] = p;
+        if (m > 0 && works()) {
+          ok = true;
+          break;
+        }
+        double h = 0;
+        for (std::uint32_t x : e) h = std::max(h, norm(load(P_, x) - centre));
+        for (int step = 0; step < 200 && h > 1e-3 * reach; ++step) {
+          int best_dir = -1;
+          double best_m = m;
+          for (int d = 0; d < 6; ++d) {
+            const Vec3 q = p + h * dirs[d];
+            if (norm(q - centre) > reach) continue;
+            ps[i] = q;
+            const double mq = margin();
+            if (mq > best_m) best_m = mq, best_dir = d;
+          }
+          if (best_dir < 0) {
+            h *= 0.5;
+            ps[i] = p;
+            continue;
+          }
+          p = p + h * dirs[best_dir], m = best_m;
+          ps[i] = rounded(p);
+          if (m > 0 && works()) {
+            ok = true;
+            break;
+          }
+          ps[i] = p;
+        }
+        ps[i] = rounded(p);
+        if (!ok && m > 0 && works()) ok = true;
+      }
+      if (!ok) return;
     }
-    for (std::uint32_t x : cand.loop_vertices) cand.positions.push_back(at[end_of(x)]);
+    cand.positions = ps;
     cand.cluster = near_end;
     cand.cluster.insert(cand.cluster.end(), far_end.begin(), far_end.end());
+    cand.strip = true;
     cand.valid = true;
     best = std::move(cand);
   }
@@ -1953,7 +2300,7 @@ class Cleaner {
       P_[3 * std::size_t(x) + 2] = Real(p.z);
       changed_vertices_.push_back(x);
     }
-    if (c.loop_vertices.size() == 1 || !c.positions.empty()) ++collapses;
+    if (c.loop_vertices.size() == 1 || c.strip) ++collapses;
     else ++cuts;
   }
 
@@ -2065,20 +2412,36 @@ class Cleaner {
     std::uint32_t i;
     double x[3];
   };
+  // Every write of a repair goes through one of these (before it), which
+  // also stamps the vertices whose position or triangles it changes with
+  // the repair's time (touch): a triangle's old vertices here, its new ones
+  // are vertices whose position the same repair writes (a collapse's or a
+  // cut's kept ends, a merge's loop vertices) or were its old ones (flips).
+  void touch(std::uint32_t v) {
+    if (!mod_.empty() && mod_[v] < now_) mod_[v] = now_;
+  }
+  void touch_triangle(std::uint32_t t) {
+    for (int k = 0; k < 3; ++k) touch(T_[3 * std::size_t(t) + k]);
+  }
   void log_position(std::uint32_t v) {
+    touch(v);
     if (worker_) log_.push_back({Undo::Position, v, {double(P_[3 * std::size_t(v)]), double(P_[3 * std::size_t(v) + 1]), double(P_[3 * std::size_t(v) + 2])}});
   }
   void log_normal(std::uint32_t v) {
+    touch(v);
     if (worker_) log_.push_back({Undo::Normal, v, {double(N_[3 * std::size_t(v)]), double(N_[3 * std::size_t(v) + 1]), double(N_[3 * std::size_t(v) + 2])}});
   }
   void log_triangle(std::uint32_t t) {
+    touch_triangle(t);
     if (worker_) log_.push_back({Undo::Triangle, t, {double(T_[3 * std::size_t(t)]), double(T_[3 * std::size_t(t) + 1]), double(T_[3 * std::size_t(t) + 2])}});
   }
   void log_alive(std::uint32_t t) {
+    touch_triangle(t);
     if (worker_) log_.push_back({Undo::Alive, t, {double(alive_[t]), 0, 0}});
   }
   // a's chain of merged vertices: next_ of its tail, and its tail.
   void log_chain(std::uint32_t a) {
+    touch(a);
     if (worker_) log_.push_back({Undo::Chain, a, {double(tail_[a]), double(next_[tail_[a]]), 0}});
   }
   // For the tests (RepairPassHooks::check_writes): how many of the writes
@@ -2194,6 +2557,19 @@ class Cleaner {
   // stamps (per vertex, stamp_base_ + the item that last committed with the
   // vertex in its region).
   std::vector<std::unique_ptr<Cleaner>> workers_;
+  // Skipping hopeless retries (start_times): per vertex, the time of the
+  // last repair that changed its position or triangles (the main
+  // Cleaner's; its workers write it through mod_); the current item's
+  // time (each Cleaner's own); per item of the pass, 0 (repaired) or when
+  // it failed; the failures of the last pass (triangle, time), sorted, and
+  // under which limits.
+  std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>> mod_own_;
+  std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>>& mod_ = mod_own_;
+  std::uint32_t now_ = 0, time_next_ = 1;
+  std::vector<std::uint32_t> outcome_, region_;
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> failed_;
+  int failed_key_ = -1;
+  std::uint64_t skipped_ = 0, skip_mismatches_ = 0;
   struct Slot {
     std::atomic<std::uint32_t> reserve;
     std::uint32_t stamp;
@@ -2239,8 +2615,9 @@ CleanupResult cleanup_mesh(PosVec& positions, NormalVec& normals, IndexVec& tria
       const std::size_t items = bad.size();
       bad = c.bad_triangles_after(bad);
       if (trace)
-        std::fprintf(stderr, "[nbmc trace] clean-up pass: items=%zu repaired=%llu %.3f ms, list %.3f ms\n", items,
-                     (unsigned long long)repaired, std::chrono::duration<double, std::milli>(t1 - t0).count(),
+        std::fprintf(stderr, "[nbmc trace] clean-up pass: items=%zu skipped=%zu repaired=%llu %.3f ms, list %.3f ms\n",
+                     items, c.last_skipped(), (unsigned long long)repaired,
+                     std::chrono::duration<double, std::milli>(t1 - t0).count(),
                      std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t1).count());
       if (repaired == 0) break;
     }
