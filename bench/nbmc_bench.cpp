@@ -7,10 +7,12 @@
 //              [--field narrow-band|dense|scatter] [--method ssp07|zb05|sph|yt10] [--backend B]
 //              [--repeat K] [--device-resident] [--tile N] [--subdomains auto|NxMxK]
 //              [--memory-budget MIB] [--influence-radius K] [--surface-radius K]
+//              [--no-cleanup] [--max-distance D]
 //
 // --influence-radius / --surface-radius: in units of the spacing (defaults 4
 // and 2, nbmc_params_init's).
 // --no-cleanup: the raw marching-cubes mesh (nbmc_params.cleanup = 0).
+// --max-distance D: the distance guard in units of the spacing (0: off).
 // --tile N: the frame repeated N x N x N times with gaps of 10% of its extent
 // (N = 2: the 1.65 M frame becomes 13.2 M particles, N = 4: 106 M), built in
 // memory. --subdomains / --memory-budget: nbmc_context_set_subdomains and the
@@ -64,12 +66,13 @@ struct Options {
   int sub[3] = {1, 1, 1};
   double budget_mib = 0;
   bool no_cleanup = false;
+  double max_distance = -1;  // < 0: nbmc_params_init's
 };
 
 [[noreturn]] void usage(const char* msg) {
   std::fprintf(stderr, "nbmc_bench: %s\nusage: nbmc_bench FRAME.xyz --spacing R [--cell-size C] [--threads N] "
                        "[--field narrow-band|dense|scatter] [--method ssp07|zb05|sph|yt10] [--backend auto|serial|openmp|cuda] "
-                       "[--repeat K] [--device-resident] | --table [--cell-sizes 1,0.5] [--skip-scatter] [--max-threads N]\n", msg);
+                       "[--repeat K] [--device-resident] [--no-cleanup] [--max-distance D] | --table [--cell-sizes 1,0.5] [--skip-scatter] [--max-threads N]\n", msg);
   std::exit(2);
 }
 
@@ -148,6 +151,7 @@ int run_one(const Options& o) {
   if (o.influence > 0) prm.influence_radius = o.influence;
   if (o.surface > 0) prm.surface_radius = o.surface;
   if (o.no_cleanup) prm.cleanup = 0;
+  if (o.max_distance >= 0) prm.max_distance = o.max_distance;
   prm.method = o.method;
   prm.field = o.field;
   auto t_up = std::chrono::steady_clock::now();
@@ -316,6 +320,7 @@ int main(int argc, char** argv) {
     else if (a == "--repeat") o.repeat = std::max(1, std::atoi(next().c_str()));
     else if (a == "--device-resident") o.device_resident = true;
     else if (a == "--no-cleanup") o.no_cleanup = true;
+    else if (a == "--max-distance") o.max_distance = std::atof(next().c_str());
     else if (a == "--tile") o.tile = std::max(1, std::atoi(next().c_str()));
     else if (a == "--memory-budget") o.budget_mib = std::atof(next().c_str());
     else if (a == "--subdomains") {
