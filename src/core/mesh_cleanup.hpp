@@ -1716,6 +1716,25 @@ class Cleaner {
   static constexpr double kClusterReach = 0.25;
   static constexpr std::size_t kClusterMax = 8;
 
+  // A triangle of a cluster or strip merge that goes from corners o to q:
+  // -1 if it breaks a rule (it becomes degenerate, a good triangle becomes
+  // bad, or its normal turns beyond cos_limit from its own, or from ref
+  // for a bad one), 2 if it was bad and stays so (as for the last round's
+  // collapses: a degenerate triangle may stay degenerate, a bad one bad),
+  // else its new smallest angle's sine.
+  double merged_triangle_score(const Vec3 o[3], const Vec3 q[3], const Vec3& ref) const {
+    const TriangleShape s_old = triangle_shape(o[0], o[1], o[2]);
+    const TriangleShape s_new = triangle_shape(q[0], q[1], q[2]);
+    const int c_old = triangle_class(s_old, degenerate_double_area_);
+    const int c_new = triangle_class(s_new, degenerate_double_area_);
+    if (c_old != 0 && c_new != 0 && (c_new != 2 || c_old == 2)) return 2;
+    const Vec3 n_new = cross(q[1] - q[0], q[2] - q[0]);
+    const Vec3 n_ref = c_old == 0 ? cross(o[1] - o[0], o[2] - o[0]) : ref;
+    if (c_new == 2 || (c_old == 0 && c_new != 0) || dot(n_new, n_ref) <= cos_limit * norm(n_new) * norm(n_ref))
+      return -1;
+    return s_new.sin_min_angle;
+  }
+
   void consider_cluster(std::uint32_t t, ClusterCandidate& best) {
     const std::uint32_t* v = T_ + 3 * std::size_t(t);
     int k_short = 0;
@@ -1859,18 +1878,9 @@ class Cleaner {
           o[k] = load(P_, T_[3 * std::size_t(r.first) + k]);
           q[k] = in_k(r.second[k]) ? p : o[k];
         }
-        const TriangleShape s_old = triangle_shape(o[0], o[1], o[2]);
-        const TriangleShape s_new = triangle_shape(q[0], q[1], q[2]);
-        const int c_old = triangle_class(s_old, degenerate_double_area_);
-        const int c_new = triangle_class(s_new, degenerate_double_area_);
-        // (as for the last round's collapses: a triangle that was
-        // degenerate may stay so, one that was bad may stay bad)
-        if (c_old != 0 && c_new != 0 && (c_new != 2 || c_old == 2)) continue;
-        const Vec3 n_new = cross(q[1] - q[0], q[2] - q[0]);
-        const Vec3 n_ref = c_old == 0 ? cross(o[1] - o[0], o[2] - o[0]) : ref;
-        if (c_new == 2 || (c_old == 0 && c_new != 0) || dot(n_new, n_ref) <= cos_limit * norm(n_new) * norm(n_ref))
-          return -1.0;
-        score = std::min(score, s_new.sin_min_angle);
+        const double s = merged_triangle_score(o, q, ref);
+        if (s < 0) return -1.0;
+        score = std::min(score, s);
       }
       return score;
     };
@@ -2185,15 +2195,7 @@ class Cleaner {
       for (const auto& r : cand.rewritten) {
         Vec3 q[3], o3[3];
         shapes(r, q, o3);
-        const TriangleShape s_old = triangle_shape(o3[0], o3[1], o3[2]);
-        const TriangleShape s_new = triangle_shape(q[0], q[1], q[2]);
-        const int c_old = triangle_class(s_old, degenerate_double_area_);
-        const int c_new = triangle_class(s_new, degenerate_double_area_);
-        if (c_old != 0 && c_new != 0 && (c_new != 2 || c_old == 2)) continue;
-        const Vec3 n_new = cross(q[1] - q[0], q[2] - q[0]);
-        const Vec3 n_ref = c_old == 0 ? cross(o3[1] - o3[0], o3[2] - o3[0]) : ref;
-        if (c_new == 2 || (c_old == 0 && c_new != 0) || dot(n_new, n_ref) <= cos_limit * norm(n_new) * norm(n_ref))
-          return false;
+        if (merged_triangle_score(o3, q, ref) < 0) return false;
       }
       return true;
     };
