@@ -491,6 +491,30 @@ TEST(MeshCleanup, PinchedCapBeyondTheCutIsMerged) {
   EXPECT_EQ(again.t, m.t);
 }
 
+// The clean-up on a patch of a real mesh with one sliver (an open patch:
+// its border is left alone): it stays manifold and oriented with the same
+// border, the sliver is repaired without a new bad triangle, every angle
+// ends at 1 degree or more, and a second run on a copy gives the same mesh
+// (a function of its input). Returns the clean-up's counts.
+static nbmc::mesh::CleanupResult expect_patch_repaired(TestMesh& m) {
+  const CheckResult in = m.check();
+  EXPECT_TRUE(in.manifold && in.oriented);
+  EXPECT_EQ(in.sliver_triangles, 1u);
+  EXPECT_EQ(in.degenerate_triangles, 0u);
+  TestMesh again = m;
+  const auto r = nbmc::mesh::cleanup_mesh(m.p, m.n, m.t);
+  const CheckResult out = m.check();
+  EXPECT_TRUE(out.manifold && out.oriented);
+  EXPECT_EQ(out.boundary_edges, in.boundary_edges);
+  EXPECT_EQ(out.degenerate_triangles + out.sliver_triangles, 0u);
+  EXPECT_EQ(r.bad_after, 0u);
+  EXPECT_GE(out.min_angle_degrees, 1.0);
+  nbmc::mesh::cleanup_mesh(again.p, again.n, again.t);
+  EXPECT_EQ(again.p, m.p);
+  EXPECT_EQ(again.t, m.t);
+  return r;
+}
+
 // A needle whose short edge fails the link condition (its ends share a
 // third neighbour), beside triangles of just over one degree (1.05 to 1.2):
 // YT10 on cbd1654k at cell r/2, three rings around one of its last slivers
@@ -565,23 +589,9 @@ TEST(MeshCleanup, NeedleBesideNearOneDegreeTrianglesIsMerged) {
         27, 29, 39, 27, 39, 28, 39, 38, 28, 29, 31, 39, 31, 41, 39, 30, 40, 49,
         34, 43, 35, 43, 44, 35, 46, 42, 35, 42, 36, 35, 46, 35, 44, 38, 39, 45,
         39, 47, 45, 46, 47, 39, 46, 39, 42, 39, 41, 42};
-  const CheckResult in = m.check();
-  ASSERT_TRUE(in.manifold && in.oriented);
-  ASSERT_EQ(in.sliver_triangles, 1u);
-  ASSERT_EQ(in.degenerate_triangles, 0u);
-  TestMesh again = m;
-  const auto r = nbmc::mesh::cleanup_mesh(m.p, m.n, m.t);
-  const CheckResult out = m.check();
-  EXPECT_TRUE(out.manifold && out.oriented);
-  EXPECT_EQ(out.boundary_edges, in.boundary_edges);
-  EXPECT_EQ(out.degenerate_triangles + out.sliver_triangles, 0u);
-  EXPECT_EQ(r.bad_after, 0u);
+  const auto r = expect_patch_repaired(m);
   EXPECT_EQ(r.cuts, 1u);  // (two loops around the cluster)
-  EXPECT_GT(out.min_angle_degrees, 1.0);
-  // (a function of its input)
-  nbmc::mesh::cleanup_mesh(again.p, again.n, again.t);
-  EXPECT_EQ(again.p, m.p);
-  EXPECT_EQ(again.t, m.t);
+  EXPECT_GT(m.check().min_angle_degrees, 1.0);
 }
 
 // The same on a strip: a needle whose short edge's ends share, besides its
@@ -629,21 +639,7 @@ TEST(MeshCleanup, StripBesideNearOneDegreeTrianglesIsMerged) {
         12, 10, 11, 12, 11, 14, 11, 13, 14, 14, 15, 12, 14, 13, 17, 13, 16, 17,
         14, 17, 15, 17, 18, 15, 17, 16, 24, 16, 23, 24, 17, 24, 18, 24, 25, 18,
         19, 22, 23, 22, 26, 23, 21, 25, 22, 25, 26, 22, 24, 23, 26, 24, 26, 25};
-  const CheckResult in = m.check();
-  ASSERT_TRUE(in.manifold && in.oriented);
-  ASSERT_EQ(in.sliver_triangles, 1u);
-  ASSERT_EQ(in.degenerate_triangles, 0u);
-  TestMesh again = m;
-  const auto r = nbmc::mesh::cleanup_mesh(m.p, m.n, m.t);
-  const CheckResult out = m.check();
-  EXPECT_TRUE(out.manifold && out.oriented);
-  EXPECT_EQ(out.boundary_edges, in.boundary_edges);
-  EXPECT_EQ(out.degenerate_triangles + out.sliver_triangles, 0u);
-  EXPECT_EQ(r.bad_after, 0u);
-  EXPECT_GE(out.min_angle_degrees, 1.0);
-  nbmc::mesh::cleanup_mesh(again.p, again.n, again.t);
-  EXPECT_EQ(again.p, m.p);
-  EXPECT_EQ(again.t, m.t);
+  expect_patch_repaired(m);
 }
 
 // Random holes as above (closed by a triangle or a cap, their vertices 1e-7
