@@ -119,11 +119,12 @@ void for_each_band_vertex(const ExecSpace& space, const char* label,
 // test as the case index). for_each_mixed_cell_host then works per block:
 // it looks up the 7 neighbouring blocks once and, per word, ANDs the eight
 // corner-shifted copies of the band and sign masks (bit operations on the
-// 4x4x4 sub-blocks and their neighbours), and calls f(w, bit, self) only for
+// 4x4x4 sub-blocks and their neighbours), and calls f(w, bit, self, complete) only for
 // the vertices whose cell has all corners in the band and mixed signs, in
 // band order within each word. The mask can only say "in the band" for a
 // corner that index() might still reject (grid box), never the reverse, so
 // f (which does the full test) sees every cell that matters: same results.
+// complete: the word's cells whose eight corners have their band bits set.
 // GPU backends keep for_each_band_vertex (not instantiated for them).
 template <class ExecSpace>
 Kokkos::View<std::uint64_t*, typename ExecSpace::memory_space> inside_masks(
@@ -202,14 +203,14 @@ void for_each_mixed_cell_host(const ExecSpace& space, const char* label,
             qi[d] = inside(nw);
             qo[d] = qb[d] & ~qi[d];
           }
-          std::uint64_t cand = all_corners(qb);
-          if (!cand) continue;
-          cand &= ~all_corners(qi) & ~all_corners(qo);
+          const std::uint64_t complete = all_corners(qb);
+          if (!complete) continue;
+          std::uint64_t cand = complete & ~all_corners(qi) & ~all_corners(qo);
           const std::int64_t base = std::int64_t(band.word_offset(w));
           while (cand) {
             const int bit = ctz64(cand);
             cand &= cand - 1;
-            f(w, bit, base + std::int64_t(popcount64(word & ((std::uint64_t(1) << bit) - 1))));
+            f(w, bit, base + std::int64_t(popcount64(word & ((std::uint64_t(1) << bit) - 1))), complete);
           }
         }
       });
@@ -251,8 +252,11 @@ McResult classify_cells(const ExecSpace& space, const BandView<typename ExecSpac
         tri_offset(self) = std::uint32_t(tables.count(cs));
       };
   if constexpr (Kokkos::SpaceAccessibility<Kokkos::HostSpace, typename ExecSpace::memory_space>::accessible)
-    for_each_mixed_cell_host(space, "nbmc::marching_cubes::cases", band, n_words,
-                             inside_masks(space, band, n_words, phi), cell);
+    for_each_mixed_cell_host(
+        space, "nbmc::marching_cubes::cases", band, n_words, inside_masks(space, band, n_words, phi),
+        KOKKOS_LAMBDA(const std::size_t w, const int bit, const std::int64_t self, std::uint64_t) {
+          cell(w, bit, self);
+        });
   else
     for_each_band_vertex(space, "nbmc::marching_cubes::cases", band, n_words, cell);
   space.fence();
@@ -299,6 +303,45 @@ KOKKOS_INLINE_FUNCTION int leaks_at(const BandView<MemSpace>& band, const Kokkos
                        nk = k + (a == 2 ? (side ? 1 : -1) : 0);
     if (ni < 0 || nj < 0 || nk < 0 || ni + 1 >= band.dims[0] || nj + 1 >= band.dims[1] || nk + 1 >= band.dims[2])
       continue;  // the grid's own boundary (padded: only reached with a clipping box)
+    std::int64_t nidx[8];
+    if (band.cell_indices(ni, nj, nk, 0, nidx)) continue;  // entirely in the band
+    out[3 * n] = ni;
+    out[3 * n + 1] = nj;
+    out[3 * n + 2] = nk;
+    ++n;
+  }
+  return n;
+}
+
+// leaks_at for the host scan (for_each_mixed_cell_host): the same result,
+// but a face neighbour whose minimum corner lies in the same word (bit nbit)
+// is known to be entirely in the band when bit nbit of `complete` is set
+// (its corners' band bits are set, and the grid check above holds), without
+// the 8 look-ups; otherwise the full test as in leaks_at.
+template <class MemSpace>
+KOKKOS_INLINE_FUNCTION int leaks_at_host(const BandView<MemSpace>& band,
+                                         const Kokkos::View<const float*, MemSpace>& phi, std::int64_t i,
+                                         std::int64_t j, std::int64_t k, std::int64_t self, std::int64_t out[18],
+                                         std::uint32_t block, int bit, std::uint64_t complete) {
+  std::int64_t idx[8];
+  if (!band.owns_cell(i, j, k) || !cell_corners(band, i, j, k, self, idx, block)) return 0;
+  int cs = 0;
+  for (int c = 0; c < 8; ++c) cs |= (phi(idx[c]) < 0.f ? 1 : 0) << c;
+  if (cs == 0 || cs == 255) return 0;
+  const int local[3] = {bit & 3, (bit >> 2) & 3, bit >> 4};
+  int n = 0;
+  for (int f = 0; f < 6; ++f) {
+    const int a = f >> 1, side = f & 1;
+    int inside = 0;
+    for (int c = 0; c < 8; ++c)
+      if (((c >> a) & 1) == side) inside += (cs >> c) & 1;
+    if (inside == 0 || inside == 4) continue;
+    const std::int64_t ni = i + (a == 0 ? (side ? 1 : -1) : 0), nj = j + (a == 1 ? (side ? 1 : -1) : 0),
+                       nk = k + (a == 2 ? (side ? 1 : -1) : 0);
+    if (ni < 0 || nj < 0 || nk < 0 || ni + 1 >= band.dims[0] || nj + 1 >= band.dims[1] || nk + 1 >= band.dims[2])
+      continue;  // the grid's own boundary (padded: only reached with a clipping box)
+    const int nl = local[a] + (side ? 1 : -1);
+    if (nl >= 0 && nl < 4 && ((complete >> (bit + (side ? 1 : -1) * (1 << (2 * a)))) & 1)) continue;
     std::int64_t nidx[8];
     if (band.cell_indices(ni, nj, nk, 0, nidx)) continue;  // entirely in the band
     out[3 * n] = ni;
