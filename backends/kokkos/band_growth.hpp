@@ -254,6 +254,7 @@ void grow_band(const ExecSpace& space, MemoryTracker& tracker, const Grid& g,
     std::size_t entry_cap = 2 * leak_cap;
     if (tiny_guesses) leak_cap = entry_cap = 1;  // tests: every round overflows and runs again
     GrowthRecorder<MemSpace> rec;
+    Kokkos::View<const std::uint64_t*, MemSpace> inside;  // host, round 0: phi < 0 per band word (bits)
     for (int attempt = 0;; ++attempt) {
       const std::size_t slots = next_pow2(2 * entry_cap + 16);
       ensure_capacity(tracker, leak_lists[0], 3 * leak_cap, "band_growth::leaks");
@@ -302,16 +303,16 @@ void grow_band(const ExecSpace& space, MemoryTracker& tracker, const Grid& g,
         // thread per vertex slot (as for_each_band_vertex, written out so
         // that the functor holds one band view, not two: see GrowthRecorder).
         if constexpr (host_memory) {
-          Kokkos::parallel_for(
-              "nbmc::band_growth::leaks",
-              Kokkos::RangePolicy<ExecSpace, Kokkos::Schedule<Kokkos::Dynamic>>(space, 0, n_words),
-              KOKKOS_LAMBDA(const std::size_t w) {
-                bv.for_each_vertex(w, [&](const int bit, const std::int64_t self) {
-                  std::int64_t i, j, k, out[18];
-                  bv.vertex(w, bit, i, j, k);
-                  const int n = leaks_at(bv, cur_phi, i, j, k, self, out, std::uint32_t(w >> 3));
-                  if (n) rec.add_leaks(bv, out, n);
-                });
+          // Only the cells with all corners in the band and mixed signs
+          // (exact bit-mask filter, for_each_mixed_cell_host).
+          if (attempt == 0) inside = inside_masks(space, bv, n_words, cur_phi);
+          for_each_mixed_cell_host(
+              space, "nbmc::band_growth::leaks", bv, n_words, inside,
+              KOKKOS_LAMBDA(const std::size_t w, const int bit, const std::int64_t self, const std::uint64_t complete) {
+                std::int64_t i, j, k, out[18];
+                bv.vertex(w, bit, i, j, k);
+                const int n = leaks_at_host(bv, cur_phi, i, j, k, self, out, std::uint32_t(w >> 3), bit, complete);
+                if (n) rec.add_leaks(bv, out, n);
               });
         } else {
           Kokkos::parallel_for(

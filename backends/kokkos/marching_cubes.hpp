@@ -111,6 +111,111 @@ void for_each_band_vertex(const ExecSpace& space, const char* label,
   }
 }
 
+// Host backends: an exact filter for the whole-band cell passes (round-0 leak
+// detection, pass A). Most band vertices are the minimum corner of no
+// triangulated cell (a corner outside the band, or eight corners of one
+// sign), yet each paid the corner lookups (up to 7 popcounts and phi reads).
+// inside_masks: per band word, bit set where the vertex has phi < 0 (same
+// test as the case index). for_each_mixed_cell_host then works per block:
+// it looks up the 7 neighbouring blocks once and, per word, ANDs the eight
+// corner-shifted copies of the band and sign masks (bit operations on the
+// 4x4x4 sub-blocks and their neighbours), and calls f(w, bit, self, complete) only for
+// the vertices whose cell has all corners in the band and mixed signs, in
+// band order within each word. The mask can only say "in the band" for a
+// corner that index() might still reject (grid box), never the reverse, so
+// f (which does the full test) sees every cell that matters: same results.
+// complete: the word's cells whose eight corners have their band bits set.
+// GPU backends keep for_each_band_vertex (not instantiated for them).
+template <class ExecSpace>
+Kokkos::View<std::uint64_t*, typename ExecSpace::memory_space> inside_masks(
+    const ExecSpace& space, const BandView<typename ExecSpace::memory_space>& band, std::size_t n_words,
+    const Kokkos::View<const float*, typename ExecSpace::memory_space>& phi) {
+  using MemSpace = typename ExecSpace::memory_space;
+  Kokkos::View<std::uint64_t*, MemSpace> m(
+      Kokkos::view_alloc(Kokkos::WithoutInitializing, "nbmc::marching_cubes::inside"), n_words);
+  Kokkos::parallel_for(
+      "nbmc::marching_cubes::inside", Kokkos::RangePolicy<ExecSpace>(space, 0, n_words),
+      KOKKOS_LAMBDA(const std::size_t w) {
+        std::uint64_t s = 0;
+        band.for_each_vertex(w, [&](const int bit, const std::int64_t idx) {
+          if (phi(idx) < 0.f) s |= std::uint64_t(1) << bit;
+        });
+        m(w) = s;
+      });
+  return m;
+}
+
+// Bit b = x + 4 y + 16 z of a 4x4x4 word: the vertex one step along +x/+y/+z
+// (from the word n beyond the sub-block's face where x/y/z is 3).
+KOKKOS_FORCEINLINE_FUNCTION std::uint64_t shift_px(std::uint64_t w, std::uint64_t n) {
+  constexpr std::uint64_t kX3 = 0x8888888888888888ull;
+  return ((w >> 1) & ~kX3) | ((n << 3) & kX3);
+}
+KOKKOS_FORCEINLINE_FUNCTION std::uint64_t shift_py(std::uint64_t w, std::uint64_t n) {
+  constexpr std::uint64_t kY3 = 0xF000F000F000F000ull;
+  return ((w >> 4) & ~kY3) | ((n << 12) & kY3);
+}
+KOKKOS_FORCEINLINE_FUNCTION std::uint64_t shift_pz(std::uint64_t w, std::uint64_t n) { return (w >> 16) | (n << 48); }
+// Bit set where all 8 corners of the cell (minimum corner at that bit) are
+// set, from the masks of the word (q[0]) and its neighbours q[d] (d = dx |
+// dy << 1 | dz << 2, as the corner numbering).
+KOKKOS_FORCEINLINE_FUNCTION std::uint64_t all_corners(const std::uint64_t q[8]) {
+  std::uint64_t px[4];
+  for (int yz = 0; yz < 4; ++yz) px[yz] = q[2 * yz] & shift_px(q[2 * yz], q[2 * yz + 1]);
+  const std::uint64_t py0 = px[0] & shift_py(px[0], px[1]), py1 = px[2] & shift_py(px[2], px[3]);
+  return py0 & shift_pz(py0, py1);
+}
+
+template <class ExecSpace, class F>
+void for_each_mixed_cell_host(const ExecSpace& space, const char* label,
+                              const BandView<typename ExecSpace::memory_space>& band, std::size_t n_words,
+                              const Kokkos::View<const std::uint64_t*, typename ExecSpace::memory_space>& inside,
+                              const F& f) {
+  Kokkos::parallel_for(
+      label, Kokkos::RangePolicy<ExecSpace, Kokkos::Schedule<Kokkos::Dynamic>>(space, 0, n_words / 8),
+      KOKKOS_LAMBDA(const std::size_t b) {
+        const std::uint64_t key = band.block_keys(b);
+        const std::uint32_t bx = std::uint32_t(compact3(key)), by = std::uint32_t(compact3(key >> 1)),
+                            bz = std::uint32_t(compact3(key >> 2));
+        std::uint32_t nb[8];
+        nb[0] = std::uint32_t(b);
+        bool looked = false;
+        for (int s = 0; s < 8; ++s) {
+          const std::size_t w = b * 8 + std::size_t(s);
+          const std::uint64_t word = band.words(w);
+          if (!word) continue;
+          if (!looked && s) {  // word 0 needs no neighbouring block
+            for (int o = 1; o < 8; ++o)
+              nb[o] = band.blocks.find(morton3(bx + std::uint32_t(o & 1), by + std::uint32_t((o >> 1) & 1),
+                                               bz + std::uint32_t(o >> 2)));
+            looked = true;
+          }
+          std::uint64_t qb[8], qi[8], qo[8];
+          for (int d = 0; d < 8; ++d) {
+            const int o = s & d, t = s ^ d;  // block offset (carry), word in that block
+            const std::uint32_t nbo = nb[o];
+            if (nbo == ~0u) {
+              qb[d] = qi[d] = qo[d] = 0;
+              continue;
+            }
+            const std::size_t nw = std::size_t(nbo) * 8 + std::size_t(t);
+            qb[d] = band.words(nw);
+            qi[d] = inside(nw);
+            qo[d] = qb[d] & ~qi[d];
+          }
+          const std::uint64_t complete = all_corners(qb);
+          if (!complete) continue;
+          std::uint64_t cand = complete & ~all_corners(qi) & ~all_corners(qo);
+          const std::int64_t base = std::int64_t(band.word_offset(w));
+          while (cand) {
+            const int bit = ctz64(cand);
+            cand &= cand - 1;
+            f(w, bit, base + std::int64_t(popcount64(word & ((std::uint64_t(1) << bit) - 1))), complete);
+          }
+        }
+      });
+}
+
 struct McResult {
   std::uint64_t vertices = 0, triangles = 0, cells = 0;
 };
@@ -133,9 +238,7 @@ McResult classify_cells(const ExecSpace& space, const BandView<typename ExecSpac
   const std::size_t nb = info.extent(0);
   // tri_offset first holds each vertex's triangle count (0 where no cell).
   Kokkos::deep_copy(space, tri_offset, std::uint32_t(0));
-  for_each_band_vertex(
-      space, "nbmc::marching_cubes::cases", band, n_words,
-      KOKKOS_LAMBDA(const std::size_t w, const int bit, const std::int64_t self) {
+  const auto cell = KOKKOS_LAMBDA(const std::size_t w, const int bit, const std::int64_t self) {
         std::int64_t i, j, k, idx[8];
         band.vertex(w, bit, i, j, k);
         if (!band.owns_cell(i, j, k) || !cell_corners(band, i, j, k, self, idx, std::uint32_t(w >> 3))) return;
@@ -147,7 +250,15 @@ McResult classify_cells(const ExecSpace& space, const BandView<typename ExecSpac
         for (int e = 0; e < 12; ++e)
           if (em & (1u << e)) Kokkos::atomic_fetch_or(&info(idx[edge_start(e)]), std::uint32_t(1) << (8 + e / 4));
         tri_offset(self) = std::uint32_t(tables.count(cs));
-      });
+      };
+  if constexpr (Kokkos::SpaceAccessibility<Kokkos::HostSpace, typename ExecSpace::memory_space>::accessible)
+    for_each_mixed_cell_host(
+        space, "nbmc::marching_cubes::cases", band, n_words, inside_masks(space, band, n_words, phi),
+        KOKKOS_LAMBDA(const std::size_t w, const int bit, const std::int64_t self, std::uint64_t) {
+          cell(w, bit, self);
+        });
+  else
+    for_each_band_vertex(space, "nbmc::marching_cubes::cases", band, n_words, cell);
   space.fence();
   std::uint64_t cells = 0;
   Kokkos::parallel_reduce(
@@ -192,6 +303,45 @@ KOKKOS_INLINE_FUNCTION int leaks_at(const BandView<MemSpace>& band, const Kokkos
                        nk = k + (a == 2 ? (side ? 1 : -1) : 0);
     if (ni < 0 || nj < 0 || nk < 0 || ni + 1 >= band.dims[0] || nj + 1 >= band.dims[1] || nk + 1 >= band.dims[2])
       continue;  // the grid's own boundary (padded: only reached with a clipping box)
+    std::int64_t nidx[8];
+    if (band.cell_indices(ni, nj, nk, 0, nidx)) continue;  // entirely in the band
+    out[3 * n] = ni;
+    out[3 * n + 1] = nj;
+    out[3 * n + 2] = nk;
+    ++n;
+  }
+  return n;
+}
+
+// leaks_at for the host scan (for_each_mixed_cell_host): the same result,
+// but a face neighbour whose minimum corner lies in the same word (bit nbit)
+// is known to be entirely in the band when bit nbit of `complete` is set
+// (its corners' band bits are set, and the grid check above holds), without
+// the 8 look-ups; otherwise the full test as in leaks_at.
+template <class MemSpace>
+KOKKOS_INLINE_FUNCTION int leaks_at_host(const BandView<MemSpace>& band,
+                                         const Kokkos::View<const float*, MemSpace>& phi, std::int64_t i,
+                                         std::int64_t j, std::int64_t k, std::int64_t self, std::int64_t out[18],
+                                         std::uint32_t block, int bit, std::uint64_t complete) {
+  std::int64_t idx[8];
+  if (!band.owns_cell(i, j, k) || !cell_corners(band, i, j, k, self, idx, block)) return 0;
+  int cs = 0;
+  for (int c = 0; c < 8; ++c) cs |= (phi(idx[c]) < 0.f ? 1 : 0) << c;
+  if (cs == 0 || cs == 255) return 0;
+  const int local[3] = {bit & 3, (bit >> 2) & 3, bit >> 4};
+  int n = 0;
+  for (int f = 0; f < 6; ++f) {
+    const int a = f >> 1, side = f & 1;
+    int inside = 0;
+    for (int c = 0; c < 8; ++c)
+      if (((c >> a) & 1) == side) inside += (cs >> c) & 1;
+    if (inside == 0 || inside == 4) continue;
+    const std::int64_t ni = i + (a == 0 ? (side ? 1 : -1) : 0), nj = j + (a == 1 ? (side ? 1 : -1) : 0),
+                       nk = k + (a == 2 ? (side ? 1 : -1) : 0);
+    if (ni < 0 || nj < 0 || nk < 0 || ni + 1 >= band.dims[0] || nj + 1 >= band.dims[1] || nk + 1 >= band.dims[2])
+      continue;  // the grid's own boundary (padded: only reached with a clipping box)
+    const int nl = local[a] + (side ? 1 : -1);
+    if (nl >= 0 && nl < 4 && ((complete >> (bit + (side ? 1 : -1) * (1 << (2 * a)))) & 1)) continue;
     std::int64_t nidx[8];
     if (band.cell_indices(ni, nj, nk, 0, nidx)) continue;  // entirely in the band
     out[3 * n] = ni;
