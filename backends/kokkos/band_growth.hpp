@@ -254,7 +254,7 @@ void grow_band(const ExecSpace& space, MemoryTracker& tracker, const Grid& g,
     std::size_t entry_cap = 2 * leak_cap;
     if (tiny_guesses) leak_cap = entry_cap = 1;  // tests: every round overflows and runs again
     GrowthRecorder<MemSpace> rec;
-    Kokkos::View<const std::uint64_t*, MemSpace> inside;  // host, round 0: phi < 0 per band word (bits)
+    Buffer<std::uint64_t, MemSpace> inside;  // host, round 0: phi < 0 per band word (bits)
     for (int attempt = 0;; ++attempt) {
       const std::size_t slots = next_pow2(2 * entry_cap + 16);
       ensure_capacity(tracker, leak_lists[0], 3 * leak_cap, "band_growth::leaks");
@@ -305,9 +305,9 @@ void grow_band(const ExecSpace& space, MemoryTracker& tracker, const Grid& g,
         if constexpr (host_memory) {
           // Only the cells with all corners in the band and mixed signs
           // (exact bit-mask filter, for_each_mixed_cell_host).
-          if (attempt == 0) inside = inside_masks(space, bv, n_words, cur_phi);
+          if (attempt == 0) inside = inside_masks(space, tracker, bv, n_words, cur_phi);
           for_each_mixed_cell_host(
-              space, "nbmc::band_growth::leaks", bv, n_words, inside,
+              space, "nbmc::band_growth::leaks", bv, n_words, Kokkos::View<const std::uint64_t*, MemSpace>(inside.view()),
               KOKKOS_LAMBDA(const std::size_t w, const int bit, const std::int64_t self, const std::uint64_t complete) {
                 std::int64_t i, j, k, out[18];
                 bv.vertex(w, bit, i, j, k);

@@ -127,12 +127,12 @@ void for_each_band_vertex(const ExecSpace& space, const char* label,
 // complete: the word's cells whose eight corners have their band bits set.
 // GPU backends keep for_each_band_vertex (not instantiated for them).
 template <class ExecSpace>
-Kokkos::View<std::uint64_t*, typename ExecSpace::memory_space> inside_masks(
-    const ExecSpace& space, const BandView<typename ExecSpace::memory_space>& band, std::size_t n_words,
-    const Kokkos::View<const float*, typename ExecSpace::memory_space>& phi) {
+Buffer<std::uint64_t, typename ExecSpace::memory_space> inside_masks(
+    const ExecSpace& space, MemoryTracker& tracker, const BandView<typename ExecSpace::memory_space>& band,
+    std::size_t n_words, const Kokkos::View<const float*, typename ExecSpace::memory_space>& phi) {
   using MemSpace = typename ExecSpace::memory_space;
-  Kokkos::View<std::uint64_t*, MemSpace> m(
-      Kokkos::view_alloc(Kokkos::WithoutInitializing, "nbmc::marching_cubes::inside"), n_words);
+  Buffer<std::uint64_t, MemSpace> masks(tracker, "marching_cubes::inside", n_words);
+  const Kokkos::View<std::uint64_t*, MemSpace> m = masks.view();
   Kokkos::parallel_for(
       "nbmc::marching_cubes::inside", Kokkos::RangePolicy<ExecSpace>(space, 0, n_words),
       KOKKOS_LAMBDA(const std::size_t w) {
@@ -142,7 +142,7 @@ Kokkos::View<std::uint64_t*, typename ExecSpace::memory_space> inside_masks(
         });
         m(w) = s;
       });
-  return m;
+  return masks;
 }
 
 // Bit b = x + 4 y + 16 z of a 4x4x4 word: the vertex one step along +x/+y/+z
@@ -227,7 +227,8 @@ struct McResult {
 // vertex's cell. The mesh order (vertices and triangles by band vertex) does
 // not depend on the thread count or the backend.
 template <class ExecSpace>
-McResult classify_cells(const ExecSpace& space, const BandView<typename ExecSpace::memory_space>& band,
+McResult classify_cells(const ExecSpace& space, MemoryTracker& tracker,
+                        const BandView<typename ExecSpace::memory_space>& band,
                         std::size_t n_words, const Kokkos::View<const float*, typename ExecSpace::memory_space>& phi,
                         const McTables<typename ExecSpace::memory_space>& tables,
                         const Kokkos::View<std::uint32_t*, typename ExecSpace::memory_space>& info,
@@ -253,7 +254,7 @@ McResult classify_cells(const ExecSpace& space, const BandView<typename ExecSpac
       };
   if constexpr (Kokkos::SpaceAccessibility<Kokkos::HostSpace, typename ExecSpace::memory_space>::accessible)
     for_each_mixed_cell_host(
-        space, "nbmc::marching_cubes::cases", band, n_words, inside_masks(space, band, n_words, phi),
+        space, "nbmc::marching_cubes::cases", band, n_words, inside_masks(space, tracker, band, n_words, phi).view(),
         KOKKOS_LAMBDA(const std::size_t w, const int bit, const std::int64_t self, std::uint64_t) {
           cell(w, bit, self);
         });

@@ -398,7 +398,7 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
   Buffer<std::uint32_t, MemSpace> vert_offset(tracker, "marching_cubes::vertex_offsets", band.n_vertices);
   Buffer<std::uint32_t, MemSpace> tri_offset(tracker, "marching_cubes::triangle_offsets", band.n_vertices);
   const Kokkos::View<const float*, MemSpace> cphi = phi.view();
-  const McResult r = classify_cells(space, bv, n_words, cphi, tables, info.view(), vert_offset.view(),
+  const McResult r = classify_cells(space, tracker, bv, n_words, cphi, tables, info.view(), vert_offset.view(),
                                     tri_offset.view());
   if (r.vertices > std::numeric_limits<std::uint32_t>::max() || r.triangles > std::numeric_limits<std::uint32_t>::max()) {
     std::ostringstream s;
