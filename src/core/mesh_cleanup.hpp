@@ -344,7 +344,8 @@ class Cleaner {
         }
         // (start_[vb] belongs to the range before: its lists start at cb.)
         std::vector<std::uint32_t> fill(ve - vb);
-        std::size_t pos = sorted ? cb : 0;
+        const std::size_t pos0 = sorted ? cb : 0;
+        std::size_t pos = pos0;
         for (std::size_t v = vb; v < ve; ++v) {
           fill[v - vb] = std::uint32_t(pos);
           pos += start_[v + 1];
@@ -355,7 +356,9 @@ class Cleaner {
           const std::uint32_t c = corner(i), v = tri[c];
           if (sorted || v < nv) incident_[fill[v - vb]++] = c / 3;
         }
-        mark_irregular(vb, ve);
+        // (start_[vb] may still be written by the range before: this
+        // range's first list starts at pos0.)
+        mark_irregular(vb, ve, std::uint32_t(pos0));
       });
       host_trace("clean-up: incidence lists", nt);
     }
@@ -981,13 +984,15 @@ class Cleaner {
   // direction (two triangles, opposite orientations) and its triangles form
   // one closed fan; the others, and the vertices of triangles that repeat a
   // vertex, are never touched.
-  // (Vertices [vb, ve), on the calling thread; irregular_ sized.)
-  void mark_irregular(std::size_t vb, std::size_t ve) {
+  // (Vertices [vb, ve), on the calling thread; irregular_ sized. first:
+  // where vb's list starts, read not from start_[vb], which belongs to the
+  // vertex range before and may not be written yet.)
+  void mark_irregular(std::size_t vb, std::size_t ve, std::uint32_t first) {
     {
       std::vector<std::pair<std::uint32_t, std::uint32_t>> in;  // (previous vertex, local index)
       std::vector<std::uint32_t> out;                           // next vertex, by local index
       for (std::size_t v = vb; v < ve; ++v) {
-        const std::uint32_t b = start_[v], e = start_[v + 1];
+        const std::uint32_t b = v == vb ? first : start_[v], e = start_[v + 1];
         // Almost every fan is small: one_closed_fan's small case on the
         // stack, without the vectors.
         if (e - b <= kSmallFan) {
