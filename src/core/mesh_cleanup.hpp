@@ -280,9 +280,7 @@ class Cleaner {
     // order by construction. With one vertex range (one thread), the corners
     // in that order are those of tri itself: no count and no copy. The copy
     // round also fills alive_ and scans its triangles for the first list of
-    // bad ones (bad_triangles' scan, fused: tri is read once); the list
-    // round, once a vertex range's lists are complete, marks its irregular
-    // vertices (mark_irregular, fused: the lists are still in cache).
+    // bad ones (bad_triangles' scan, fused: tri is read once).
     {
       // Vertex ranges of 2^shift vertices (a shift, not a division, per corner).
       const std::size_t want = std::max(chunk_count(nt, 16384), chunk_count(nv, 16384));
@@ -332,7 +330,6 @@ class Cleaner {
       start_.resize(nv + 1);
       start_[0] = 0;
       if (sorted) incident_.resize(corners.size());
-      irregular_.resize(nv);  // (every vertex written below, by its range's thread)
       on_threads(parts, [&](std::size_t r) {
         const std::size_t vb = r << shift, ve = std::min(nv, (r + 1) << shift);
         const std::size_t cb = sorted ? at[r * tparts] : 0, ce = sorted ? at[(r + 1) * tparts] : 3 * nt;
@@ -344,8 +341,7 @@ class Cleaner {
         }
         // (start_[vb] belongs to the range before: its lists start at cb.)
         std::vector<std::uint32_t> fill(ve - vb);
-        const std::size_t pos0 = sorted ? cb : 0;
-        std::size_t pos = pos0;
+        std::size_t pos = sorted ? cb : 0;
         for (std::size_t v = vb; v < ve; ++v) {
           fill[v - vb] = std::uint32_t(pos);
           pos += start_[v + 1];
@@ -356,12 +352,12 @@ class Cleaner {
           const std::uint32_t c = corner(i), v = tri[c];
           if (sorted || v < nv) incident_[fill[v - vb]++] = c / 3;
         }
-        // (start_[vb] may still be written by the range before: this
-        // range's first list starts at pos0.)
-        mark_irregular(vb, ve, std::uint32_t(pos0));
       });
       host_trace("clean-up: incidence lists", nt);
     }
+    // (Not in the list round: its vertex ranges are powers of two, uneven
+    // on a few threads, and fewer than the threads on many.)
+    mark_irregular();
     host_trace("clean-up: irregular vertices", nv);
   }
 
@@ -394,8 +390,6 @@ class Cleaner {
     if (c) out.emplace_back(-c, s.sin_min_angle, t);
   }
 
-  // Bad triangles now: (class, sin of the smallest angle, index), worst first.
-  // (A scan on all host threads; the sort makes the list independent of them.)
   // The constructor's scan (the same list as bad_triangles() before any
   // repair), once; then bad_triangles().
   BadList initial_bad_triangles() {
@@ -403,6 +397,8 @@ class Cleaner {
     has_initial_bad_ = false;
     return std::move(initial_bad_);
   }
+  // Bad triangles now: (class, sin of the smallest angle, index), worst first.
+  // (A scan on all host threads; the sort makes the list independent of them.)
   BadList bad_triangles() const {
     const std::size_t chunks = chunk_count(nt_, 16384);
     std::vector<std::vector<std::tuple<int, double, std::uint32_t>>> part(chunks);
@@ -984,15 +980,13 @@ class Cleaner {
   // direction (two triangles, opposite orientations) and its triangles form
   // one closed fan; the others, and the vertices of triangles that repeat a
   // vertex, are never touched.
-  // (Vertices [vb, ve), on the calling thread; irregular_ sized. first:
-  // where vb's list starts, read not from start_[vb], which belongs to the
-  // vertex range before and may not be written yet.)
-  void mark_irregular(std::size_t vb, std::size_t ve, std::uint32_t first) {
-    {
+  void mark_irregular() {
+    irregular_.resize(nv_);  // (every vertex written below, by its chunk's thread)
+    for_chunks(nv_, chunk_count(nv_, 16384), [&](std::size_t, std::size_t vb, std::size_t ve) {
       std::vector<std::pair<std::uint32_t, std::uint32_t>> in;  // (previous vertex, local index)
       std::vector<std::uint32_t> out;                           // next vertex, by local index
       for (std::size_t v = vb; v < ve; ++v) {
-        const std::uint32_t b = v == vb ? first : start_[v], e = start_[v + 1];
+        const std::uint32_t b = start_[v], e = start_[v + 1];
         // Almost every fan is small: one_closed_fan's small case on the
         // stack, without the vectors.
         if (e - b <= kSmallFan) {
@@ -1013,7 +1007,7 @@ class Cleaner {
         if (ok) ok = one_closed_fan(in, out);
         irregular_[v] = ok ? 0 : 1;
       }
-    }
+    });
   }
 
   // mark_irregular's test for v with a list [b, e) of at most kSmallFan
