@@ -140,6 +140,8 @@ std::pair<std::size_t, std::size_t> compact_mesh(Real* positions, float* normals
   pc.starts();
   nc.dst = pc.dst;  // (the same chunks and vertices)
   tc.starts();
+  // Nothing removed: every item stays where it is (no remap, no copy).
+  if (pc.dst[pc.chunks] == nv && tc.dst[tc.chunks] == nt) return {nv, nt};
   // New vertex numbers: the used vertices before each one (pc's D_k).
   std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>> remap(nv);  // (every entry written below)
   const std::size_t rounds = std::max(pc.chunks, tc.chunks);

@@ -241,9 +241,7 @@ class Cleaner {
     // microseconds per 4 KiB page, which one thread writing them all (as a
     // value-initialized std::vector does) pays alone. Each vertex chunk also
     // finds its part of the bounding box.
-    for_chunks(nt, chunk_count(nt, 65536), [&](std::size_t, std::size_t b, std::size_t e) {
-      std::fill(alive_.begin() + b, alive_.begin() + e, std::uint8_t(1));
-    });
+    // (alive_ is filled by the triangle round of the incidence build below.)
     const std::size_t vchunks = chunk_count(nv, 65536);
     std::vector<std::array<double, 6>> box(vchunks);  // lo, hi
     for_chunks(nv, vchunks, [&](std::size_t k, std::size_t b, std::size_t e) {
@@ -279,57 +277,94 @@ class Cleaner {
     // range of triangles by vertex range (a count, then a copy into one array
     // ordered by vertex range, then triangle range), and each thread fills
     // the lists of its vertex range from its part of that array, in triangle
-    // order by construction.
+    // order by construction. With one vertex range (one thread), the corners
+    // in that order are those of tri itself: no count and no copy. The copy
+    // round also fills alive_ and scans its triangles for the first list of
+    // bad ones (bad_triangles' scan, fused: tri is read once).
     {
-      // Vertex ranges of 2^shift vertices (a shift, not a division, per corner).
+      // Vertex ranges of 2^shift vertices (a shift, not a division, per
+      // corner), about 8 per thread: the list round gives each thread a
+      // run of them (one range per thread, a power of two, left them
+      // uneven: 62/38 % of the vertices on 2 threads, 13 ranges on 16).
       const std::size_t want = std::max(chunk_count(nt, 16384), chunk_count(nv, 16384));
+      const std::size_t per_thread = want > 1 ? 8 : 1;
       int shift = 0;
-      while ((std::size_t(1) << shift) * want < nv) ++shift;
+      while ((std::size_t(1) << shift) * want * per_thread < nv) ++shift;
       const std::size_t parts = std::max<std::size_t>(1, (nv + (std::size_t(1) << shift) - 1) >> shift);
+      const std::size_t groups = std::min(want, parts);  // the list round's threads
       const std::size_t tparts = want;  // triangle ranges
+      const bool sorted = parts > 1;    // false: corner i is i itself
       std::vector<std::size_t> at(parts * tparts + 1, 0);  // [vertex range][triangle range]
-      for_chunks(nt, tparts, [&](std::size_t k, std::size_t b, std::size_t e) {
-        std::vector<std::size_t> n(parts, 0);
-        for (std::size_t i = 3 * b; i < 3 * e; ++i)
-          if (tri[i] < nv) ++n[tri[i] >> shift];
-        for (std::size_t r = 0; r < parts; ++r) at[r * tparts + k + 1] = n[r];
-      });
-      for (std::size_t i = 0; i < parts * tparts; ++i) at[i + 1] += at[i];
+      if (sorted) {
+        for_chunks(nt, tparts, [&](std::size_t k, std::size_t b, std::size_t e) {
+          std::vector<std::size_t> n(parts, 0);
+          for (std::size_t i = 3 * b; i < 3 * e; ++i)
+            if (tri[i] < nv) ++n[tri[i] >> shift];
+          for (std::size_t r = 0; r < parts; ++r) at[r * tparts + k + 1] = n[r];
+        });
+        for (std::size_t i = 0; i < parts * tparts; ++i) at[i + 1] += at[i];
+      }
       // A corner is its index in tri (3 t + c, 32 bits as incident_'s
       // offsets): its vertex is read again from tri, its triangle is a
       // third of it. Half the bytes of storing both (fewer fresh pages to
       // map, less to write and read back), and tri's reads stay local.
-      std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>> corners(at[parts * tparts]);
+      std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>> corners(sorted ? at[parts * tparts] : 0);
+      std::vector<BadList> bad(tparts);
       for_chunks(nt, tparts, [&](std::size_t k, std::size_t b, std::size_t e) {
-        std::vector<std::size_t> w(parts);
-        for (std::size_t r = 0; r < parts; ++r) w[r] = at[r * tparts + k];
-        for (std::size_t i = 3 * b; i < 3 * e; ++i) {
-          const std::uint32_t v = tri[i];
-          if (v < nv) corners[w[v >> shift]++] = std::uint32_t(i);
+        std::fill(alive_.begin() + b, alive_.begin() + e, std::uint8_t(1));
+        if (sorted) {
+          std::vector<std::size_t> w(parts);
+          for (std::size_t r = 0; r < parts; ++r) w[r] = at[r * tparts + k];
+          for (std::size_t i = 3 * b; i < 3 * e; ++i) {
+            const std::uint32_t v = tri[i];
+            if (v < nv) corners[w[v >> shift]++] = std::uint32_t(i);
+          }
+        }
+        // (As bad_triangles(), every triangle alive.)
+        for (std::size_t t = b; t < e; ++t) {
+          const std::uint32_t* v = tri + 3 * t;
+          if (surely_good(load(P_, v[0]), load(P_, v[1]), load(P_, v[2]), degenerate_double_area_)) continue;
+          add_if_bad(std::uint32_t(t), bad[k]);
         }
       });
+      for (const auto& q : bad) initial_bad_.insert(initial_bad_.end(), q.begin(), q.end());
+      std::sort(initial_bad_.begin(), initial_bad_.end());
+      has_initial_bad_ = true;
       host_trace("clean-up: incidence corners", nt);
       // (start_ unwritten: each thread clears its own range of it.)
       start_.resize(nv + 1);
       start_[0] = 0;
-      incident_.resize(corners.size());
-      on_threads(parts, [&](std::size_t r) {
-        const std::size_t vb = r << shift, ve = std::min(nv, (r + 1) << shift);
-        const std::size_t cb = at[r * tparts], ce = at[(r + 1) * tparts];
+      if (sorted) incident_.resize(corners.size());
+      on_threads(groups, [&](std::size_t g) {
+        // (Ranges [r0, r1): their corners lie together, by range, then
+        // triangle range, so in triangle order for each vertex.)
+        const std::size_t r0 = parts * g / groups, r1 = parts * (g + 1) / groups;
+        const std::size_t vb = r0 << shift, ve = std::min(nv, r1 << shift);
+        const std::size_t cb = sorted ? at[r0 * tparts] : 0, ce = sorted ? at[r1 * tparts] : 3 * nt;
+        auto corner = [&](std::size_t i) { return sorted ? corners[i] : std::uint32_t(i); };
         std::fill(start_.begin() + vb + 1, start_.begin() + ve + 1, 0u);
-        for (std::size_t i = cb; i < ce; ++i) ++start_[tri[corners[i]] + 1];
+        for (std::size_t i = cb; i < ce; ++i) {
+          const std::uint32_t v = tri[corner(i)];
+          if (sorted || v < nv) ++start_[v + 1];
+        }
         // (start_[vb] belongs to the range before: its lists start at cb.)
         std::vector<std::uint32_t> fill(ve - vb);
-        std::size_t pos = cb;
+        std::size_t pos = sorted ? cb : 0;
         for (std::size_t v = vb; v < ve; ++v) {
           fill[v - vb] = std::uint32_t(pos);
           pos += start_[v + 1];
           start_[v + 1] = std::uint32_t(pos);
         }
-        for (std::size_t i = cb; i < ce; ++i) incident_[fill[tri[corners[i]] - vb]++] = corners[i] / 3;
+        if (!sorted) incident_.resize(pos);  // (one range, one thread: this one)
+        for (std::size_t i = cb; i < ce; ++i) {
+          const std::uint32_t c = corner(i), v = tri[c];
+          if (sorted || v < nv) incident_[fill[v - vb]++] = c / 3;
+        }
       });
       host_trace("clean-up: incidence lists", nt);
     }
+    // (Not in the list round: its vertex ranges are powers of two, uneven
+    // on a few threads, and fewer than the threads on many.)
     mark_irregular();
     host_trace("clean-up: irregular vertices", nv);
   }
@@ -363,6 +398,13 @@ class Cleaner {
     if (c) out.emplace_back(-c, s.sin_min_angle, t);
   }
 
+  // The constructor's scan (the same list as bad_triangles() before any
+  // repair), once; then bad_triangles().
+  BadList initial_bad_triangles() {
+    if (!has_initial_bad_) return bad_triangles();
+    has_initial_bad_ = false;
+    return std::move(initial_bad_);
+  }
   // Bad triangles now: (class, sin of the smallest angle, index), worst first.
   // (A scan on all host threads; the sort makes the list independent of them.)
   BadList bad_triangles() const {
@@ -2532,6 +2574,9 @@ class Cleaner {
   std::vector<std::uint32_t>& extra_head_ = extra_head_own_;  // per vertex, into extra_ (after flips)
   Extra& extra_ = extra_own_;                                 // (triangle, next entry)
   double degenerate_double_area_ = 0;
+  // The constructor's scan (initial_bad_triangles).
+  std::vector<std::tuple<int, double, std::uint32_t>> initial_bad_;
+  bool has_initial_bad_ = false;
   std::vector<std::uint32_t> fa_, fb_, ra_, rb_, common_, scratch_, around_, cluster_;
   // prepare_positions: the old class and normal of each triangle of around_,
   // and their sum.
@@ -2603,7 +2648,7 @@ CleanupResult cleanup_mesh(PosVec& positions, NormalVec& normals, IndexVec& tria
   // they never pre-empt a repair that keeps more of the mesh.
   // One scan of the whole mesh; after it, each pass looks again only at what
   // was bad and what the repairs changed (bad_triangles_after).
-  auto bad = c.bad_triangles();
+  auto bad = c.initial_bad_triangles();
   r.bad_before = bad.size();
   host_trace("clean-up: scan", bad.size());
   auto passes = [&] {
