@@ -311,7 +311,7 @@ void grow_band(const ExecSpace& space, MemoryTracker& tracker, const Grid& g,
               KOKKOS_LAMBDA(const std::size_t w, const int bit, const std::int64_t self, const std::uint64_t complete) {
                 std::int64_t i, j, k, out[18];
                 bv.vertex(w, bit, i, j, k);
-                const int n = leaks_at_host(bv, cur_phi, i, j, k, self, out, std::uint32_t(w >> 3), bit, complete);
+                const int n = leaks_at(bv, cur_phi, i, j, k, self, out, std::uint32_t(w >> 3), bit, complete);
                 if (n) rec.add_leaks(bv, out, n);
               });
         } else {

@@ -284,10 +284,16 @@ McResult classify_cells(const ExecSpace& space, MemoryTracker& tracker,
 // minimum corners of the neighbour cells across its mixed faces that are not
 // entirely in the band (at most 6 cells, written to out); 0 if the cell is
 // not triangulated. Face f: axis a = f / 2, side = f % 2 (0: at the minimum).
+// The host scan (for_each_mixed_cell_host) passes the cell's bit in its word
+// and the word's `complete` mask: a face neighbour whose minimum corner lies
+// in the same word is then known to be entirely in the band when its bit of
+// `complete` is set (its corners' band bits are set, and the grid check
+// below holds), without the 8 look-ups (bit < 0: always the look-ups).
 template <class MemSpace>
 KOKKOS_INLINE_FUNCTION int leaks_at(const BandView<MemSpace>& band, const Kokkos::View<const float*, MemSpace>& phi,
                                     std::int64_t i, std::int64_t j, std::int64_t k, std::int64_t self,
-                                    std::int64_t out[18], std::uint32_t block = ~0u) {
+                                    std::int64_t out[18], std::uint32_t block = ~0u, int bit = -1,
+                                    std::uint64_t complete = 0) {
   std::int64_t idx[8];
   if (!band.owns_cell(i, j, k) || !cell_corners(band, i, j, k, self, idx, block)) return 0;
   int cs = 0;
@@ -304,6 +310,10 @@ KOKKOS_INLINE_FUNCTION int leaks_at(const BandView<MemSpace>& band, const Kokkos
                        nk = k + (a == 2 ? (side ? 1 : -1) : 0);
     if (ni < 0 || nj < 0 || nk < 0 || ni + 1 >= band.dims[0] || nj + 1 >= band.dims[1] || nk + 1 >= band.dims[2])
       continue;  // the grid's own boundary (padded: only reached with a clipping box)
+    if (bit >= 0) {
+      const int nl = ((bit >> (2 * a)) & 3) + (side ? 1 : -1);
+      if (nl >= 0 && nl < 4 && ((complete >> (bit + (side ? 1 : -1) * (1 << (2 * a)))) & 1)) continue;
+    }
     std::int64_t nidx[8];
     if (band.cell_indices(ni, nj, nk, 0, nidx)) continue;  // entirely in the band
     out[3 * n] = ni;
@@ -314,44 +324,6 @@ KOKKOS_INLINE_FUNCTION int leaks_at(const BandView<MemSpace>& band, const Kokkos
   return n;
 }
 
-// leaks_at for the host scan (for_each_mixed_cell_host): the same result,
-// but a face neighbour whose minimum corner lies in the same word (bit nbit)
-// is known to be entirely in the band when bit nbit of `complete` is set
-// (its corners' band bits are set, and the grid check above holds), without
-// the 8 look-ups; otherwise the full test as in leaks_at.
-template <class MemSpace>
-KOKKOS_INLINE_FUNCTION int leaks_at_host(const BandView<MemSpace>& band,
-                                         const Kokkos::View<const float*, MemSpace>& phi, std::int64_t i,
-                                         std::int64_t j, std::int64_t k, std::int64_t self, std::int64_t out[18],
-                                         std::uint32_t block, int bit, std::uint64_t complete) {
-  std::int64_t idx[8];
-  if (!band.owns_cell(i, j, k) || !cell_corners(band, i, j, k, self, idx, block)) return 0;
-  int cs = 0;
-  for (int c = 0; c < 8; ++c) cs |= (phi(idx[c]) < 0.f ? 1 : 0) << c;
-  if (cs == 0 || cs == 255) return 0;
-  const int local[3] = {bit & 3, (bit >> 2) & 3, bit >> 4};
-  int n = 0;
-  for (int f = 0; f < 6; ++f) {
-    const int a = f >> 1, side = f & 1;
-    int inside = 0;
-    for (int c = 0; c < 8; ++c)
-      if (((c >> a) & 1) == side) inside += (cs >> c) & 1;
-    if (inside == 0 || inside == 4) continue;
-    const std::int64_t ni = i + (a == 0 ? (side ? 1 : -1) : 0), nj = j + (a == 1 ? (side ? 1 : -1) : 0),
-                       nk = k + (a == 2 ? (side ? 1 : -1) : 0);
-    if (ni < 0 || nj < 0 || nk < 0 || ni + 1 >= band.dims[0] || nj + 1 >= band.dims[1] || nk + 1 >= band.dims[2])
-      continue;  // the grid's own boundary (padded: only reached with a clipping box)
-    const int nl = local[a] + (side ? 1 : -1);
-    if (nl >= 0 && nl < 4 && ((complete >> (bit + (side ? 1 : -1) * (1 << (2 * a)))) & 1)) continue;
-    std::int64_t nidx[8];
-    if (band.cell_indices(ni, nj, nk, 0, nidx)) continue;  // entirely in the band
-    out[3 * n] = ni;
-    out[3 * n + 1] = nj;
-    out[3 * n + 2] = nk;
-    ++n;
-  }
-  return n;
-}
 
 // Band leaks: cells that are triangulated (all corners in the band, mixed
 // signs) and have a face with mixed signs whose neighbour cell across it is

@@ -1777,6 +1777,18 @@ class Cleaner {
     return s_new.sin_min_angle;
   }
 
+  // How far a triangle that was good stays from the rules' limits when its
+  // corners go from o to q: the least of its smallest angle's sine above
+  // sin 1 degree and its normal's cosine to its old one above cos_limit
+  // (negative: a rule broken); 1 (no bound) for a triangle that was bad.
+  double good_triangle_margin(const Vec3 o[3], const Vec3 q[3]) const {
+    if (triangle_class(triangle_shape(o[0], o[1], o[2]), degenerate_double_area_) != 0) return 1;
+    const Vec3 n_new = cross(q[1] - q[0], q[2] - q[0]), n_old = cross(o[1] - o[0], o[2] - o[0]);
+    const double ln = norm(n_new) * norm(n_old);
+    return std::min(triangle_shape(q[0], q[1], q[2]).sin_min_angle - kSinOneDegree,
+                    ln > 0 ? dot(n_new, n_old) / ln - cos_limit : -1.0);
+  }
+
   void consider_cluster(std::uint32_t t, ClusterCandidate& best) {
     const std::uint32_t* v = T_ + 3 * std::size_t(t);
     int k_short = 0;
@@ -1986,11 +1998,7 @@ class Cleaner {
                 o[k] = load(P_, T_[3 * std::size_t(r.first) + k]);
                 q[k] = in_k(r.second[k]) ? p : o[k];
               }
-              if (triangle_class(triangle_shape(o[0], o[1], o[2]), degenerate_double_area_) != 0) continue;
-              const Vec3 n_new = cross(q[1] - q[0], q[2] - q[0]), n_old = cross(o[1] - o[0], o[2] - o[0]);
-              const double ln = norm(n_new) * norm(n_old);
-              m = std::min({m, triangle_shape(q[0], q[1], q[2]).sin_min_angle - kSinOneDegree,
-                            ln > 0 ? dot(n_new, n_old) / ln - cos_limit : -1.0});
+              m = std::min(m, good_triangle_margin(o, q));
             }
             return m;
           };
@@ -2254,11 +2262,7 @@ class Cleaner {
         for (const auto& r : cand.rewritten) {
           Vec3 q[3], o3[3];
           shapes(r, q, o3);
-          if (triangle_class(triangle_shape(o3[0], o3[1], o3[2]), degenerate_double_area_) != 0) continue;
-          const Vec3 n_new = cross(q[1] - q[0], q[2] - q[0]), n_old = cross(o3[1] - o3[0], o3[2] - o3[0]);
-          const double ln = norm(n_new) * norm(n_old);
-          m = std::min({m, triangle_shape(q[0], q[1], q[2]).sin_min_angle - kSinOneDegree,
-                        ln > 0 ? dot(n_new, n_old) / ln - cos_limit : -1.0});
+          m = std::min(m, good_triangle_margin(o3, q));
         }
         return m;
       };
