@@ -1789,6 +1789,35 @@ class Cleaner {
                     ln > 0 ? dot(n_new, n_old) / ln - cos_limit : -1.0);
   }
 
+  // The pattern search of the cluster and strip merges, for a point that
+  // none of their listed points gives: from p (margin m), a step of h along
+  // the axis direction of largest margin(q) among those that improve it and
+  // stay within reach of centre, h halved when none does, for at most 200
+  // steps and while h > 1e-3 reach; stops at the first p with m > 0 that
+  // accept(p) takes (true), else false. p and m are the last step's.
+  template <class Margin, class Accept>
+  static bool pattern_search(Vec3& p, double& m, double h, const Vec3& centre, double reach, Margin&& margin,
+                             Accept&& accept) {
+    const Vec3 dirs[6] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
+    for (int step = 0; step < 200 && h > 1e-3 * reach; ++step) {
+      int best_dir = -1;
+      double best_m = m;
+      for (int d = 0; d < 6; ++d) {
+        const Vec3 q = p + h * dirs[d];
+        if (norm(q - centre) > reach) continue;
+        const double mq = margin(q);
+        if (mq > best_m) best_m = mq, best_dir = d;
+      }
+      if (best_dir < 0) {
+        h *= 0.5;
+        continue;
+      }
+      p = p + h * dirs[best_dir], m = best_m;
+      if (m > 0 && accept(p)) return true;
+    }
+    return false;
+  }
+
   void consider_cluster(std::uint32_t t, ClusterCandidate& best) {
     const std::uint32_t* v = T_ + 3 * std::size_t(t);
     int k_short = 0;
@@ -2011,23 +2040,8 @@ class Cleaner {
           }
           double h = 0;
           for (std::uint32_t x : K) h = std::max(h, norm(load(P_, x) - centre));
-          const Vec3 dirs[6] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
-          for (int step = 0; step < 200 && h > 1e-3 * reach; ++step) {
-            int best_dir = -1;
-            double best_m = m;
-            for (int d = 0; d < 6; ++d) {
-              const Vec3 q = p + h * dirs[d];
-              if (norm(q - centre) > reach) continue;
-              const double mq = margin(q);
-              if (mq > best_m) best_m = mq, best_dir = d;
-            }
-            if (best_dir < 0) {
-              h *= 0.5;
-              continue;
-            }
-            p = p + h * dirs[best_dir], m = best_m;
-            if (m > 0 && score_at(rounded(p), owner) > 0) break;  // (the first that works)
-          }
+          pattern_search(p, m, h, centre, reach, margin,
+                         [&](const Vec3& q) { return score_at(rounded(q), owner) > 0; });
           if (m > 0) {
             const Vec3 q = rounded(p);
             const double score = score_at(q, owner);
@@ -2267,7 +2281,6 @@ class Cleaner {
         return m;
       };
       auto rounded = [](const Vec3& c) { return Vec3{double(Real(c.x)), double(Real(c.y)), double(Real(c.z))}; };
-      const Vec3 dirs[6] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
       bool ok = false;
       for (std::size_t i = 0; i < ps.size() && !ok; ++i) {
         const std::vector<std::uint32_t>& e = *ends[end_of(cand.loop_vertices[i])];
@@ -2290,29 +2303,18 @@ class Cleaner {
         }
         double h = 0;
         for (std::uint32_t x : e) h = std::max(h, norm(load(P_, x) - centre));
-        for (int step = 0; step < 200 && h > 1e-3 * reach; ++step) {
-          int best_dir = -1;
-          double best_m = m;
-          for (int d = 0; d < 6; ++d) {
-            const Vec3 q = p + h * dirs[d];
-            if (norm(q - centre) > reach) continue;
-            ps[i] = q;
-            const double mq = margin();
-            if (mq > best_m) best_m = mq, best_dir = d;
-          }
-          if (best_dir < 0) {
-            h *= 0.5;
-            ps[i] = p;
-            continue;
-          }
-          p = p + h * dirs[best_dir], m = best_m;
-          ps[i] = rounded(p);
-          if (m > 0 && works()) {
-            ok = true;
-            break;
-          }
-          ps[i] = p;
-        }
+        ok = pattern_search(
+            p, m, h, centre, reach,
+            [&](const Vec3& q) {
+              ps[i] = q;
+              return margin();
+            },
+            [&](const Vec3& q) {
+              ps[i] = rounded(q);
+              const bool w = works();
+              ps[i] = q;
+              return w;
+            });
         ps[i] = rounded(p);
         if (!ok && m > 0 && works()) ok = true;
       }
