@@ -11,7 +11,9 @@
 #include "grid.hpp"
 
 #include <algorithm>
+#include <cstdlib>
 #include <cstring>
+#include <string>
 #include <vector>
 #if defined(_OPENMP)
 #include <parallel/algorithm>
@@ -28,6 +30,12 @@ struct Neighbourhood {
   Buffer<std::uint64_t, MemSpace> cell_keys;
   Buffer<std::uint32_t, MemSpace> cell_start;  // n_cells + 1
   HashMapStorage<MemSpace> cells;              // Morton key -> cell index
+  // Where the neighbour grid is small enough (dense_cells_allowed), the
+  // particle range of every grid cell, packed begin | end << 32 (0 for an
+  // empty cell), indexed x + nx (y + ny z): one load per cell lookup instead
+  // of a Morton key, a hash and a probe. Empty otherwise (the hash map
+  // serves). Both give the same ranges.
+  Buffer<std::uint64_t, MemSpace> dense;
   // Per-particle data of a field method with a pass over the particles (P
   // floats per particle, sorted order: SPH's weight, YT10's kernel; with
   // per-particle radii, SSP07's and ZB05's radius r_j, radii.hpp); empty
@@ -53,10 +61,19 @@ struct NeighbourView {
   // Per-particle radii (radii.hpp; sorted order, empty without them): the
   // radius relative to the largest, t_j, and the kernel's 1 / R_j^2.
   Kokkos::View<const float*, MemSpace> scale, support;
+  // Neighbourhood::dense (empty: look cells up in the hash map).
+  Kokkos::View<const std::uint64_t*, MemSpace> dense;
 
-  // Range of particles of neighbour cell (x, y, z); empty if unoccupied.
+  // Range of particles of neighbour cell (x, y, z), which must lie in the
+  // grid (0 <= x < nb_dims[0], ...); false if the cell is unoccupied.
   KOKKOS_INLINE_FUNCTION bool cell_range(std::int64_t x, std::int64_t y, std::int64_t z, std::uint32_t& b,
                                          std::uint32_t& e) const {
+    if (dense.extent(0) != 0) {
+      const std::uint64_t r = dense(std::size_t(x + nb_dims[0] * (y + nb_dims[1] * z)));
+      b = std::uint32_t(r);
+      e = std::uint32_t(r >> 32);
+      return e != b;
+    }
     const std::uint32_t c = cells.find(morton3(std::uint32_t(x), std::uint32_t(y), std::uint32_t(z)));
     if (c == ~0u) return false;
     b = cell_start(c);
@@ -77,6 +94,7 @@ NeighbourView<MemSpace> view_of(const Neighbourhood<MemSpace>& nb, const Grid& g
   v.pdata = nb.pdata.view();
   v.scale = nb.scale.view();
   v.support = nb.support.view();
+  v.dense = nb.dense.view();
   return v;
 }
 
@@ -121,6 +139,46 @@ void insert_cells(const ExecSpace& space, MemoryTracker& tracker, Neighbourhood<
       KOKKOS_LAMBDA(const std::size_t c) {
         map.insert(keys(c));
         map.values(map.find_slot(keys(c))) = std::uint32_t(c);
+      });
+  space.fence();
+}
+
+// Whether the dense cell table (Neighbourhood::dense) is built for a grid of
+// `dense` cells of which `occupied` hold particles: when it costs at most 8
+// entries (64 bytes) per occupied cell, or 8 MiB. A frame's particles fill
+// most of their bounding box's cells; scattered particles in a huge box keep
+// the hash map alone. NBMC_DENSE_CELLS=0 turns the table off (the results
+// are the same; tests compare both).
+inline bool dense_cells_allowed(std::uint64_t dense, std::size_t occupied) {
+  const char* e = std::getenv("NBMC_DENSE_CELLS");
+  if (e && std::string(e) == "0") return false;
+  return dense <= std::max<std::uint64_t>(std::uint64_t(1) << 20, 8 * std::uint64_t(occupied));
+}
+
+// Builds Neighbourhood::dense from the occupied cells' keys and starts, if
+// dense_cells_allowed.
+template <class ExecSpace>
+void build_dense_cells(const ExecSpace& space, MemoryTracker& tracker, const Grid& g,
+                       Neighbourhood<typename ExecSpace::memory_space>& out) {
+  using MemSpace = typename ExecSpace::memory_space;
+  const std::uint64_t n_dense =
+      std::uint64_t(g.nb_dims[0]) * std::uint64_t(g.nb_dims[1]) * std::uint64_t(g.nb_dims[2]);
+  if (!dense_cells_allowed(n_dense, out.n_cells)) {
+    out.dense = Buffer<std::uint64_t, MemSpace>();
+    return;
+  }
+  out.dense = Buffer<std::uint64_t, MemSpace>(tracker, "neighbourhood::dense_cells", std::size_t(n_dense));
+  Kokkos::deep_copy(space, out.dense.view(), std::uint64_t(0));
+  const auto dense = out.dense.view();
+  const auto keys = out.cell_keys.view();
+  const auto start = out.cell_start.view();
+  const std::uint64_t nx = std::uint64_t(g.nb_dims[0]), ny = std::uint64_t(g.nb_dims[1]);
+  Kokkos::parallel_for(
+      "nbmc::neighbourhood::dense_cells", Kokkos::RangePolicy<ExecSpace>(space, 0, out.n_cells),
+      KOKKOS_LAMBDA(const std::size_t c) {
+        const std::uint64_t k = keys(c);
+        const std::uint64_t x = compact3(k), y = compact3(k >> 1), z = compact3(k >> 2);
+        dense(std::size_t(x + nx * (y + ny * z))) = std::uint64_t(start(c)) | (std::uint64_t(start(c + 1)) << 32);
       });
   space.fence();
 }
@@ -230,6 +288,7 @@ void build_neighbourhood(const ExecSpace& space, MemoryTracker& tracker, const d
   }
   rec.release();
   insert_cells(space, tracker, out);
+  build_dense_cells(space, tracker, g, out);
 }
 
 // Unsigned bits of a float that sort in the float's order (no NaN; -0 is
@@ -362,6 +421,7 @@ void build_neighbourhood_device(const ExecSpace& space, MemoryTracker& tracker,
   space.fence();
   rel.release();
   insert_cells(space, tracker, out);
+  build_dense_cells(space, tracker, g, out);
 }
 
 }  // namespace Details

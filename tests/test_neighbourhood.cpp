@@ -1,0 +1,149 @@
+// SPDX-License-Identifier: MIT
+// The neighbourhood's two cell lookups (backends/kokkos/neighbourhood.hpp):
+// the dense table of particle ranges, built where the neighbour grid is small
+// enough, and the hash map of occupied cells, which always exists. They must
+// give the same range for every cell of the grid, so that the field, the
+// surface particles and the band never depend on which one served.
+#include <gtest/gtest.h>
+
+#include "common.hpp"
+#include "grid.hpp"
+#include "neighbourhood.hpp"
+
+#include <cstdlib>
+#include <random>
+#include <vector>
+
+// The library's definition is not exported; the stages only report progress.
+void nbmc::Progress::operator()(int, double) const {}
+
+namespace {
+
+using namespace nbmc;
+using namespace nbmc::Details;
+using Host = Kokkos::HostSpace;
+using Points = std::vector<double>;
+
+class KokkosEnv : public ::testing::Environment {
+ public:
+  void SetUp() override {
+    Kokkos::InitArguments args;
+    args.num_threads = 2;
+    Kokkos::initialize(args);
+  }
+  void TearDown() override { Kokkos::finalize(); }
+};
+const ::testing::Environment* const kokkos_env = ::testing::AddGlobalTestEnvironment(new KokkosEnv);
+
+Params params(double r) {
+  Params p;  // the C API's defaults, absolute units
+  p.spacing = r;
+  p.cell_size = 0.5 * r;
+  p.influence_radius = 4 * r;
+  p.band_width = 2 * r;
+  p.surface_radius = 2 * r;
+  p.iso_radius = r;
+  return p;
+}
+
+struct Built {
+  Grid g;
+  Neighbourhood<Host> nbh;
+};
+
+void build(const Points& xyz, const Params& p, Built& b) {
+  static MemoryTracker tracker;
+  const std::size_t n = xyz.size() / 3;
+  double lo[3] = {1e300, 1e300, 1e300}, hi[3] = {-1e300, -1e300, -1e300};
+  for (std::size_t i = 0; i < n; ++i)
+    for (int a = 0; a < 3; ++a) {
+      lo[a] = std::min(lo[a], xyz[3 * i + a]);
+      hi[a] = std::max(hi[a], xyz[3 * i + a]);
+    }
+  b.g = make_grid(lo, hi, p);
+  build_neighbourhood(Kokkos::DefaultHostExecutionSpace(), tracker, xyz.data(), n, {}, b.g, b.nbh);
+}
+
+// A jittered ball of particles: it fills most of its bounding box's cells.
+Points ball(double r, int half, unsigned seed) {
+  Points p;
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(-0.3 * r, 0.3 * r);
+  for (int k = -half; k <= half; ++k)
+    for (int j = -half; j <= half; ++j)
+      for (int i = -half; i <= half; ++i)
+        if (i * i + j * j + k * k <= half * half) {
+          p.push_back(i * r + u(rng));
+          p.push_back(j * r + u(rng));
+          p.push_back(k * r + u(rng));
+        }
+  return p;
+}
+
+// Every cell of the grid: the dense table and the hash map agree, and every
+// particle lies in the range of its own cell.
+void expect_same_ranges(const Built& b) {
+  const NeighbourView<Host> dense = view_of(b.nbh, b.g);
+  NeighbourView<Host> hashed = dense;
+  hashed.dense = {};
+  std::size_t occupied = 0, particles = 0;
+  for (std::int64_t z = 0; z < b.g.nb_dims[2]; ++z)
+    for (std::int64_t y = 0; y < b.g.nb_dims[1]; ++y)
+      for (std::int64_t x = 0; x < b.g.nb_dims[0]; ++x) {
+        std::uint32_t b0 = 7, e0 = 7, b1 = 9, e1 = 9;
+        const bool in_dense = dense.cell_range(x, y, z, b0, e0);
+        const bool in_hash = hashed.cell_range(x, y, z, b1, e1);
+        ASSERT_EQ(in_dense, in_hash) << "cell " << x << " " << y << " " << z;
+        if (!in_hash) continue;
+        EXPECT_EQ(b0, b1);
+        EXPECT_EQ(e0, e1);
+        EXPECT_LT(b1, e1);
+        ++occupied;
+        particles += e1 - b1;
+      }
+  EXPECT_EQ(occupied, b.nbh.n_cells);
+  EXPECT_EQ(particles, b.nbh.n);
+}
+
+TEST(Neighbourhood, DenseTableAndHashMapGiveTheSameRanges) {
+  const double r = 0.05;
+  Built b;
+  build(ball(r, 9, 3), params(r), b);
+  ASSERT_GT(b.nbh.dense.size(), 0u) << "a compact ball must get the dense table";
+  expect_same_ranges(b);
+}
+
+TEST(Neighbourhood, ScatteredParticlesKeepTheHashMapAlone) {
+  // Two small balls, 2,000 r apart in x and 300 r in y and z: neighbour
+  // cells are R/2 = 2 r wide, so the grid has about 1,000 x 150 x 150 cells,
+  // of which a few hundred are occupied.
+  const double r = 0.05;
+  Points p = ball(r, 3, 4), q = ball(r, 3, 5);
+  for (std::size_t i = 0; i < q.size(); i += 3) q[i] += 2000 * r, q[i + 1] += 300 * r, q[i + 2] += 300 * r;
+  p.insert(p.end(), q.begin(), q.end());
+  Built b;
+  build(p, params(r), b);
+  EXPECT_EQ(b.nbh.dense.size(), 0u);
+  // The lookups still find every particle (hash map); only the occupied
+  // cells are visited, the grid is too large to walk.
+  const NeighbourView<Host> v = view_of(b.nbh, b.g);
+  std::size_t found = 0;
+  for (std::size_t c = 0; c < b.nbh.n_cells; ++c) {
+    const std::uint64_t k = b.nbh.cell_keys.view()(c);
+    std::uint32_t b0, e0;
+    ASSERT_TRUE(v.cell_range(compact3(k), compact3(k >> 1), compact3(k >> 2), b0, e0));
+    found += e0 - b0;
+  }
+  EXPECT_EQ(found, b.nbh.n);
+}
+
+TEST(Neighbourhood, DenseTableCanBeTurnedOff) {
+  const double r = 0.05;
+  setenv("NBMC_DENSE_CELLS", "0", 1);
+  Built b;
+  build(ball(r, 5, 6), params(r), b);
+  unsetenv("NBMC_DENSE_CELLS");
+  EXPECT_EQ(b.nbh.dense.size(), 0u);
+}
+
+}  // namespace
