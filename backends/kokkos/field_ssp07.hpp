@@ -43,11 +43,12 @@ template <bool Radii>
 struct FieldSSP07T {
   static constexpr const char* name = "ssp07";
   // a[0] = W = sum k^3, a[1..3] = sum k^3 d, a[4..6] = sum k^2 d (grad k without 6/R^2),
-  // a[7..15] = sum d_a k^2 d_b (row-major); radii: a[4..15] times q_j, a[16] = sum k^3 r_j
+  // a[7..12] = sum d_a k^2 d_b, a symmetric matrix: its upper triangle, (a, b) =
+  // 00, 01, 02, 11, 12, 22; radii: a[4..12] times q_j, a[13] = sum k^3 r_j
   static constexpr int P = Radii ? 1 : 0;  // radii: the particle's radius r_j
   static constexpr bool radii = Radii;
-  static constexpr int RS = 16;                // radii: sum k^3 r_j
-  static constexpr int KM = Radii ? 17 : 16;   // largest k (the distance guard)
+  static constexpr int RS = 13;                // radii: sum k^3 r_j
+  static constexpr int KM = Radii ? 14 : 13;   // largest k (the distance guard)
   static constexpr int N = KM + 1;
   // T is float, or a host SIMD vector of floats (same formula, lane-wise).
   template <class T>
@@ -71,8 +72,8 @@ struct FieldSSP07T {
     a[5] += gy;
     a[6] += gz;
     a[7] += dx * gx; a[8] += dx * gy; a[9] += dx * gz;
-    a[10] += dy * gx; a[11] += dy * gy; a[12] += dy * gz;
-    a[13] += dz * gx; a[14] += dz * gy; a[15] += dz * gz;
+    a[10] += dy * gy; a[11] += dy * gz;
+    a[12] += dz * gz;
   }
   // Adds particles [b, e) (SoA coordinates) at vertex x, one after the other (the
   // order of the sums is part of the result: see field_common.hpp); returns how
@@ -82,8 +83,7 @@ struct FieldSSP07T {
                                                          std::uint32_t e, float x0, float x1, float x2,
                                                          float inv_R2) {
     float w0 = a[0], d0 = a[1], d1 = a[2], d2 = a[3], g0 = a[4], g1 = a[5], g2 = a[6];
-    float m00 = a[7], m01 = a[8], m02 = a[9], m10 = a[10], m11 = a[11], m12 = a[12], m20 = a[13], m21 = a[14],
-          m22 = a[15];
+    float m00 = a[7], m01 = a[8], m02 = a[9], m11 = a[10], m12 = a[11], m22 = a[12];
     float rs = Radii ? a[RS] : 0.f;
     float km = a[KM];
     std::uint32_t count = 0;
@@ -109,12 +109,12 @@ struct FieldSSP07T {
       g1 += gy;
       g2 += gz;
       m00 += dx * gx; m01 += dx * gy; m02 += dx * gz;
-      m10 += dy * gx; m11 += dy * gy; m12 += dy * gz;
-      m20 += dz * gx; m21 += dz * gy; m22 += dz * gz;
+      m11 += dy * gy; m12 += dy * gz;
+      m22 += dz * gz;
       km = lane_max(km, k);
     }
     a[0] = w0; a[1] = d0; a[2] = d1; a[3] = d2; a[4] = g0; a[5] = g1; a[6] = g2;
-    a[7] = m00; a[8] = m01; a[9] = m02; a[10] = m10; a[11] = m11; a[12] = m12; a[13] = m20; a[14] = m21; a[15] = m22;
+    a[7] = m00; a[8] = m01; a[9] = m02; a[10] = m11; a[11] = m12; a[12] = m22;
     if constexpr (Radii) a[RS] = rs;
     a[KM] = km;
     (void)Rj;
@@ -126,9 +126,12 @@ struct FieldSSP07T {
     const float s = Radii ? 6.f * inv : 6.f * c.inv_R2 * inv;
     const float db[3] = {a[1] * inv, a[2] * inv, a[3] * inv};
     const float g[3] = {a[4], a[5], a[6]};
+    // sum d_a k^2 d_b is symmetric (one sum per pair, a[7..12]); the
+    // Jacobian is not, through dbar_a (grad k)_b.
+    const int m[9] = {7, 8, 9, 8, 10, 11, 9, 11, 12};
     float J[9];
     for (int r = 0; r < 3; ++r)
-      for (int q = 0; q < 3; ++q) J[3 * r + q] = s * (a[7 + 3 * r + q] - db[r] * g[q]);
+      for (int q = 0; q < 3; ++q) J[3 * r + q] = s * (a[m[3 * r + q]] - db[r] * g[q]);
     return largest_eigenvalue_sym3(J[0], J[4], J[8], 0.5f * (J[1] + J[3]), 0.5f * (J[2] + J[6]),
                                    0.5f * (J[5] + J[7]));
   }
