@@ -1,10 +1,12 @@
 // SPDX-License-Identifier: MIT
-// Neighbourhood: particle handlers sorted by the z-order (Morton) key of their
-// neighbour-grid cell (cell size S = max(R/2, surface radius), grid.hpp), then by position, so that the order
-// (and every sum over it) is independent of the input order. Occupied cells are
-// kept as a sorted list with start indices and a hash map key -> cell, so memory
-// follows the particles, never the bounding box (the paper's startIndices array
-// is dense; ours is not).
+// Neighbourhood: particle handlers sorted by the key of their neighbour-grid
+// cell (cell size S = max(R/2, surface radius), grid.hpp; the key is the
+// cell's row-major index x + nx (y + ny z), so that the cells of one row in x
+// are consecutive), then by position, so that the order (and every sum over
+// it) is independent of the input order. Occupied cells are kept as a sorted
+// list with start indices and a hash map key -> cell, so memory follows the
+// particles, never the bounding box; where the grid is small enough, a dense
+// table of start indices (the paper's startIndices array) serves the lookups.
 #pragma once
 
 #include "common.hpp"
@@ -29,13 +31,14 @@ struct Neighbourhood {
   Buffer<std::uint32_t, MemSpace> perm;   // sorted index -> uploaded index
   Buffer<std::uint64_t, MemSpace> cell_keys;
   Buffer<std::uint32_t, MemSpace> cell_start;  // n_cells + 1
-  HashMapStorage<MemSpace> cells;              // Morton key -> cell index
+  HashMapStorage<MemSpace> cells;              // cell key -> cell index
   // Where the neighbour grid is small enough (dense_cells_allowed), the
-  // particle range of every grid cell, packed begin | end << 32 (0 for an
-  // empty cell), indexed x + nx (y + ny z): one load per cell lookup instead
-  // of a Morton key, a hash and a probe. Empty otherwise (the hash map
-  // serves). Both give the same ranges.
-  Buffer<std::uint64_t, MemSpace> dense;
+  // start of every grid cell's particles, by cell key, and n at the end
+  // (empty cells start where the next occupied one does): one load per cell
+  // lookup instead of a hash and a probe, and a whole row of cells in x is
+  // one range. Empty otherwise (the hash map serves). Both give the same
+  // ranges.
+  Buffer<std::uint32_t, MemSpace> dense_start;
   // Per-particle data of a field method with a pass over the particles (P
   // floats per particle, sorted order: SPH's weight, YT10's kernel; with
   // per-particle radii, SSP07's and ZB05's radius r_j, radii.hpp); empty
@@ -45,6 +48,19 @@ struct Neighbourhood {
   Buffer<float, MemSpace> scale;    // t_j = r_j / r_max, in (0, 1]
   Buffer<float, MemSpace> support;  // 1 / R_j^2, R_j = R t_j
 };
+
+// The key of neighbour cell (x, y, z): its row-major index in the grid.
+KOKKOS_INLINE_FUNCTION std::uint64_t neighbour_cell_key(std::int64_t x, std::int64_t y, std::int64_t z,
+                                                        const std::int64_t dims[3]) {
+  return std::uint64_t(x) + std::uint64_t(dims[0]) * (std::uint64_t(y) + std::uint64_t(dims[1]) * std::uint64_t(z));
+}
+KOKKOS_INLINE_FUNCTION void neighbour_cell_of_key(std::uint64_t key, const std::int64_t dims[3], std::int64_t& x,
+                                                  std::int64_t& y, std::int64_t& z) {
+  const std::uint64_t row = key / std::uint64_t(dims[0]);
+  x = std::int64_t(key - row * std::uint64_t(dims[0]));
+  z = std::int64_t(row / std::uint64_t(dims[1]));
+  y = std::int64_t(row - std::uint64_t(z) * std::uint64_t(dims[1]));
+}
 
 // Read-only device view of a neighbourhood for kernels.
 template <class MemSpace>
@@ -61,24 +77,35 @@ struct NeighbourView {
   // Per-particle radii (radii.hpp; sorted order, empty without them): the
   // radius relative to the largest, t_j, and the kernel's 1 / R_j^2.
   Kokkos::View<const float*, MemSpace> scale, support;
-  // Neighbourhood::dense (empty: look cells up in the hash map).
-  Kokkos::View<const std::uint64_t*, MemSpace> dense;
+  // Neighbourhood::dense_start (empty: look cells up in the hash map).
+  Kokkos::View<const std::uint32_t*, MemSpace> dense_start;
 
+  KOKKOS_INLINE_FUNCTION std::uint64_t key(std::int64_t x, std::int64_t y, std::int64_t z) const {
+    return neighbour_cell_key(x, y, z, nb_dims);
+  }
   // Range of particles of neighbour cell (x, y, z), which must lie in the
   // grid (0 <= x < nb_dims[0], ...); false if the cell is unoccupied.
   KOKKOS_INLINE_FUNCTION bool cell_range(std::int64_t x, std::int64_t y, std::int64_t z, std::uint32_t& b,
                                          std::uint32_t& e) const {
-    if (dense.extent(0) != 0) {
-      const std::uint64_t r = dense(std::size_t(x + nb_dims[0] * (y + nb_dims[1] * z)));
-      b = std::uint32_t(r);
-      e = std::uint32_t(r >> 32);
+    if (dense_start.extent(0) != 0) {
+      const std::size_t d = std::size_t(key(x, y, z));
+      b = dense_start(d);
+      e = dense_start(d + 1);
       return e != b;
     }
-    const std::uint32_t c = cells.find(morton3(std::uint32_t(x), std::uint32_t(y), std::uint32_t(z)));
+    const std::uint32_t c = cells.find(key(x, y, z));
     if (c == ~0u) return false;
     b = cell_start(c);
     e = cell_start(c + 1);
     return true;
+  }
+  // With the dense table only: the particles of cells x0..x1 of row (y, z),
+  // one range (the row's cells are consecutive in the sorted order).
+  KOKKOS_INLINE_FUNCTION void row_range(std::int64_t x0, std::int64_t x1, std::int64_t y, std::int64_t z,
+                                        std::uint32_t& b, std::uint32_t& e) const {
+    const std::size_t d = std::size_t(key(0, y, z));
+    b = dense_start(d + std::size_t(x0));
+    e = dense_start(d + std::size_t(x1) + 1);
   }
 };
 
@@ -94,7 +121,7 @@ NeighbourView<MemSpace> view_of(const Neighbourhood<MemSpace>& nb, const Grid& g
   v.pdata = nb.pdata.view();
   v.scale = nb.scale.view();
   v.support = nb.support.view();
-  v.dense = nb.dense.view();
+  v.dense_start = nb.dense_start.view();
   return v;
 }
 
@@ -156,8 +183,9 @@ inline bool dense_cells_allowed(std::uint64_t dense, std::size_t n) {
   return dense <= std::max<std::uint64_t>(std::uint64_t(1) << 22, 2 * std::uint64_t(n));
 }
 
-// Builds Neighbourhood::dense from the occupied cells' keys and starts, if
-// dense_cells_allowed.
+// Builds Neighbourhood::dense_start from the occupied cells' keys and
+// starts, if dense_cells_allowed: the count of every cell at its key, then an
+// exclusive scan (the particles are sorted by key).
 template <class ExecSpace>
 void build_dense_cells(const ExecSpace& space, MemoryTracker& tracker, const Grid& g,
                        Neighbourhood<typename ExecSpace::memory_space>& out) {
@@ -165,23 +193,18 @@ void build_dense_cells(const ExecSpace& space, MemoryTracker& tracker, const Gri
   const std::uint64_t n_dense =
       std::uint64_t(g.nb_dims[0]) * std::uint64_t(g.nb_dims[1]) * std::uint64_t(g.nb_dims[2]);
   if (!dense_cells_allowed(n_dense, out.n)) {
-    out.dense = Buffer<std::uint64_t, MemSpace>();
+    out.dense_start = Buffer<std::uint32_t, MemSpace>();
     return;
   }
-  out.dense = Buffer<std::uint64_t, MemSpace>(tracker, "neighbourhood::dense_cells", std::size_t(n_dense));
-  Kokkos::deep_copy(space, out.dense.view(), std::uint64_t(0));
-  const auto dense = out.dense.view();
+  out.dense_start = Buffer<std::uint32_t, MemSpace>(tracker, "neighbourhood::dense_cells", std::size_t(n_dense) + 1);
+  const auto start = out.dense_start.view();
+  Kokkos::deep_copy(space, start, std::uint32_t(0));
   const auto keys = out.cell_keys.view();
-  const auto start = out.cell_start.view();
-  const std::uint64_t nx = std::uint64_t(g.nb_dims[0]), ny = std::uint64_t(g.nb_dims[1]);
+  const auto cs = out.cell_start.view();
   Kokkos::parallel_for(
       "nbmc::neighbourhood::dense_cells", Kokkos::RangePolicy<ExecSpace>(space, 0, out.n_cells),
-      KOKKOS_LAMBDA(const std::size_t c) {
-        const std::uint64_t k = keys(c);
-        const std::uint64_t x = compact3(k), y = compact3(k >> 1), z = compact3(k >> 2);
-        dense(std::size_t(x + nx * (y + ny * z))) = std::uint64_t(start(c)) | (std::uint64_t(start(c + 1)) << 32);
-      });
-  space.fence();
+      KOKKOS_LAMBDA(const std::size_t c) { start(std::size_t(keys(c))) = cs(c + 1) - cs(c); });
+  exclusive_scan(space, "nbmc::neighbourhood::dense_starts", start, start);
 }
 
 // Per-particle radii (host, uploaded order): the runs of handlers at one
@@ -219,6 +242,7 @@ void build_neighbourhood(const ExecSpace& space, MemoryTracker& tracker, const d
   const double o0 = g.origin[0], o1 = g.origin[1], o2 = g.origin[2];
   const double inv_s = 1.0 / g.nb_cell;
   const std::int64_t nd0 = g.nb_dims[0], nd1 = g.nb_dims[1], nd2 = g.nb_dims[2];
+  const std::int64_t dims[3] = {nd0, nd1, nd2};
   const std::uint32_t* kp = keep.empty() ? nullptr : keep.data();
   using HostExec = Kokkos::DefaultHostExecutionSpace;
   auto host_space = [&]() {
@@ -238,7 +262,8 @@ void build_neighbourhood(const ExecSpace& space, MemoryTracker& tracker, const d
         s.x = relative_coordinate(px);
         s.y = relative_coordinate(py);
         s.z = relative_coordinate(pz);
-        s.key = morton3(neighbour_cell(px, inv_s, nd0), neighbour_cell(py, inv_s, nd1), neighbour_cell(pz, inv_s, nd2));
+        s.key = neighbour_cell_key(neighbour_cell(px, inv_s, nd0), neighbour_cell(py, inv_s, nd1),
+                                   neighbour_cell(pz, inv_s, nd2), dims);
         s.index = src;
         r[i] = s;
       });
@@ -340,6 +365,7 @@ void build_neighbourhood_device(const ExecSpace& space, MemoryTracker& tracker,
   const double o0 = g.origin[0], o1 = g.origin[1], o2 = g.origin[2];
   const double inv_s = 1.0 / g.nb_cell;
   const std::int64_t nd0 = g.nb_dims[0], nd1 = g.nb_dims[1], nd2 = g.nb_dims[2];
+  const std::int64_t dims[3] = {nd0, nd1, nd2};
   {
     const auto order = va.view();
     Kokkos::parallel_for(
@@ -349,15 +375,15 @@ void build_neighbourhood_device(const ExecSpace& space, MemoryTracker& tracker,
           relv(i) = relative_coordinate(px);
           relv(n + i) = relative_coordinate(py);
           relv(2 * n + i) = relative_coordinate(pz);
-          cellv(i) = morton3(neighbour_cell(px, inv_s, nd0), neighbour_cell(py, inv_s, nd1),
-                             neighbour_cell(pz, inv_s, nd2));
+          cellv(i) = neighbour_cell_key(neighbour_cell(px, inv_s, nd0), neighbour_cell(py, inv_s, nd1),
+                                        neighbour_cell(pz, inv_s, nd2), dims);
           order(i) = std::uint32_t(i);
         });
   }
-  int key_bits = 1;
+  int key_bits = 1;  // of the cell keys, < nx ny nz
   {
-    const std::int64_t m = std::max(nd0, std::max(nd1, nd2));
-    while ((std::int64_t(1) << key_bits) < m) ++key_bits;
+    const std::uint64_t m = std::uint64_t(nd0) * std::uint64_t(nd1) * std::uint64_t(nd2);
+    while (key_bits < 64 && (std::uint64_t(1) << key_bits) < m) ++key_bits;
   }
   std::uint32_t* order = va.data();
   std::uint32_t* other = vb.data();
@@ -374,7 +400,7 @@ void build_neighbourhood_device(const ExecSpace& space, MemoryTracker& tracker,
                                    : cellv(cur[i]);
         });
     device_sort_pairs(space, tracker, keys_in, keys_out, order, other, n,
-                      axis == 3 ? 63 : axis >= 0 ? 32 : 3 * key_bits);
+                      axis == 3 ? 63 : axis >= 0 ? 32 : key_bits);
     std::swap(order, other);
   }
   cell.release();

@@ -308,27 +308,49 @@ KOKKOS_INLINE_FUNCTION std::uint32_t sum_vertex_direct(const NeighbourView<MemSp
   std::int64_t lo[3], hi[3];
   cell_span(nb, x, x, fc.R, lo, hi);
   const float* X = nb.pos.data();
-  const float inv_R2 = fc.inv_R2;
+  const float inv_R2 = fc.inv_R2, R2 = fc.R * fc.R;
   auto beyond = [&](float d) { return (d * d) * inv_R2 >= 1.f; };
+  // A cell's (or a row's) particles are sorted by x: the runs before the
+  // first and after the last that can reach x are skipped. They would add
+  // k = 0 (exactly +0 to every sum): a skipped particle has
+  // ((X - x0)^2) * inv_R2 >= 1 with the float operations of s2, and
+  // s2 = ((dx^2 + dy^2) + dz^2) * q_j is at least that (rounding is
+  // monotone; q_j >= inv_R2 with radii).
+  auto add = [&](std::uint32_t b, std::uint32_t e) {
+    while (b < e && X[b] < x[0] && beyond(X[b] - x[0])) ++b;
+    while (e > b && X[e - 1] > x[0] && beyond(X[e - 1] - x[0])) --e;
+    evals += Method::accumulate(acc, X, X + nb.n, X + 2 * nb.n, Method::P ? nb.pdata.data() : nullptr,
+                                Method::radii ? nb.support.data() : nullptr, b, e, x[0], x[1], x[2], fc.inv_R2);
+  };
+  const bool rows = nb.dense_start.extent(0) != 0;
   for (std::int64_t z = lo[2]; z <= hi[2]; ++z)
-    for (std::int64_t y = lo[1]; y <= hi[1]; ++y)
-      for (std::int64_t xx = lo[0]; xx <= hi[0]; ++xx) {
-        // The distance first: a cell that is too far needs no lookup.
+    for (std::int64_t y = lo[1]; y <= hi[1]; ++y) {
+      // The distance first: a cell that is too far needs no lookup. The
+      // cells of a row within R are one run around x (box_distance2 grows
+      // with the x gap).
+      std::int64_t x0 = lo[0], x1 = hi[0];
+      auto near = [&](std::int64_t xx) {
         const float clo[3] = {float(xx) * S, float(y) * S, float(z) * S};
-        if (box_distance2(clo, S, x) >= fc.R * fc.R) continue;
+        return box_distance2(clo, S, x) < R2;
+      };
+      while (x0 <= x1 && !near(x0)) ++x0;
+      while (x1 >= x0 && !near(x1)) --x1;
+      if (x0 > x1) continue;
+      if (rows) {
+        // With the dense table, the row's cells x0..x1 are one range of
+        // particles sorted by x (cells in x order, each sorted by x): the
+        // same particles in the same order as cell by cell, the runs out of
+        // reach trimmed at the row's two ends instead of at every cell's.
         std::uint32_t b, e;
-        if (!nb.cell_range(xx, y, z, b, e)) continue;
-        // A cell's particles are sorted by x: the runs before the first and
-        // after the last that can reach x are skipped. They would add k = 0
-        // (exactly +0 to every sum): a skipped particle has
-        // ((X - x0)^2) * inv_R2 >= 1 with the float operations of s2, and
-        // s2 = ((dx^2 + dy^2) + dz^2) * q_j is at least that (rounding is
-        // monotone; q_j >= inv_R2 with radii).
-        while (b < e && X[b] < x[0] && beyond(X[b] - x[0])) ++b;
-        while (e > b && X[e - 1] > x[0] && beyond(X[e - 1] - x[0])) --e;
-        evals += Method::accumulate(acc, X, X + nb.n, X + 2 * nb.n, Method::P ? nb.pdata.data() : nullptr,
-                                    Method::radii ? nb.support.data() : nullptr, b, e, x[0], x[1], x[2], fc.inv_R2);
+        nb.row_range(x0, x1, y, z, b, e);
+        add(b, e);
+      } else {
+        for (std::int64_t xx = x0; xx <= x1; ++xx) {
+          std::uint32_t b, e;
+          if (nb.cell_range(xx, y, z, b, e)) add(b, e);
+        }
       }
+    }
   return evals;
 }
 

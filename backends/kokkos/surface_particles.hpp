@@ -64,8 +64,8 @@ KOKKOS_INLINE_FUNCTION std::size_t surface_particles_of_cell(const NeighbourView
   int n_cells = 0;
   bool face_empty = false;
   const std::uint64_t key = keys(cell);
-  const std::int64_t cx = std::int64_t(compact3(key)), cy = std::int64_t(compact3(key >> 1)),
-                     cz = std::int64_t(compact3(key >> 2));
+  std::int64_t cx, cy, cz;
+  neighbour_cell_of_key(key, nb.nb_dims, cx, cy, cz);
   for (std::int64_t z = cz - range; z <= cz + range; ++z)
     for (std::int64_t y = cy - range; y <= cy + range; ++y)
       for (std::int64_t x = cx - range; x <= cx + range; ++x) {
