@@ -140,8 +140,8 @@ std::size_t reference_surface(const NeighbourView<Host>& nb, const std::vector<s
   }
   std::vector<std::pair<std::uint32_t, std::uint32_t>> ranges;
   bool face_empty = false;
-  const std::int64_t cx = std::int64_t(compact3(keys[cell])), cy = std::int64_t(compact3(keys[cell] >> 1)),
-                     cz = std::int64_t(compact3(keys[cell] >> 2));
+  std::int64_t cx, cy, cz;
+  neighbour_cell_of_key(keys[cell], nb.nb_dims, cx, cy, cz);
   for (std::int64_t z = cz - range; z <= cz + range; ++z)
     for (std::int64_t y = cy - range; y <= cy + range; ++y)
       for (std::int64_t x = cx - range; x <= cx + range; ++x) {
