@@ -32,6 +32,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
+#include <cstdlib>
 #include <cstring>
 #include <fstream>
 #include <random>
@@ -55,6 +56,11 @@ class KokkosEnv : public ::testing::Environment {
     Kokkos::InitArguments args;
     args.num_threads = 3;  // an odd split of the work on any machine
     Kokkos::initialize(args);
+    // ctest's FieldOrder.EightLanes asks for 8 lanes: skipped where the CPU
+    // cannot run them (host_simd_lanes gives fewer).
+    const char* e = std::getenv("NBMC_HOST_SIMD");
+    if (e && std::atoi(e) > host_simd_lanes())
+      GTEST_SKIP() << "NBMC_HOST_SIMD=" << e << ": lanes not available on this CPU";
   }
   void TearDown() override { Kokkos::finalize(); }
 };
@@ -543,4 +549,25 @@ TEST(FieldOrder, RadiiTwoResolutions) {
 TEST(FieldOrder, RadiiCoarseCells) {
   const Points p = jittered_ball(0, 0, 0, 0.6, kR, 0.25, 9);
   check_all<true>("coarse cells, radii", p, 6.0, random_radii(p, kR, 0.5, 6));
+}
+
+// The lane count of the host field (host_simd_lanes): the widest the CPU
+// runs (16 with AVX-512F, 8 with AVX2, else 4), or NBMC_HOST_SIMD's where
+// the CPU has it.
+TEST(HostSimdLanes, Dispatch) {
+  const char* e = std::getenv("NBMC_HOST_SIMD");
+  const std::string saved = e ? e : "";
+  unsetenv("NBMC_HOST_SIMD");
+  const int best = host_simd_lanes();
+#if defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
+  EXPECT_EQ(best, __builtin_cpu_supports("avx512f") ? 16 : __builtin_cpu_supports("avx2") ? 8 : 4);
+#endif
+  for (int asked : {4, 8, 16}) {
+    setenv("NBMC_HOST_SIMD", std::to_string(asked).c_str(), 1);
+    EXPECT_EQ(host_simd_lanes(), std::min(asked, best)) << "NBMC_HOST_SIMD=" << asked;
+  }
+  setenv("NBMC_HOST_SIMD", "32", 1);  // not a width: the default
+  EXPECT_EQ(host_simd_lanes(), best);
+  if (e) setenv("NBMC_HOST_SIMD", saved.c_str(), 1);
+  else unsetenv("NBMC_HOST_SIMD");
 }

@@ -229,15 +229,11 @@ TEST(SurfaceParticles, IndependentOfTheInfluenceRadiusOnARealFrame) {
   EXPECT_LT(c[0], 46250u / 2);
 }
 
-// The host field kernel runs 8 lanes (AVX2, chosen at run time) or 4
-// (NBMC_HOST_SIMD=4): every lane does the scalar operations, so the meshes
-// are the same bit for bit.
-TEST(HostSimd, FourAndEightLanesGiveTheSameMesh) {
-#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
-  if (!__builtin_cpu_supports("avx2")) GTEST_SKIP() << "no AVX2 on this CPU: 4 lanes only";
-#else
-  GTEST_SKIP() << "8 lanes are an x86-64 path";
-#endif
+// The host field kernel runs 16 lanes (AVX-512F), 8 (AVX2), chosen at run
+// time, or 4 (NBMC_HOST_SIMD=16|8|4 asks for one): every lane does the
+// scalar operations, so the meshes are the same bit for bit.
+namespace {
+std::vector<std::pair<Points, nbmc_params>> lane_cases() {
   std::vector<std::pair<Points, nbmc_params>> cases;
   const double r = 0.05;
   for (double R : {4.0, 2.0}) {
@@ -253,12 +249,38 @@ TEST(HostSimd, FourAndEightLanesGiveTheSameMesh) {
     prm.cell_size = 0.5;
     cases.emplace_back(read_xyz(f), prm);
   }
-  for (const auto& c : cases) {
-    setenv("NBMC_HOST_SIMD", "4", 1);
-    const Result four = reconstruct(c.first, c.second);
+  return cases;
+}
+
+// The meshes with NBMC_HOST_SIMD=a and =b.
+void expect_same_mesh_with_lanes(const char* a, const char* b) {
+  for (const auto& c : lane_cases()) {
+    setenv("NBMC_HOST_SIMD", a, 1);
+    const Result ra = reconstruct(c.first, c.second);
+    setenv("NBMC_HOST_SIMD", b, 1);
+    const Result rb = reconstruct(c.first, c.second);
     unsetenv("NBMC_HOST_SIMD");
-    const Result eight = reconstruct(c.first, c.second);
-    expect_identical(four, eight, "4 vs 8 lanes");
-    EXPECT_EQ(four.stats.neighbour_evaluations, eight.stats.neighbour_evaluations);
+    expect_identical(ra, rb, (std::string(a) + " vs " + b + " lanes").c_str());
+    EXPECT_EQ(ra.stats.neighbour_evaluations, rb.stats.neighbour_evaluations);
   }
+}
+}  // namespace
+
+TEST(HostSimd, FourAndEightLanesGiveTheSameMesh) {
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+  if (!__builtin_cpu_supports("avx2")) GTEST_SKIP() << "no AVX2 on this CPU: 4 lanes only";
+#else
+  GTEST_SKIP() << "8 lanes are an x86-64 path";
+#endif
+  expect_same_mesh_with_lanes("4", "8");
+}
+
+TEST(HostSimd, EightAndSixteenLanesGiveTheSameMesh) {
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+  if (!__builtin_cpu_supports("avx512f")) GTEST_SKIP() << "no AVX-512F on this CPU: at most 8 lanes";
+#else
+  GTEST_SKIP() << "16 lanes are an x86-64 path";
+#endif
+  expect_same_mesh_with_lanes("8", "16");
+  expect_same_mesh_with_lanes("4", "16");
 }

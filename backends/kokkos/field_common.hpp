@@ -47,6 +47,24 @@
 #include <cstring>
 #include <type_traits>
 
+// Whether the 8-lane kernels (AVX2, chosen at run time) are compiled: on
+// x86-64 with GCC, or with any compiler that compiles the whole translation
+// unit for AVX2 (-mavx2, -march=native). Clang rejects a 32-byte vector
+// passed to a function not compiled for AVX even where that function is
+// inlined into an AVX2 one, so a Clang build without -mavx2 uses 4 lanes
+// (the same results: the lane count never changes a value).
+#if !defined(__CUDA_ARCH__) && !defined(__CUDACC__) && defined(__x86_64__) && defined(__GNUC__) && (!defined(__clang__) || defined(__AVX2__))
+#define NBMC_HOST_SIMD8 1
+#endif
+// The same for the 16-lane kernels (AVX-512F, chosen at run time): GCC on
+// x86-64, or a compiler told -mavx512f.
+#if !defined(__CUDA_ARCH__) && !defined(__CUDACC__) && defined(__x86_64__) && defined(__GNUC__) && (!defined(__clang__) || defined(__AVX512F__))
+#define NBMC_HOST_SIMD16 1
+#endif
+#if defined(NBMC_HOST_SIMD16)
+#include <immintrin.h>
+#endif
+
 namespace nbmc {
 namespace Details {
 
@@ -74,12 +92,13 @@ inline bool host_any(HostVecI m) {
   return (u[0] | u[1]) != 0;
 }
 
-// The same for L lanes (4 or 8), for kernels templated on the lane count.
-// 8 lanes are only used inside functions compiled for AVX2 and chosen at run
-// time (host_simd_lanes in scalar_field.hpp); each lane still does the
-// scalar code's IEEE operations (AVX2 has no FMA; nbmc compiles without
-// contraction anyway), so the lane count never changes a result. (GCC's
-// -Wpsabi note on 32-byte vectors does not apply: they never cross a call
+// The same for L lanes (4, 8 or 16), for kernels templated on the lane
+// count. 8 lanes are only used inside functions compiled for AVX2, 16 inside
+// functions compiled for AVX-512F, chosen at run time (host_simd_lanes in
+// scalar_field.hpp); each lane still does the scalar code's IEEE operations
+// (nbmc compiles without FMA contraction, so neither AVX2's nor AVX-512's
+// FMAs are used), so the lane count never changes a result. (GCC's -Wpsabi
+// note on 32- and 64-byte vectors does not apply: they never cross a call
 // that is not inlined.)
 #if defined(__GNUC__) && !defined(__clang__)
 #pragma GCC diagnostic push
@@ -97,6 +116,29 @@ struct HostSimd<8> {
   typedef float F __attribute__((vector_size(32)));
   typedef std::int32_t I __attribute__((vector_size(32)));
 };
+template <>
+struct HostSimd<16> {
+  typedef float F __attribute__((vector_size(64)));
+  typedef std::int32_t I __attribute__((vector_size(64)));
+};
+#if defined(NBMC_HOST_SIMD16)
+// GCC 12 with its default tuning (-mtune=generic) compiles some operations
+// on 64-byte vectors lane by lane even inside AVX-512F functions: a float
+// in every lane of the generic lanes_of (v - T{}, folded to {v, ..., v})
+// becomes 16 masked broadcasts, for every particle of the tile kernel (16
+// lanes were 1.45x slower than 8), two comparisons ANDed become 32 scalar
+// ones, and host_any_of's OR of the words a chain of extracts. So the 16
+// lanes have these in intrinsics (the same bits: a broadcast keeps -0).
+// A tune= in the kernels' target attribute would also do, but GCC inlines
+// no function tuned otherwise into them.
+template <>
+__attribute__((target("avx512f"))) inline HostSimd<16>::F lanes_of<HostSimd<16>::F>(float v) {
+  const __m512 b = _mm512_set1_ps(v);
+  HostSimd<16>::F r;
+  std::memcpy(&r, &b, 64);
+  return r;
+}
+#endif
 template <class M>
 inline bool host_any_of(M m) {
   std::uint64_t u[sizeof(M) / 8];
@@ -105,19 +147,18 @@ inline bool host_any_of(M m) {
   for (std::size_t q = 0; q < sizeof(M) / 8; ++q) o |= u[q];
   return o != 0;
 }
+#if defined(NBMC_HOST_SIMD16)
+template <>
+__attribute__((target("avx512f"))) inline bool host_any_of<HostSimd<16>::I>(HostSimd<16>::I m) {
+  __m512i v;
+  std::memcpy(&v, &m, 64);
+  return _mm512_test_epi32_mask(v, v) != 0;
+}
+#endif
 #if defined(__GNUC__) && !defined(__clang__)
 #pragma GCC diagnostic pop
 #endif
 
-// Whether the 8-lane kernels (AVX2, chosen at run time) are compiled: on
-// x86-64 with GCC, or with any compiler that compiles the whole translation
-// unit for AVX2 (-mavx2, -march=native). Clang rejects a 32-byte vector
-// passed to a function not compiled for AVX even where that function is
-// inlined into an AVX2 one, so a Clang build without -mavx2 uses 4 lanes
-// (the same results: the lane count never changes a value).
-#if !defined(__CUDACC__) && defined(__x86_64__) && defined(__GNUC__) && (!defined(__clang__) || defined(__AVX2__))
-#define NBMC_HOST_SIMD8 1
-#endif
 #endif
 
 // 1/R_j^2 of particle j in accumulate(): its own (Q[j]) for the radii

@@ -30,8 +30,10 @@
 #if !defined(__CUDA_ARCH__) && defined(__SSE__)
 #include <xmmintrin.h>
 #endif
-#if defined(NBMC_HOST_SIMD8)  // field_common.hpp
+#if defined(NBMC_HOST_SIMD8) || defined(NBMC_HOST_SIMD16)  // field_common.hpp
 #include <immintrin.h>
+#endif
+#if defined(NBMC_HOST_SIMD8)
 #define NBMC_HOST_AVX_SQRT 1
 #endif
 
@@ -59,11 +61,12 @@ KOKKOS_INLINE_FUNCTION float sph_kernel(float k) {
 }
 
 #if !defined(__CUDA_ARCH__)
-#if defined(NBMC_HOST_AVX_SQRT)
+#if defined(NBMC_HOST_AVX_SQRT) || defined(NBMC_HOST_SIMD16)
 #if defined(__GNUC__) && !defined(__clang__)
 #pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wpsabi"  // 32-byte vectors never cross a call that is not inlined
+#pragma GCC diagnostic ignored "-Wpsabi"  // 32- and 64-byte vectors never cross a call that is not inlined
 #endif
+#if defined(NBMC_HOST_AVX_SQRT)
 // 8 lanes only run inside the AVX2 kernels (scalar_field.hpp), which inline
 // this: one 256-bit IEEE square root instead of two 128-bit ones.
 __attribute__((target("avx"))) inline HostSimd<8>::F sqrt_lanes(HostSimd<8>::F x) {
@@ -74,11 +77,23 @@ __attribute__((target("avx"))) inline HostSimd<8>::F sqrt_lanes(HostSimd<8>::F x
   std::memcpy(&q, &v, 32);
   return q;
 }
+#endif
+#if defined(NBMC_HOST_SIMD16)
+// 16 lanes only run inside the AVX-512F kernels: one 512-bit square root.
+__attribute__((target("avx512f"))) inline HostSimd<16>::F sqrt_lanes(HostSimd<16>::F x) {
+  __m512 v;
+  std::memcpy(&v, &x, 64);
+  v = _mm512_sqrt_ps(v);
+  HostSimd<16>::F q;
+  std::memcpy(&q, &v, 64);
+  return q;
+}
+#endif
 #if defined(__GNUC__) && !defined(__clang__)
 #pragma GCC diagnostic pop
 #endif
 #endif
-// Host SIMD vectors of any lane count (4, or 8 in the AVX2 tile kernel).
+// Host SIMD vectors of any lane count (4; 8 and 16 have their own above).
 template <class V>
 inline V sqrt_lanes(V x) {
   V q;
@@ -114,6 +129,9 @@ inline V sph_kernel_lanes(V k) {
 inline HostVecF sph_kernel(HostVecF k) { return sph_kernel_lanes(k); }
 #if defined(NBMC_HOST_SIMD8)
 inline HostSimd<8>::F sph_kernel(HostSimd<8>::F k) { return sph_kernel_lanes(k); }
+#endif
+#if defined(NBMC_HOST_SIMD16)
+inline HostSimd<16>::F sph_kernel(HostSimd<16>::F k) { return sph_kernel_lanes(k); }
 #endif
 #endif
 

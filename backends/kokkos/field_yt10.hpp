@@ -42,6 +42,7 @@
 #include "field_sph.hpp"
 
 #include <cstdint>
+#include <cstring>
 
 namespace nbmc {
 namespace Details {
@@ -74,6 +75,32 @@ inline V yt10_spline(V q, V q2, V k) {
   using I = decltype(in);
   return (V)((I)cubic_spline(q, q2) & in);
 }
+#if defined(NBMC_HOST_SIMD16)
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wpsabi"  // 64-byte vectors never cross a call that is not inlined
+#endif
+// The same for 16 lanes, the mask in intrinsics (field_common.hpp, above
+// lanes_of<HostSimd<16>::F>: GCC 12 compiles the two comparisons of the
+// generic form lane by lane). Ordered comparisons, as the vector operators.
+__attribute__((target("avx512f"))) inline HostSimd<16>::F yt10_spline(HostSimd<16>::F q, HostSimd<16>::F q2,
+                                                                       HostSimd<16>::F k) {
+  const HostSimd<16>::F s = cubic_spline(q, q2);
+  __m512 vq, vk, vs;
+  std::memcpy(&vq, &q, 64);
+  std::memcpy(&vk, &k, 64);
+  std::memcpy(&vs, &s, 64);
+  const __mmask16 in = _mm512_cmp_ps_mask(vq, _mm512_set1_ps(1.f), _CMP_LT_OQ) &
+                       _mm512_cmp_ps_mask(vk, _mm512_setzero_ps(), _CMP_GT_OQ);
+  vs = _mm512_maskz_mov_ps(in, vs);  // +0 where not in, as the generic form's AND
+  HostSimd<16>::F r;
+  std::memcpy(&r, &vs, 64);
+  return r;
+}
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic pop
+#endif
+#endif
 #endif
 
 // Whether |d|^2 < reach2 (in any lane).

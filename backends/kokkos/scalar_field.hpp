@@ -97,7 +97,9 @@ struct TileScratch {
 
 // Bits of a band word (bit = x + 4y + 16z) in the order the host groups
 // them: 2x2 squares in x and y, so that a group's vertices visit nearly the
-// same cells.
+// same cells (a group of 8 lanes is a 4x2 half layer, one of 16 a 4x4 layer;
+// groups of 2x2 columns, 2x2x2 and 2x2x4, measured no faster on the dev box:
+// bench/RESULTS.md, "16-lane host field").
 KOKKOS_INLINE_FUNCTION int tile_order(int o) {
   const int z = o >> 4, yq = (o >> 3) & 1, xq = (o >> 2) & 1, y = (o >> 1) & 1, x = o & 1;
   return (2 * xq + x) + 4 * (2 * yq + y) + 16 * z;
@@ -105,7 +107,7 @@ KOKKOS_INLINE_FUNCTION int tile_order(int o) {
 
 #if defined(__GNUC__) && !defined(__clang__)
 #pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wpsabi"  // 32-byte vectors never cross a call that is not inlined
+#pragma GCC diagnostic ignored "-Wpsabi"  // 32- and 64-byte vectors never cross a call that is not inlined
 #endif
 // The lane kernel of the host tiles, for any points: points 0..n_points-1
 // (point(i, x) gives point i), in groups of L lanes, each point's sums in
@@ -266,16 +268,40 @@ __attribute__((target("avx2"), flatten)) bool eval_tile_host_avx2(
 }
 #endif
 
-// Lanes of the host field kernel: 8 where the CPU has AVX2, else 4;
-// NBMC_HOST_SIMD=4 forces 4 (the results are the same either way).
-inline int host_simd_lanes() {
-#if defined(NBMC_HOST_AVX2)
-  const char* e = std::getenv("NBMC_HOST_SIMD");
-  if (e && std::string(e) == "4") return 4;
-  return __builtin_cpu_supports("avx2") ? 8 : 4;
-#else
-  return 4;
+// 16 lanes on CPUs with AVX-512F, chosen at run time, as the 8 above: the
+// same tile code with 64-byte vectors (32 zmm registers: SSP07's 17 or 18
+// accumulators, the lanes' coordinates and the temporaries fit; GCC 12 keeps
+// all but the lanes' x in registers, reloaded once per particle, where the
+// 16 ymm registers of the AVX2 loop spill 9 or 13 per particle).
+// A group of 16 is a 4x4 layer of the tile (tile_order), whose vertices visit
+// nearly the same cells.
+#if defined(NBMC_HOST_SIMD16)  // field_common.hpp: GCC, or any compiler with -mavx512f
+#define NBMC_HOST_AVX512 1
+template <class Method, class MemSpace>
+__attribute__((target("avx512f"), flatten)) bool eval_tile_host_avx512(
+    const NeighbourView<MemSpace>& nb, const std::int64_t lo[3], const std::int64_t hi[3], float S,
+    const FieldConstants& fc, std::uint64_t word, std::uint64_t full, std::size_t w, const BandView<MemSpace>& band,
+    float c, const Kokkos::View<float*, MemSpace>& phi, std::uint64_t& evals) {
+  return eval_tile_host_lanes<Method, 16>(nb, lo, hi, S, fc, word, full, w, band, c, phi, evals);
+}
 #endif
+
+// Lanes of the host field kernel: 16 where the CPU has AVX-512F, else 8
+// where it has AVX2, else 4. NBMC_HOST_SIMD=4|8|16 asks for a width; a
+// width the CPU (or the build) lacks gives the widest one below it. The
+// results are the same for every width.
+inline int host_simd_lanes() {
+  int best = 4;
+#if defined(NBMC_HOST_AVX2)
+  if (__builtin_cpu_supports("avx2")) best = 8;
+#endif
+#if defined(NBMC_HOST_AVX512)
+  if (__builtin_cpu_supports("avx512f")) best = 16;
+#endif
+  const char* e = std::getenv("NBMC_HOST_SIMD");
+  const int asked = e ? std::atoi(e) : 0;
+  if (asked == 4 || asked == 8 || asked == 16) return asked < best ? asked : best;
+  return best;
 }
 
 template <class Method, class MemSpace>
@@ -285,6 +311,9 @@ KOKKOS_INLINE_FUNCTION bool eval_tile_host(const NeighbourView<MemSpace>& nb, co
                                            const BandView<MemSpace>& band, float c,
                                            const Kokkos::View<float*, MemSpace>& phi, std::uint64_t& evals,
                                            int lanes) {
+#if defined(NBMC_HOST_AVX512)
+  if (lanes == 16) return eval_tile_host_avx512<Method>(nb, lo, hi, S, fc, word, full, w, band, c, phi, evals);
+#endif
 #if defined(NBMC_HOST_AVX2)
   if (lanes == 8) return eval_tile_host_avx2<Method>(nb, lo, hi, S, fc, word, full, w, band, c, phi, evals);
 #endif
