@@ -1,7 +1,8 @@
 // SPDX-License-Identifier: MIT
 // Mesh post-processing through the C API: nbmc_mesh_check on reconstructed
 // shapes (agrees with the tests' own checker), the clean-up (on by default,
-// off with cleanup = 0) on random-jittered lattices, smoothing, and the
+// off with cleanup = 0) on random-jittered lattices, its fairing flips,
+// smoothing, and the
 // ABI's handling of structs from callers built before the fields were
 // appended.
 #include "nbmc_test.hpp"
@@ -9,12 +10,14 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
 #include <random>
 #include <string>
+#include <utility>
 #include <vector>
 
 namespace {
@@ -193,6 +196,83 @@ TEST(MeshCleanupCapi, JitteredLatticesStayClosed) {
               (unsigned long long)clean_tris);
   EXPECT_GT(raw_bad, 0u);  // the test exercises the clean-up
   EXPECT_GT(repairs, 0u);
+}
+
+// Mean dihedral angle (degrees) over the edges with exactly two triangles of
+// non-zero area, as bench/nbmc_quality measures it.
+double dihedral_mean(const nbmc_test::Mesh& m) {
+  std::vector<std::pair<std::uint64_t, std::uint32_t>> e;
+  for (std::size_t t = 0; t < m.triangle_count(); ++t)
+    for (int k = 0; k < 3; ++k) {
+      std::uint64_t a = m.triangles[3 * t + k], b = m.triangles[3 * t + (k + 1) % 3];
+      if (a > b) std::swap(a, b);
+      e.push_back({(a << 32) | b, std::uint32_t(t)});
+    }
+  std::sort(e.begin(), e.end());
+  auto normal = [&](std::uint32_t t, double n[3]) {
+    const float* P = m.positions.data();
+    const std::uint32_t* v = &m.triangles[3 * std::size_t(t)];
+    double u[3], w[3];
+    for (int a = 0; a < 3; ++a) {
+      u[a] = double(P[3 * v[1] + a]) - P[3 * v[0] + a];
+      w[a] = double(P[3 * v[2] + a]) - P[3 * v[0] + a];
+    }
+    n[0] = u[1] * w[2] - u[2] * w[1], n[1] = u[2] * w[0] - u[0] * w[2], n[2] = u[0] * w[1] - u[1] * w[0];
+    return std::sqrt(n[0] * n[0] + n[1] * n[1] + n[2] * n[2]);
+  };
+  double sum = 0;
+  std::size_t count = 0;
+  for (std::size_t i = 0; i < e.size();) {
+    std::size_t j = i;
+    while (j < e.size() && e[j].first == e[i].first) ++j;
+    if (j - i == 2) {
+      double n0[3], n1[3];
+      const double l = normal(e[i].second, n0) * normal(e[i + 1].second, n1);
+      if (l > 0) {
+        const double c = (n0[0] * n1[0] + n0[1] * n1[1] + n0[2] * n1[2]) / l;
+        sum += std::acos(std::min(1.0, std::max(-1.0, c))) * 180 / M_PI;
+        ++count;
+      }
+    }
+    i = j;
+  }
+  return count ? sum / double(count) : 0;
+}
+
+// The clean-up's fairing flips (src/core/mesh_flip.hpp): on a jittered
+// lattice ball with a spray of single particles beside it (the distance
+// guard's beads), the default mesh's mean dihedral angle lies well below the
+// raw marching-cubes mesh's (the clean-up's sliver repairs alone leave it
+// within 0.5 %: 6.46 -> 6.49 degrees for SSP07 at cell r/2, against 5.27
+// with the flips), and stays closed, manifold and oriented without a bad
+// triangle.
+TEST(MeshCleanupCapi, FairingFlipsLowerTheDihedralAngle) {
+  Context c;
+  Points p = jittered_sphere(5, 0.15, 11);
+  for (int i = 0; i < 12; ++i) {  // a sparse trail of droplets
+    const double a = 0.5 * i;
+    p.insert(p.end(), {7.0 + 1.6 * i, 2.0 * std::sin(a), 1.5 * std::cos(a)});
+  }
+  for (int32_t method : {NBMC_METHOD_SSP07, NBMC_METHOD_ZB05}) {
+    for (double cell : {0.5, 1.0}) {
+      nbmc_params prm = nbmc_test::params(1);
+      prm.method = method;
+      prm.cell_size = cell;
+      prm.cleanup = 0;
+      nbmc_mesh* raw = c.run(p, prm);
+      prm.cleanup = 1;
+      nbmc_mesh* clean = c.run(p, prm);
+      const nbmc_mesh_check_result b = check(clean);
+      EXPECT_TRUE(good(b)) << method << " " << cell;
+      EXPECT_EQ(b.degenerate_triangle_count + b.sliver_triangle_count, 0u);
+      const nbmc_test::Mesh mr = copy(raw), mc = copy(clean);
+      const double d_raw = dihedral_mean(mr), d_clean = dihedral_mean(mc);
+      std::printf("method %d cell %g: dihedral mean raw %.3f, default %.3f\n", method, cell, d_raw, d_clean);
+      EXPECT_LT(d_clean, 0.95 * d_raw) << method << " " << cell;
+      nbmc_mesh_destroy(raw);
+      nbmc_mesh_destroy(clean);
+    }
+  }
 }
 
 // Cleaned meshes are the same on every backend and thread count.
