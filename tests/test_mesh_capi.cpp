@@ -2,9 +2,8 @@
 // Mesh post-processing through the C API: nbmc_mesh_check on reconstructed
 // shapes (agrees with the tests' own checker), the clean-up (on by default,
 // off with cleanup = 0) on random-jittered lattices, its fairing flips,
-// smoothing, and the
-// ABI's handling of structs from callers built before the fields were
-// appended.
+// smoothing, and the ABI's handling of structs from callers built before the
+// fields were appended.
 #include "nbmc_test.hpp"
 #include "../src/core/mesh_memory.hpp"
 
