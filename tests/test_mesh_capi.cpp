@@ -128,6 +128,7 @@ TEST(MeshCheckCapi, Shapes) {
 TEST(MeshCleanupCapi, JitteredLatticesStayClosed) {
   Context c;
   std::uint64_t raw_bad = 0, clean_bad = 0, raw_tris = 0, clean_tris = 0, repairs = 0;
+  double max_volume_change = 0;
   for (unsigned seed = 1; seed <= 60; ++seed) {
     std::mt19937 rng(seed);
     std::uniform_real_distribution<double> u(-1, 1);
@@ -158,9 +159,12 @@ TEST(MeshCleanupCapi, JitteredLatticesStayClosed) {
       ASSERT_EQ(b.unreferenced_vertex_count, 0u);
       EXPECT_EQ(b.degenerate_triangle_count + b.sliver_triangle_count, 0u) << "seed " << seed << " cell " << cell;
       EXPECT_LE(a.triangle_count - b.triangle_count, a.triangle_count / 100) << "seed " << seed;
-      // Real frames change by about 1e-6; these small rough shapes at cell r
-      // by up to 0.3% (a vertex moved within a bumpy fan's plane).
-      EXPECT_NEAR(b.volume, a.volume, 0.005 * a.volume) << "seed " << seed;
+      // Real frames change by hundredths of a percent; these small rough
+      // shapes at cell r by up to 0.6 % (a vertex moved within a bumpy fan's
+      // plane; the fairing flips' other diagonals, each changing the volume
+      // by the tent between the two).
+      EXPECT_NEAR(b.volume, a.volume, 0.01 * a.volume) << "seed " << seed;
+      max_volume_change = std::max(max_volume_change, std::fabs(b.volume / a.volume - 1));
       nbmc_stats st;
       nbmc_stats_init(&st);
       ASSERT_EQ(nbmc_context_stats(c.ctx, &st), NBMC_OK);
@@ -190,9 +194,10 @@ TEST(MeshCleanupCapi, JitteredLatticesStayClosed) {
       nbmc_mesh_destroy(clean);
     }
   }
-  std::printf("jittered lattices: %llu bad triangles raw, %llu cleaned; %llu -> %llu triangles\n",
+  std::printf("jittered lattices: %llu bad triangles raw, %llu cleaned; %llu -> %llu triangles; volume change "
+              "up to %.3f %%\n",
               (unsigned long long)raw_bad, (unsigned long long)clean_bad, (unsigned long long)raw_tris,
-              (unsigned long long)clean_tris);
+              (unsigned long long)clean_tris, 100 * max_volume_change);
   EXPECT_GT(raw_bad, 0u);  // the test exercises the clean-up
   EXPECT_GT(repairs, 0u);
 }

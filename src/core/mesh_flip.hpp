@@ -30,7 +30,7 @@
 //    1 degree) holds;
 //  - the two new triangles meet at no more than kFlipMaxDihedralDegrees
 //    (no folds);
-//  - the bend of the five edges falls.
+//  - the bend of the five edges falls by at least kFlipMinGain.
 // Open, non-manifold or misoriented parts of a mesh are left alone. At most
 // kFlipRounds rounds (below); the result depends only on the mesh, the same
 // on every backend and thread count.
@@ -50,7 +50,10 @@ namespace nbmc {
 namespace mesh {
 
 constexpr int kFlipRounds = 3;
-constexpr double kFlipMinAngleDegrees = 10.0;
+constexpr double kFlipMinAngleDegrees = 5.0;
+// The least gain (fall of the bend of the five edges, about radians) a flip
+// must bring: smaller ones change nothing visible and only cost rounds.
+constexpr double kFlipMinGain = 1e-3;
 constexpr double kFlipMaxDihedralDegrees = 60.0;
 
 struct FlipResult {
@@ -118,16 +121,20 @@ FlipResult flip_edges_fairing(const Real* positions, std::size_t nv, IndexVec& t
       count[v] = start[v + 1] - start[v];
       if (count[v]) some[v] = list[start[v]].second / 3;
     }
-    for (std::size_t a = 0; a < nv; ++a)
-      for (std::uint32_t i = start[a]; i < start[a + 1]; ++i) {
-        const std::uint32_t b = list[i].first, h = list[i].second;
-        if (b == a) continue;
-        std::uint32_t same = 0, opposite = 0, other = 0;
-        for (std::uint32_t j = start[a]; j < start[a + 1]; ++j) same += list[j].first == b;
-        for (std::uint32_t j = start[b]; j < start[b + 1]; ++j)
-          if (list[j].first == a) ++opposite, other = list[j].second;
-        if (same == 1 && opposite == 1 && other / 3 != h / 3) nb[h] = other / 3;
-      }
+    // (Each vertex writes only the neighbours of its own half-edges: on the
+    // host threads.)
+    for_chunks(nv, chunk_count(nv, 4096), [&](std::size_t, std::size_t lo, std::size_t hi) {
+      for (std::size_t a = lo; a < hi; ++a)
+        for (std::uint32_t i = start[a]; i < start[a + 1]; ++i) {
+          const std::uint32_t b = list[i].first, h = list[i].second;
+          if (b == a) continue;
+          std::uint32_t same = 0, opposite = 0, other = 0;
+          for (std::uint32_t j = start[a]; j < start[a + 1]; ++j) same += list[j].first == b;
+          for (std::uint32_t j = start[b]; j < start[b + 1]; ++j)
+            if (list[j].first == a) ++opposite, other = list[j].second;
+          if (same == 1 && opposite == 1 && other / 3 != h / 3) nb[h] = other / 3;
+        }
+    });
   }
   host_trace("clean-up: fairing neighbours", nt);
   // Regular vertices: the fan walked around v through the neighbours closes
@@ -153,16 +160,24 @@ FlipResult flip_edges_fairing(const Real* positions, std::size_t nv, IndexVec& t
     return n;
   };
   std::vector<std::uint8_t> regular(nv, 0);
-  for (std::size_t v = 0; v < nv; ++v)
-    if (some[v] != kNoTriangle && count[v] >= 3)
-      regular[v] = walk(std::uint32_t(v), some[v], count[v], [](std::uint32_t) {}) == count[v];
+  for_chunks(nv, chunk_count(nv, 4096), [&](std::size_t, std::size_t lo, std::size_t hi) {
+    for (std::size_t v = lo; v < hi; ++v)
+      if (some[v] != kNoTriangle && count[v] >= 3)
+        regular[v] = walk(std::uint32_t(v), some[v], count[v], [](std::uint32_t) {}) == count[v];
+  });
 
   host_trace("clean-up: fairing regular vertices", nv);
   auto pos = [&](std::uint32_t v) { return load(positions, v); };
   // Unit normals of the triangles, kept up to date through the flips.
-  std::vector<Vec3> tn(nt);
+  // (In float: half the memory traffic of the evaluations; a flip compares
+  // bends of these rounded normals, the same on every run.)
+  std::vector<float> tnf(3 * nt);
+  auto set_normal = [&](std::size_t t, const Vec3& n) {
+    tnf[3 * t] = float(n.x), tnf[3 * t + 1] = float(n.y), tnf[3 * t + 2] = float(n.z);
+  };
+  auto normal_of = [&](std::size_t t) { return Vec3{tnf[3 * t], tnf[3 * t + 1], tnf[3 * t + 2]}; };
   for (std::size_t t = 0; t < nt; ++t)
-    tn[t] = detail::unit_normal(pos(T[3 * t]), pos(T[3 * t + 1]), pos(T[3 * t + 2]));
+    set_normal(t, detail::unit_normal(pos(T[3 * t]), pos(T[3 * t + 1]), pos(T[3 * t + 2])));
   // Index of edge (x -> y) in triangle t, or -1.
   auto edge_slot = [&](std::uint32_t t, std::uint32_t x, std::uint32_t y) -> int {
     for (int k = 0; k < 3; ++k)
@@ -194,18 +209,21 @@ FlipResult flip_edges_fairing(const Real* positions, std::size_t nv, IndexVec& t
     if (k1 < 0) return false;
     const std::uint32_t d = T[3 * std::size_t(t1) + (k1 + 2) % 3];
     if (c == d || !regular[a] || !regular[b] || !regular[c] || !regular[d]) return false;
-    const Vec3 &m0 = tn[t0], &m1 = tn[t1];
+    const Vec3 m0 = normal_of(t0), m1 = normal_of(t1);
     const std::uint32_t n_bc = nb[3 * std::size_t(t0) + (k + 1) % 3], n_ca = nb[3 * std::size_t(t0) + (k + 2) % 3];
     const std::uint32_t n_ad = nb[3 * std::size_t(t1) + (k1 + 1) % 3], n_db = nb[3 * std::size_t(t1) + (k1 + 2) % 3];
     if (n_bc == kNoTriangle || n_ca == kNoTriangle || n_ad == kNoTriangle || n_db == kNoTriangle) return false;
-    const Vec3 &s_bc = tn[n_bc], &s_ca = tn[n_ca], &s_ad = tn[n_ad], &s_db = tn[n_db];
+    const Vec3 s_bc = normal_of(n_bc), s_ca = normal_of(n_ca), s_ad = normal_of(n_ad), s_db = normal_of(n_db);
     if (zero(m0) || zero(m1) || zero(s_bc) || zero(s_ca) || zero(s_ad) || zero(s_db)) return false;
     const Vec3 pa = pos(a), pb = pos(b), pc = pos(c), pd = pos(d);
-    const Vec3 u0 = detail::unit_normal(pa, pd, pc), u1 = detail::unit_normal(pd, pb, pc);
+    // The new triangles' normals, rounded as they will be kept.
+    Vec3 u0 = detail::unit_normal(pa, pd, pc), u1 = detail::unit_normal(pd, pb, pc);
+    u0 = Vec3{float(u0.x), float(u0.y), float(u0.z)};
+    u1 = Vec3{float(u1.x), float(u1.y), float(u1.z)};
     if (zero(u0) || zero(u1) || dot(u0, u1) < cos_max_dihedral) return false;
     const double before = bend(m0, m1) + bend(m0, s_bc) + bend(m0, s_ca) + bend(m1, s_ad) + bend(m1, s_db);
     const double after = bend(u0, u1) + bend(u1, s_bc) + bend(u0, s_ca) + bend(u0, s_ad) + bend(u1, s_db);
-    if (!(after < before - 1e-9)) return false;
+    if (!(after < before - kFlipMinGain)) return false;
     const double old_min = std::min(detail::sin_smallest_angle(pa, pb, pc), detail::sin_smallest_angle(pb, pa, pd));
     if (!(old_min >= kSinOneDegree)) return false;  // a bad triangle: the clean-up's, left alone
     const double new_min = std::min(detail::sin_smallest_angle(pa, pd, pc), detail::sin_smallest_angle(pd, pb, pc));
@@ -237,8 +255,8 @@ FlipResult flip_edges_fairing(const Real* positions, std::size_t nv, IndexVec& t
     const int ka = edge_slot(f.n_ad, f.d, f.a), kb = edge_slot(f.n_bc, f.c, f.b);
     if (ka >= 0) nb[3 * std::size_t(f.n_ad) + ka] = f.t0;
     if (kb >= 0) nb[3 * std::size_t(f.n_bc) + kb] = f.t1;
-    tn[f.t0] = f.u0;
-    tn[f.t1] = f.u1;
+    set_normal(f.t0, f.u0);
+    set_normal(f.t1, f.u1);
   };
   // The canonical id of the edge k of t: 3 t' + k' of its lower triangle t'.
   auto edge_id = [&](std::uint32_t t, int k) -> std::uint32_t {
@@ -264,15 +282,13 @@ FlipResult flip_edges_fairing(const Real* positions, std::size_t nv, IndexVec& t
       const std::uint32_t o = nb[3 * std::size_t(t) + k];
       if (o != kNoTriangle && o > t) work.push_back(3 * t + std::uint32_t(k));
     }
-  std::vector<std::uint8_t> ok;
-  std::vector<std::uint32_t> next;
+  std::vector<std::uint8_t> ok, mark(nt, 0);
   for (int round = 0; round < max_rounds && !work.empty(); ++round) {
     ok.assign(work.size(), 0);
     for_chunks(work.size(), chunk_count(work.size(), 4096), [&](std::size_t, std::size_t lo, std::size_t hi) {
       Candidate f;
       for (std::size_t i = lo; i < hi; ++i) ok[i] = evaluate(work[i] / 3, int(work[i] % 3), f);
     });
-    next.clear();
     std::uint64_t flips = 0;
     Candidate f;
     for (std::size_t i = 0; i < work.size(); ++i) {
@@ -285,22 +301,25 @@ FlipResult flip_edges_fairing(const Real* positions, std::size_t nv, IndexVec& t
       if (o == kNoTriangle || o < t0 || !evaluate(t0, k, f)) continue;
       apply(f);
       ++flips;
-      for (std::uint32_t t : {f.t0, f.t1, f.n_bc, f.n_ca, f.n_ad, f.n_db}) next.push_back(t);
+      for (std::uint32_t t : {f.t0, f.t1, f.n_bc, f.n_ca, f.n_ad, f.n_db}) mark[t] = 1;
     }
     host_trace("clean-up: fairing round", flips);
     res.rounds = round + 1;
     res.flips += flips;
     if (flips == 0) break;
-    std::sort(next.begin(), next.end());
-    next.erase(std::unique(next.begin(), next.end()), next.end());
+    // The next work list: the edges of the marked triangles, in triangle
+    // order, each once (an edge between two marked triangles from the lower).
     work.clear();
-    for (std::uint32_t t : next)
+    for (std::uint32_t t = 0; t < nt; ++t) {
+      if (!mark[t]) continue;
       for (int k = 0; k < 3; ++k) {
+        const std::uint32_t o = nb[3 * std::size_t(t) + k];
+        if (o == kNoTriangle || (o < t && mark[o])) continue;
         const std::uint32_t id = edge_id(t, k);
         if (id != kNoTriangle) work.push_back(id);
       }
-    std::sort(work.begin(), work.end());
-    work.erase(std::unique(work.begin(), work.end()), work.end());
+    }
+    std::fill(mark.begin(), mark.end(), std::uint8_t(0));
   }
   return res;
 }
