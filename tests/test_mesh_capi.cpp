@@ -357,7 +357,10 @@ TEST(MeshSmoothCapi, SphereKeepsItsRadius) {
   const nbmc_mesh_check_result a = check(raw), b = check(m);
   EXPECT_TRUE(good(b));
   EXPECT_EQ(a.triangle_count, b.triangle_count);
-  EXPECT_NEAR(st.smoothing_volume_change, b.volume / a.volume - 1, 1e-4);
+  // smoothing_volume_change is measured right after smoothing; the clean-up
+  // that runs again on the smoothed mesh flips edges once more (its fairing
+  // flips), which moves the final volume by about 1.5e-4 of it here.
+  EXPECT_NEAR(st.smoothing_volume_change, b.volume / a.volume - 1, 3e-4);
   EXPECT_LT(std::fabs(st.smoothing_volume_change), 0.01);
   EXPECT_GT(st.stage_seconds[NBMC_STAGE_POSTPROCESS], 0);
   const nbmc_test::Mesh s = copy(m), r0 = copy(raw);
