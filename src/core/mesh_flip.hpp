@@ -289,6 +289,7 @@ FlipResult flip_edges_fairing(const Real* positions, std::size_t nv, IndexVec& t
       Candidate f;
       for (std::size_t i = lo; i < hi; ++i) ok[i] = evaluate(work[i] / 3, int(work[i] % 3), f);
     });
+    host_trace("clean-up: fairing evaluation", work.size());
     std::uint64_t flips = 0;
     Candidate f;
     for (std::size_t i = 0; i < work.size(); ++i) {
