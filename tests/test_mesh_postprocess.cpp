@@ -2,10 +2,12 @@
 // Mesh post-processing on hand-built meshes: the mesh check's exact figures
 // (tetrahedron, cube, open box, two tetrahedra sharing a vertex, a flipped
 // triangle, a non-manifold edge, degenerate and sliver triangles) and the
-// clean-up on randomly pinched spheres (never opens or breaks the mesh).
+// clean-up on randomly pinched spheres (never opens or breaks the mesh), and
+// the clean-up's fairing flips (mesh_flip.hpp) on bumpy spheres and a torus.
 #include "../src/core/mesh_check.hpp"
 #include "../src/core/mesh_cleanup.hpp"
 #include "../src/core/mesh_decimate.hpp"
+#include "../src/core/mesh_flip.hpp"
 #include "../src/core/mesh_smooth.hpp"
 
 #include <gtest/gtest.h>
@@ -997,6 +999,168 @@ double max_radius_error(const TestMesh& m) {
     e = std::max(e, std::fabs(l - 1));
   }
   return e;
+}
+
+// ---------------------------------------------------------------- fairing flips
+
+// Sum of the dihedral angles (radians) over the edges with exactly two
+// non-degenerate triangles, as bench/nbmc_quality measures them.
+double dihedral_sum(const TestMesh& m) {
+  std::map<std::pair<std::uint32_t, std::uint32_t>, std::vector<std::size_t>> edges;
+  for (std::size_t t = 0; t < m.t.size() / 3; ++t)
+    for (int k = 0; k < 3; ++k) {
+      const std::uint32_t a = m.t[3 * t + k], b = m.t[3 * t + (k + 1) % 3];
+      edges[{std::min(a, b), std::max(a, b)}].push_back(t);
+    }
+  auto normal = [&](std::size_t t) {
+    const nbmc::mesh::Vec3 a = nbmc::mesh::load(m.p.data(), m.t[3 * t]), b = nbmc::mesh::load(m.p.data(), m.t[3 * t + 1]),
+                           c = nbmc::mesh::load(m.p.data(), m.t[3 * t + 2]);
+    return nbmc::mesh::cross(b - a, c - a);
+  };
+  double sum = 0;
+  for (const auto& e : edges) {
+    if (e.second.size() != 2) continue;
+    const nbmc::mesh::Vec3 n0 = normal(e.second[0]), n1 = normal(e.second[1]);
+    const double l = nbmc::mesh::norm(n0) * nbmc::mesh::norm(n1);
+    if (l > 0) sum += std::acos(std::min(1.0, std::max(-1.0, nbmc::mesh::dot(n0, n1) / l)));
+  }
+  return sum;
+}
+
+// An icosphere with every vertex moved radially by up to +-`bump` (seed):
+// its triangulation no longer follows the bumps everywhere.
+TestMesh bumpy_sphere(int levels, double bump, unsigned seed) {
+  TestMesh m = icosphere(levels);
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> u(-bump, bump);
+  for (std::size_t v = 0; v < m.p.size() / 3; ++v) {
+    const float s = float(1 + u(rng));
+    for (int a = 0; a < 3; ++a) m.p[3 * v + a] *= s;
+  }
+  return m;
+}
+
+double smallest_angle(const TestMesh& m) {
+  double best = 180;
+  for (std::size_t t = 0; t < m.t.size() / 3; ++t) {
+    const nbmc::mesh::Vec3 a = nbmc::mesh::load(m.p.data(), m.t[3 * t]), b = nbmc::mesh::load(m.p.data(), m.t[3 * t + 1]),
+                           c = nbmc::mesh::load(m.p.data(), m.t[3 * t + 2]);
+    best = std::min(best, std::asin(std::min(1.0, nbmc::mesh::detail::sin_smallest_angle(a, b, c))) * 180 / M_PI);
+  }
+  return best;
+}
+
+// Bumpy spheres: the flips lower the sum of the dihedral angles; no vertex
+// moves, the triangle count and the topology (closed, manifold, oriented,
+// Euler 2, one component) stay, no triangle gets an angle below
+// min(kFlipMinAngleDegrees, the smallest before), and the result is the
+// same on 1 and 4 host threads and when run again (a second run finds
+// little: the first ran until its rounds flipped almost nothing).
+TEST(MeshFairingFlips, BumpySpheres) {
+  std::uint64_t total = 0;
+  for (unsigned seed = 1; seed <= 6; ++seed) {
+    TestMesh m = bumpy_sphere(seed <= 3 ? 3 : 5, seed <= 3 ? 0.02 * seed : 0.002 * seed, seed);  // level 5: 20480 triangles, several chunks
+    const TestMesh before = m;
+    const double sum0 = dihedral_sum(m), min0 = smallest_angle(m);
+    nbmc::mesh::FlipResult r;
+    {
+      const nbmc::ScopedHostThreads one(1);
+      r = nbmc::mesh::flip_edges_fairing(m.p.data(), m.p.size() / 3, m.t);
+    }
+    EXPECT_GT(r.flips, 0u) << seed;
+    total += r.flips;
+    EXPECT_EQ(m.p, before.p);
+    ASSERT_EQ(m.t.size(), before.t.size());
+    const CheckResult c = m.check();
+    EXPECT_TRUE(c.closed && c.manifold && c.oriented) << seed;
+    EXPECT_EQ(c.euler_characteristic, 2) << seed;
+    EXPECT_EQ(c.components, 1u);
+    EXPECT_EQ(c.degenerate_triangles + c.sliver_triangles, 0u);
+    EXPECT_GE(smallest_angle(m), std::min(nbmc::mesh::kFlipMinAngleDegrees, min0) - 1e-9) << seed;
+    const double sum1 = dihedral_sum(m);
+    EXPECT_LT(sum1, 0.97 * sum0) << seed;
+    std::printf("bumpy sphere %u: %zu triangles, %llu flips in %d rounds, dihedral sum %.2f -> %.2f\n", seed,
+                m.t.size() / 3, (unsigned long long)r.flips, r.rounds, sum0, sum1);
+    TestMesh four = before;
+    {
+      const nbmc::ScopedHostThreads threads(4);
+      nbmc::mesh::flip_edges_fairing(four.p.data(), four.p.size() / 3, four.t);
+    }
+    EXPECT_EQ(four.t, m.t) << seed;
+    TestMesh again = m;
+    const auto r2 = nbmc::mesh::flip_edges_fairing(again.p.data(), again.p.size() / 3, again.t);
+    EXPECT_LE(r2.flips, r.flips / 10 + 1) << seed;
+    EXPECT_LE(dihedral_sum(again), sum1 + 1e-9);
+  }
+  EXPECT_GT(total, 0u);
+}
+
+// A smooth icosphere is left nearly alone (its diagonals already follow the
+// sphere), and zero rounds leave any mesh as it is.
+TEST(MeshFairingFlips, SmoothSphereAndZeroRounds) {
+  TestMesh m = icosphere(3);
+  const TestMesh before = m;
+  const auto r = nbmc::mesh::flip_edges_fairing(m.p.data(), m.p.size() / 3, m.t);
+  EXPECT_EQ(r.flips, 0u);
+  EXPECT_EQ(m.t, before.t);
+  TestMesh b = bumpy_sphere(3, 0.1, 9);
+  const TestMesh b0 = b;
+  const auto z = nbmc::mesh::flip_edges_fairing(b.p.data(), b.p.size() / 3, b.t, 0);
+  EXPECT_EQ(z.flips, 0u);
+  EXPECT_EQ(b.t, b0.t);
+}
+
+// A bumpy torus (every vertex moved off the tube by up to 8 % of its radius;
+// a smooth torus's quads are planar, both diagonals alike): flips lower the
+// dihedral sum; closed, manifold, oriented, Euler 0 kept.
+TEST(MeshFairingFlips, BumpyTorus) {
+  const int n = 32, mm = 16;
+  const double R = 2, a = 0.7;
+  TestMesh t = torus_mesh(n, mm, R, a);
+  std::mt19937 rng(5);
+  std::uniform_real_distribution<double> u(-0.08, 0.08);
+  for (int i = 0; i < n; ++i)
+    for (int j = 0; j < mm; ++j) {
+      float* q = &t.p[3 * std::size_t(i * mm + j)];
+      const double uu = 2 * M_PI * i / n, s = 1 + u(rng);
+      const double cx = R * std::cos(uu), cy = R * std::sin(uu);  // the tube's centre line
+      q[0] = float(cx + s * (q[0] - cx));
+      q[1] = float(cy + s * (q[1] - cy));
+      q[2] = float(s * q[2]);
+    }
+  ASSERT_TRUE(t.check().closed && t.check().manifold && t.check().oriented);
+  const double sum0 = dihedral_sum(t);
+  const auto r = nbmc::mesh::flip_edges_fairing(t.p.data(), t.p.size() / 3, t.t);
+  const CheckResult c = t.check();
+  EXPECT_TRUE(c.closed && c.manifold && c.oriented);
+  EXPECT_EQ(c.euler_characteristic, 0);
+  EXPECT_GT(r.flips, 0u);
+  EXPECT_LT(dihedral_sum(t), 0.97 * sum0);
+  std::printf("bumpy torus: %llu flips, dihedral sum %.3f -> %.3f\n", (unsigned long long)r.flips, sum0,
+              dihedral_sum(t));
+}
+
+// Open, non-manifold and misoriented parts are left alone: an open box keeps
+// its boundary, two tetrahedra sharing a vertex keep that vertex.
+TEST(MeshFairingFlips, IrregularPartsLeftAlone) {
+  TestMesh box = cube();
+  box.t.erase(box.t.begin() + 6, box.t.begin() + 12);
+  const CheckResult b0 = box.check();
+  nbmc::mesh::flip_edges_fairing(box.p.data(), box.p.size() / 3, box.t);
+  const CheckResult b1 = box.check();
+  EXPECT_EQ(b1.boundary_edges, b0.boundary_edges);
+  EXPECT_EQ(b1.nonmanifold_edges + b1.misoriented_edges, 0u);
+  TestMesh two = tetrahedron();
+  TestMesh other = tetrahedron();
+  for (std::size_t i = 0; i < other.p.size(); ++i) other.p[i] = -other.p[i];
+  // other's vertex 0 is the origin too: share it
+  const std::uint32_t base = std::uint32_t(two.p.size() / 3);
+  for (std::size_t i = 3; i < other.p.size(); ++i) two.p.push_back(other.p[i]);
+  for (std::uint32_t v : other.t) two.t.push_back(v == 0 ? 0 : v - 1 + base);
+  const TestMesh two0 = two;
+  nbmc::mesh::flip_edges_fairing(two.p.data(), two.p.size() / 3, two.t);
+  EXPECT_EQ(two.t, two0.t);
+  EXPECT_EQ(two.check().nonmanifold_vertices, two0.check().nonmanifold_vertices);
 }
 
 // Decimation of a unit sphere to a quarter and a tenth: closed, manifold,

@@ -43,6 +43,13 @@ inline std::uint64_t mesh_bytes(std::uint64_t nv, std::uint64_t nt, bool double_
 //     lists are built from (3 x 8 B, freed before the scan), or two lists of
 //     bad triangles at once (the old and the new one of a pass; a (class,
 //     sine, index) entry each) and the indices a pass looks at again (4 B).
+// The fairing flips after it (mesh_flip.hpp) need less, once the clean-up's
+// own arrays are freed: per vertex 9 B (fan sizes, a triangle of each fan,
+// the regular flag), per triangle at most about 52 B (the neighbours across
+// the three edges, 3 x 4 B; the unit normals, 3 x 8 B; the work list of
+// edges and its flags, about 8 B; the triangles to look at again, at most
+// about 8 B; while the neighbours are found, the (head, half-edge) lists
+// instead, 3 x 8 B).
 inline std::uint64_t cleanup_bytes(std::uint64_t nv, std::uint64_t nt) {
   constexpr std::uint64_t bad_entry = sizeof(std::tuple<int, double, std::uint32_t>);
   constexpr std::uint64_t corners = 3 * 8, passes = 2 * bad_entry + 4;

@@ -15,6 +15,7 @@ struct PostprocessStats {
   // again after smoothing), except: bad_before of the first run (the
   // marching-cubes mesh), bad_after of the last.
   std::uint64_t collapses = 0, flips = 0, moves = 0, cuts = 0;
+  std::uint64_t fairing_flips = 0;     // the fairing flips after each clean-up (mesh_flip.hpp)
   std::uint64_t removed_component_triangles = 0;  // small bad components + degenerate specks
   std::uint64_t bad_before = 0, bad_after = 0;  // degenerate + sliver triangles
   double volume_before_smoothing = 0, volume_after_smoothing = 0;
