@@ -170,17 +170,18 @@ void insert_cells(const ExecSpace& space, MemoryTracker& tracker, Neighbourhood<
   space.fence();
 }
 
-// Whether the dense cell table (Neighbourhood::dense) is built for a grid of
-// `dense` cells and n particles: when it costs at most 2 entries (16 bytes)
-// per particle, or 32 MiB. A frame's particles fill much of their bounding
-// box (the 1.65 M dam-break frame: 1.76 M cells of 2 r, 11% of them
-// occupied); scattered particles in a huge box keep the hash map alone.
-// NBMC_DENSE_CELLS=0 turns the table off (the results are the same; tests
-// compare both).
+// Whether the dense cell table (Neighbourhood::dense_start) is built for a
+// grid of `dense` cells and n particles: when it has at most 2 entries (8
+// bytes) per particle, or 64 Ki entries, so that memory still follows the
+// particles, not the bounding box (Memory.TwoClumpsFarApart...). A frame's
+// particles fill much of their bounding box (the 1.65 M dam-break frame:
+// 1.76 M cells of 2 r, 11% of them occupied); scattered particles in a huge
+// box keep the hash map alone. NBMC_DENSE_CELLS=0 turns the table off (the
+// results are the same; tests compare both).
 inline bool dense_cells_allowed(std::uint64_t dense, std::size_t n) {
   const char* e = std::getenv("NBMC_DENSE_CELLS");
   if (e && std::string(e) == "0") return false;
-  return dense <= std::max<std::uint64_t>(std::uint64_t(1) << 22, 2 * std::uint64_t(n));
+  return dense <= std::max<std::uint64_t>(std::uint64_t(1) << 16, 2 * std::uint64_t(n));
 }
 
 // Builds Neighbourhood::dense_start from the occupied cells' keys and
