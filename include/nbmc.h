@@ -272,9 +272,10 @@ typedef struct nbmc_params {
      below): a caller built against a header without them passes the shorter
      struct, and these fields keep their defaults. */
   int32_t cleanup;          /* non-zero (default): remove degenerate and sliver triangles by edge
-                               collapses and flips, then flip edges whose other diagonal bends
-                               the surface less; 0: the raw marching-cubes mesh */
-  int32_t smooth_iterations; /* Taubin lambda|mu smoothing steps after the clean-up; default 0 */
+                               collapses and flips; 0: the raw marching-cubes mesh */
+  int32_t smooth_iterations; /* Taubin lambda|mu smoothing steps after the clean-up (then, with
+                               cleanup on, the clean-up again, ending with fairing flips of the
+                               edges whose other diagonal bends the surface less); default 0 */
   /* Appended with NBMC_METHOD_SPH (older callers: the default). */
   double iso_threshold;     /* NBMC_METHOD_SPH and NBMC_METHOD_YT10: iso level of the normalised
                                density, a fraction of the rest density, 0 < iso_threshold < 1;
@@ -500,10 +501,11 @@ NBMC_API int32_t nbmc_kokkos_finalize(void);
  *    its edges or flipping its longest edge, keeping the mesh closed, manifold
  *    and oriented (link condition checked before each collapse; no triangle
  *    turns by 60 degrees or more; good triangles stay good). Those that no
- *    repair can fix without folding the surface stay. Then edges are
- *    flipped where the quad's other diagonal bends the surface less (the
- *    fairing flips: no vertex moves, no triangle gets an angle below 5
- *    degrees or its pair's smallest, docs/api.md).
+ *    repair can fix without folding the surface stay. After smoothing,
+ *    the clean-up runs again and then flips edges where the quad's other
+ *    diagonal bends the surface less (the fairing flips: no vertex moves,
+ *    no triangle gets an angle below 5 degrees or its pair's smallest,
+ *    docs/api.md).
  *  - smoothing (nbmc_params.smooth_iterations, default 0): Taubin's lambda|mu
  *    filter (lambda = 0.5, mu = -0.53, uniform weights), each iteration one
  *    lambda and one mu step; a component whose volume changed by more than

@@ -97,11 +97,15 @@ void postprocess_positions(const nbmc_params& params, PosVec& positions, HostMes
     const StepMemory mem(tracker, mesh::cleanup_bytes(c.first, c.second), held(), "the mesh clean-up",
                          "nbmc_params.cleanup = 0; CLI --no-cleanup", c.first, c.second);
     const mesh::CleanupResult r = mesh::cleanup_mesh(positions, m.normals, m.triangles, cell);
-    // Then the fairing flips (core/mesh_flip.hpp): the diagonals that bend
-    // the surface least; no vertex moves.
-    const mesh::FlipResult f = mesh::flip_edges_fairing(positions.data(), positions.size() / 3, m.triangles);
-    host_trace("clean-up: fairing flips", f.flips);
-    ps.fairing_flips += f.flips;
+    // After smoothing, the fairing flips (core/mesh_flip.hpp): the
+    // diagonals that bend the surface least; no vertex moves. Not in the
+    // default clean-up: on the 1.65 M frame at r/2 they cost 0.37 s of host
+    // time on 16 threads, 6x a GPU run's whole time (bench/RESULTS.md).
+    if (!first) {
+      const mesh::FlipResult f = mesh::flip_edges_fairing(positions.data(), positions.size() / 3, m.triangles);
+      host_trace("clean-up: fairing flips", f.flips);
+      ps.fairing_flips += f.flips;
+    }
     ps.collapses += r.collapses;
     ps.flips += r.flips;
     ps.moves += r.moves;
