@@ -10,13 +10,12 @@
 #include "common.hpp"
 #include "grid.hpp"
 #include "neighbourhood.hpp"
+#include "stage_tests.hpp"
 
 #include <cstdlib>
 #include <random>
 #include <vector>
 
-// The library's definition is not exported; the stages only report progress.
-void nbmc::Progress::operator()(int, double) const {}
 
 namespace {
 
@@ -25,16 +24,8 @@ using namespace nbmc::Details;
 using Host = Kokkos::HostSpace;
 using Points = std::vector<double>;
 
-class KokkosEnv : public ::testing::Environment {
- public:
-  void SetUp() override {
-    Kokkos::InitArguments args;
-    args.num_threads = 2;
-    Kokkos::initialize(args);
-  }
-  void TearDown() override { Kokkos::finalize(); }
-};
-const ::testing::Environment* const kokkos_env = ::testing::AddGlobalTestEnvironment(new KokkosEnv);
+const ::testing::Environment* const kokkos_env =
+    ::testing::AddGlobalTestEnvironment(new nbmc_test::KokkosThreads(2));
 
 Params params(double r) {
   Params p;  // the C API's defaults, absolute units

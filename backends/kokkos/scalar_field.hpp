@@ -269,10 +269,11 @@ __attribute__((target("avx2"), flatten)) bool eval_tile_host_avx2(
 #endif
 
 // 16 lanes on CPUs with AVX-512F, chosen at run time, as the 8 above: the
-// same tile code with 64-byte vectors (32 zmm registers: SSP07's 17 or 18
+// same tile code with 64-byte vectors (32 zmm registers: SSP07's 14 or 15
 // accumulators, the lanes' coordinates and the temporaries fit; GCC 12 keeps
 // all but the lanes' x in registers, reloaded once per particle, where the
-// 16 ymm registers of the AVX2 loop spill 9 or 13 per particle).
+// 16 ymm registers of the AVX2 loop spilled 9 or 13 per particle; measured
+// with SSP07's former 17 or 18 accumulators).
 // A group of 16 is a 4x4 layer of the tile (tile_order), whose vertices visit
 // nearly the same cells.
 #if defined(NBMC_HOST_SIMD16)  // field_common.hpp: GCC, or any compiler with -mavx512f
