@@ -72,12 +72,13 @@ Points ball(double r, int half, unsigned seed) {
   return p;
 }
 
-// Every cell of the grid: the dense table and the hash map agree, and every
-// particle lies in the range of its own cell.
-void expect_same_ranges(const Built& b) {
-  const NeighbourView<Host> dense = view_of(b.nbh, b.g);
-  NeighbourView<Host> hashed = dense;
-  hashed.dense_start = {};
+// Every cell of the grid: the dense table of b and the hash map of h (the
+// same particles, built with NBMC_DENSE_CELLS=0) agree, and every particle
+// lies in the range of its own cell.
+void expect_same_ranges(const Built& b, const Built& h) {
+  const NeighbourView<Host> dense = view_of(b.nbh, b.g), hashed = view_of(h.nbh, h.g);
+  ASSERT_EQ(h.nbh.dense_start.size(), 0u);
+  ASSERT_EQ(b.nbh.cells.keys.size(), 0u) << "the hash map is built only without the dense table";
   std::size_t occupied = 0, particles = 0;
   for (std::int64_t z = 0; z < b.g.nb_dims[2]; ++z)
     for (std::int64_t y = 0; y < b.g.nb_dims[1]; ++y)
@@ -118,10 +119,14 @@ void expect_same_ranges(const Built& b) {
 
 TEST(Neighbourhood, DenseTableAndHashMapGiveTheSameRanges) {
   const double r = 0.05;
-  Built b;
-  build(ball(r, 9, 3), params(r), b);
+  const Points p = ball(r, 9, 3);
+  Built b, h;
+  build(p, params(r), b);
   ASSERT_GT(b.nbh.dense_start.size(), 0u) << "a compact ball must get the dense table";
-  expect_same_ranges(b);
+  setenv("NBMC_DENSE_CELLS", "0", 1);
+  build(p, params(r), h);
+  unsetenv("NBMC_DENSE_CELLS");
+  expect_same_ranges(b, h);
 }
 
 TEST(Neighbourhood, ScatteredParticlesKeepTheHashMapAlone) {

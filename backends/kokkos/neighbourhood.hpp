@@ -31,13 +31,13 @@ struct Neighbourhood {
   Buffer<std::uint32_t, MemSpace> perm;   // sorted index -> uploaded index
   Buffer<std::uint64_t, MemSpace> cell_keys;
   Buffer<std::uint32_t, MemSpace> cell_start;  // n_cells + 1
-  HashMapStorage<MemSpace> cells;              // cell key -> cell index
+  HashMapStorage<MemSpace> cells;              // cell key -> cell index (without dense_start)
   // Where the neighbour grid is small enough (dense_cells_allowed), the
   // start of every grid cell's particles, by cell key, and n at the end
   // (empty cells start where the next occupied one does): one load per cell
   // lookup instead of a hash and a probe, and a whole row of cells in x is
-  // one range. Empty otherwise (the hash map serves). Both give the same
-  // ranges.
+  // one range. Empty otherwise, and then the hash map, which is built only
+  // then, serves. Both give the same ranges.
   Buffer<std::uint32_t, MemSpace> dense_start;
   // Per-particle data of a field method with a pass over the particles (P
   // floats per particle, sorted order: SPH's weight, YT10's kernel; with
@@ -208,6 +208,16 @@ void build_dense_cells(const ExecSpace& space, MemoryTracker& tracker, const Gri
   exclusive_scan(space, "nbmc::neighbourhood::dense_starts", start, start);
 }
 
+// The cell lookups of a built neighbourhood: the dense table where it is
+// allowed, else the hash map (one of the two, never both).
+template <class ExecSpace>
+void index_cells(const ExecSpace& space, MemoryTracker& tracker, const Grid& g,
+                 Neighbourhood<typename ExecSpace::memory_space>& out) {
+  build_dense_cells(space, tracker, g, out);
+  if (out.dense_start.size() == 0) insert_cells(space, tracker, out);
+  else out.cells = HashMapStorage<typename ExecSpace::memory_space>();
+}
+
 // Per-particle radii (host, uploaded order): the runs of handlers at one
 // position (same cell, same x, y, z) sorted by radius, then index. Such runs
 // are rare (duplicates), so this is one pass over the sorted handlers.
@@ -314,8 +324,7 @@ void build_neighbourhood(const ExecSpace& space, MemoryTracker& tracker, const d
     space.fence();
   }
   rec.release();
-  insert_cells(space, tracker, out);
-  build_dense_cells(space, tracker, g, out);
+  index_cells(space, tracker, g, out);
 }
 
 // Unsigned bits of a float that sort in the float's order (no NaN; -0 is
@@ -448,8 +457,7 @@ void build_neighbourhood_device(const ExecSpace& space, MemoryTracker& tracker,
   }
   space.fence();
   rel.release();
-  insert_cells(space, tracker, out);
-  build_dense_cells(space, tracker, g, out);
+  index_cells(space, tracker, g, out);
 }
 
 }  // namespace Details

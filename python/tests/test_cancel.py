@@ -84,7 +84,9 @@ CTRL_C = textwrap.dedent("""
         calls.append(stage)
         if len(calls) == 2:
             print("started", flush=True)
-        time.sleep(0.3)  # a slow reconstruction, so that Ctrl-C lands in the middle
+        # A slow reconstruction, so that Ctrl-C lands in the middle: 8 more
+        # reports, 8 s, leave room for a parent that a busy machine delays.
+        time.sleep(1.0)
     ctx = nbmc.Context(threads=1, progress=progress)
     try:
         ctx.reconstruct(points, particle_radius={radius})
