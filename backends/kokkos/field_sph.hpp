@@ -147,7 +147,7 @@ struct FieldSPHT {
   template <class T>
   KOKKOS_INLINE_FUNCTION static void add(T* a, T /*dx*/, T /*dy*/, T /*dz*/, T k, const float* w,
                                          T /*q: in k already*/) {
-    a[0] += sph_kernel(k) * lanes_of<T>(w[0]);
+    a[0] = fmadd(sph_kernel(k), lanes_of<T>(w[0]), a[0]);
     a[KM] = lane_max(a[KM], k);
   }
   // Adds particles [b, e) (SoA coordinates, weights W) at vertex x, one after
@@ -166,7 +166,7 @@ struct FieldSPHT {
       if (!(s2 < 1.f)) continue;  // it would add exactly +0 (field_common.hpp)
       const float k = s2 < 1.f ? 1.f - s2 : 0.f;
       count += s2 < 1.f ? 1u : 0u;
-      a0 += sph_kernel(k) * W[j];
+      a0 = fmadd(sph_kernel(k), W[j], a0);
       km = lane_max(km, k);
     }
     a[0] = a0;

@@ -56,11 +56,11 @@ struct FieldSSP07T {
     T k2 = k * k;
     const T w = k2 * k;
     a[0] += w;
-    a[1] += w * dx;
-    a[2] += w * dy;
-    a[3] += w * dz;
+    a[1] = fmadd(w, dx, a[1]);
+    a[2] = fmadd(w, dy, a[2]);
+    a[3] = fmadd(w, dz, a[3]);
     if constexpr (Radii) {
-      a[RS] += w * lanes_of<T>(pd[0]);
+      a[RS] = fmadd(w, lanes_of<T>(pd[0]), a[RS]);
       k2 = k2 * q;
     } else {
       (void)pd;
@@ -71,9 +71,9 @@ struct FieldSSP07T {
     a[4] += gx;
     a[5] += gy;
     a[6] += gz;
-    a[7] += dx * gx; a[8] += dx * gy; a[9] += dx * gz;
-    a[10] += dy * gy; a[11] += dy * gz;
-    a[12] += dz * gz;
+    a[7] = fmadd(dx, gx, a[7]); a[8] = fmadd(dx, gy, a[8]); a[9] = fmadd(dx, gz, a[9]);
+    a[10] = fmadd(dy, gy, a[10]); a[11] = fmadd(dy, gz, a[11]);
+    a[12] = fmadd(dz, gz, a[12]);
   }
   // Adds particles [b, e) (SoA coordinates) at vertex x, one after the other (the
   // order of the sums is part of the result: see field_common.hpp); returns how
@@ -97,20 +97,20 @@ struct FieldSSP07T {
       float k2 = k * k;
       const float w = k2 * k;
       w0 += w;
-      d0 += w * dx;
-      d1 += w * dy;
-      d2 += w * dz;
+      d0 = fmadd(w, dx, d0);
+      d1 = fmadd(w, dy, d1);
+      d2 = fmadd(w, dz, d2);
       if constexpr (Radii) {
-        rs += w * Rj[j];
+        rs = fmadd(w, Rj[j], rs);
         k2 = k2 * q;
       }
       const float gx = k2 * dx, gy = k2 * dy, gz = k2 * dz;
       g0 += gx;
       g1 += gy;
       g2 += gz;
-      m00 += dx * gx; m01 += dx * gy; m02 += dx * gz;
-      m11 += dy * gy; m12 += dy * gz;
-      m22 += dz * gz;
+      m00 = fmadd(dx, gx, m00); m01 = fmadd(dx, gy, m01); m02 = fmadd(dx, gz, m02);
+      m11 = fmadd(dy, gy, m11); m12 = fmadd(dy, gz, m12);
+      m22 = fmadd(dz, gz, m22);
       km = lane_max(km, k);
     }
     a[0] = w0; a[1] = d0; a[2] = d1; a[3] = d2; a[4] = g0; a[5] = g1; a[6] = g2;

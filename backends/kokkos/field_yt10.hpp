@@ -132,7 +132,7 @@ struct FieldYT10 {
     const T uy = (g01 * ex + g11 * ey) + g12 * ez;
     const T uz = (g02 * ex + g12 * ey) + g22 * ez;
     const T q2 = (ux * ux + uy * uy) + uz * uz;
-    a[0] += yt10_spline(sqrt_lanes(q2), q2, k) * lanes_of<T>(pd[9]);
+    a[0] = fmadd(yt10_spline(sqrt_lanes(q2), q2, k), lanes_of<T>(pd[9]), a[0]);
   }
   // Adds particles [b, e) (SoA coordinates, kernels PD) at vertex x, one after
   // the other (see field_common.hpp); returns how many lie within R. The
@@ -185,9 +185,9 @@ struct Yt10Moments {
     a[1] += wx;
     a[2] += wy;
     a[3] += wz;
-    a[4] += wx * dx; a[5] += wx * dy; a[6] += wx * dz;
-    a[7] += wy * dy; a[8] += wy * dz;
-    a[9] += wz * dz;
+    a[4] = fmadd(wx, dx, a[4]); a[5] = fmadd(wx, dy, a[5]); a[6] = fmadd(wx, dz, a[6]);
+    a[7] = fmadd(wy, dy, a[7]); a[8] = fmadd(wy, dz, a[8]);
+    a[9] = fmadd(wz, dz, a[9]);
   }
   // The same for particles [b, e), one after the other (add's operations).
   KOKKOS_INLINE_FUNCTION static std::uint32_t accumulate(float* a, const float* X, const float* Y, const float* Z,

@@ -26,10 +26,10 @@ struct FieldZB05T {
   KOKKOS_INLINE_FUNCTION static void add(T* a, T dx, T dy, T dz, T k, const float* pd, T /*q: in k already*/) {
     const T w = k * k * k;
     a[0] += w;
-    a[1] += w * dx;
-    a[2] += w * dy;
-    a[3] += w * dz;
-    if constexpr (Radii) a[RS] += w * lanes_of<T>(pd[0]);
+    a[1] = fmadd(w, dx, a[1]);
+    a[2] = fmadd(w, dy, a[2]);
+    a[3] = fmadd(w, dz, a[3]);
+    if constexpr (Radii) a[RS] = fmadd(w, lanes_of<T>(pd[0]), a[RS]);
     else (void)pd;
     a[KM] = lane_max(a[KM], k);
   }
@@ -53,10 +53,10 @@ struct FieldZB05T {
       count += s2 < 1.f ? 1u : 0u;
       const float w = k * k * k;
       a0 += w;
-      a1 += w * dx;
-      a2 += w * dy;
-      a3 += w * dz;
-      if constexpr (Radii) rs += w * Rj[j];
+      a1 = fmadd(w, dx, a1);
+      a2 = fmadd(w, dy, a2);
+      a3 = fmadd(w, dz, a3);
+      if constexpr (Radii) rs = fmadd(w, Rj[j], rs);
       km = lane_max(km, k);
     }
     a[0] = a0; a[1] = a1; a[2] = a2; a[3] = a3;

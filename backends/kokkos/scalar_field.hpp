@@ -260,7 +260,7 @@ KOKKOS_INLINE_FUNCTION bool eval_tile_host_lanes(const NeighbourView<MemSpace>& 
 #if defined(NBMC_HOST_SIMD8)  // field_common.hpp: GCC, or any compiler with -mavx2
 #define NBMC_HOST_AVX2 1
 template <class Method, class MemSpace>
-__attribute__((target("avx2"), flatten)) bool eval_tile_host_avx2(
+__attribute__((target("avx2,fma"), flatten)) bool eval_tile_host_avx2(
     const NeighbourView<MemSpace>& nb, const std::int64_t lo[3], const std::int64_t hi[3], float S,
     const FieldConstants& fc, std::uint64_t word, std::uint64_t full, std::size_t w, const BandView<MemSpace>& band,
     float c, const Kokkos::View<float*, MemSpace>& phi, std::uint64_t& evals) {
@@ -294,7 +294,7 @@ __attribute__((target("avx512f"), flatten)) bool eval_tile_host_avx512(
 inline int host_simd_lanes() {
   int best = 4;
 #if defined(NBMC_HOST_AVX2)
-  if (__builtin_cpu_supports("avx2")) best = 8;
+  if (__builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma")) best = 8;
 #endif
 #if defined(NBMC_HOST_AVX512)
   if (__builtin_cpu_supports("avx512f")) best = 16;

@@ -95,7 +95,7 @@ KOKKOS_INLINE_FUNCTION float yt10_cell_host_lanes(const NeighbourView<MemSpace>&
 // (host_simd_lanes), as for the band tiles.
 #if defined(NBMC_HOST_AVX2)
 template <class MemSpace>
-__attribute__((target("avx2"), flatten)) float yt10_cell_host_avx2(const NeighbourView<MemSpace>& nb, float S,
+__attribute__((target("avx2,fma"), flatten)) float yt10_cell_host_avx2(const NeighbourView<MemSpace>& nb, float S,
                                                                    const FieldConstants& fc, const Yt10Constants& k,
                                                                    std::uint32_t b, std::uint32_t e, float* out) {
   return yt10_cell_host_lanes<8>(nb, S, fc, k, b, e, out);
