@@ -53,13 +53,17 @@
 // unit for AVX2 (-mavx2, -march=native). Clang rejects a 32-byte vector
 // passed to a function not compiled for AVX even where that function is
 // inlined into an AVX2 one, so a Clang build without -mavx2 uses 4 lanes
-// (the same results: the lane count never changes a value).
-#if !defined(__CUDA_ARCH__) && !defined(__CUDACC__) && defined(__x86_64__) && defined(__GNUC__) && (!defined(__clang__) || defined(__AVX2__))
+// (the same results: the lane count never changes a value). Under nvcc
+// (a CUDA build compiles every file with it, the host backends' too) the
+// host pass has them as well (checked with nvcc 13 and GCC 13); until
+// session 23 they were left out there, so a CUDA build's OpenMP backend ran
+// 4 lanes.
+#if !defined(__CUDA_ARCH__) && defined(__x86_64__) && defined(__GNUC__) && (!defined(__clang__) || defined(__AVX2__))
 #define NBMC_HOST_SIMD8 1
 #endif
 // The same for the 16-lane kernels (AVX-512F, chosen at run time): GCC on
 // x86-64, or a compiler told -mavx512f.
-#if !defined(__CUDA_ARCH__) && !defined(__CUDACC__) && defined(__x86_64__) && defined(__GNUC__) && (!defined(__clang__) || defined(__AVX512F__))
+#if !defined(__CUDA_ARCH__) && defined(__x86_64__) && defined(__GNUC__) && (!defined(__clang__) || defined(__AVX512F__))
 #define NBMC_HOST_SIMD16 1
 #endif
 #if defined(NBMC_HOST_SIMD8) || defined(NBMC_HOST_SIMD16)

@@ -18,6 +18,7 @@
 #include <cmath>
 #include <cstdlib>
 #include <limits>
+#include <new>
 #include <string>
 
 namespace nbmc {
@@ -93,6 +94,31 @@ struct TileScratch {
   // most kMaxTileCells + 2 when their product is at most kMaxTileCells).
   typename HostSimd<L>::F gap2[kMaxTileCells + 2];
 };
+
+// The calling thread's scratch for the tile kernels (every method and lane
+// count shares it; no call nests in another): a block on the heap, made on
+// the thread's first tile, freed when the thread ends. A static thread_local
+// TileScratch per kernel instantiation (as until session 23) made 1.2 MiB
+// of thread-local storage, which glibc allocates and clears for every new
+// thread of the process, and the host post-processing starts its threads
+// per parallel loop (core/parallel.hpp): with 16 threads the clean-up took
+// twice as long on the H100 machine's host.
+inline void* host_tile_scratch(std::size_t bytes) {
+  struct Block {
+    void* p = nullptr;
+    std::size_t n = 0;
+    ~Block() { ::operator delete(p, std::align_val_t(64)); }
+  };
+  static thread_local Block b;
+  if (b.n < bytes) {
+    ::operator delete(b.p, std::align_val_t(64));
+    b.p = nullptr;
+    b.n = 0;
+    b.p = ::operator new(bytes, std::align_val_t(64));
+    b.n = bytes;
+  }
+  return b.p;
+}
 #endif
 
 // Bits of a band word (bit = x + 4y + 16z) in the order the host groups
@@ -123,8 +149,8 @@ inline bool eval_points_host_lanes(const NeighbourView<MemSpace>& nb, const std:
   using HostVecI = typename HostSimd<L>::I;
   const std::int64_t span[3] = {hi[0] - lo[0] + 1, hi[1] - lo[1] + 1, hi[2] - lo[2] + 1};
   if (span[0] * span[1] * span[2] > kMaxTileCells) return false;
-  static thread_local TileScratch<L> scratch;
-  TileScratch<L>& t = scratch;  // one TLS lookup per tile, not per access
+  static_assert(alignof(TileScratch<L>) <= 64, "host_tile_scratch aligns to 64 bytes");
+  TileScratch<L>& t = *new (host_tile_scratch(sizeof(TileScratch<L>))) TileScratch<L>;  // no initialisation
   int n_cells = 0;
   for (std::int64_t z = lo[2]; z <= hi[2]; ++z)
     for (std::int64_t y = lo[1]; y <= hi[1]; ++y)
@@ -256,7 +282,7 @@ KOKKOS_INLINE_FUNCTION bool eval_tile_host_lanes(const NeighbourView<MemSpace>& 
 
 // 8 lanes on CPUs with AVX2, chosen at run time: the tile code above compiled
 // for AVX2 (flatten: everything it calls is inlined into this one function,
-// so no other code is compiled for AVX2). Not under nvcc.
+// so no other code is compiled for AVX2 and FMA).
 #if defined(NBMC_HOST_SIMD8)  // field_common.hpp: GCC, or any compiler with -mavx2
 #define NBMC_HOST_AVX2 1
 template <class Method, class MemSpace>
