@@ -44,6 +44,7 @@
 #include <atomic>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <memory>
 #include <utility>
 #include <vector>
@@ -122,6 +123,13 @@ NBMC_FLIP_INLINE bool unit_normal_f(const Real* P, std::uint32_t p, std::uint32_
 // 3 t + (k + 2) % 3.
 inline std::uint32_t next1(std::uint32_t h) { return h % 3 == 2 ? h - 2 : h + 1; }
 inline std::uint32_t next2(std::uint32_t h) { return h % 3 == 0 ? h + 2 : h - 1; }
+inline void prefetch(const void* p) {
+#if defined(__GNUC__)
+  __builtin_prefetch(p);
+#else
+  (void)p;
+#endif
+}
 inline float dot3(const float* a, const float* b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
 inline bool zero3(const float* a) { return a[0] == 0 && a[1] == 0 && a[2] == 0; }
 // |a - b|^2.
@@ -243,12 +251,24 @@ FlipResult flip_edges_fairing(const Real* positions, std::size_t nv, IndexVec& t
   const float cos_max_dihedral = float(std::cos(kFlipMaxDihedralDegrees * 3.14159265358979323846 / 180.0));
   const float min_gain = float(kFlipMinGain);
 
-  // A flip found by evaluate: what apply needs.
+  std::vector<std::uint8_t> seen(3 * nt, 0);  // per half-edge: the level it was evaluated at (0: not)
+  std::vector<std::uint32_t> last(nt, 0);     // per triangle: the time of the last flip that changed it
+  std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>> near(nt);
+  const bool timed = 9 * std::uint64_t(nt) + 12 < std::uint64_t(kNoTriangle);  // (else: every change counts)
+  auto time_of = [&](int level, std::uint32_t h) {
+    return std::uint32_t(level - 1) * std::uint32_t(6 * nt + 4) + 2 * (h + 1);
+  };  // A flip found by evaluate: what apply needs.
   struct Candidate {
     float u0[3], u1[3];
+    // Of a rejected edge: how far the bends of its five edges are from
+    // passing (after - before + kFlipMinGain), or 0 when its rejection may
+    // change with its neighbourhood, or infinity when only its own quad's
+    // corners decide it (they stay while its two triangles do).
+    float margin;
     std::uint32_t t0, t1, a, b, c, d, o_bc, o_ca, o_ad, o_db;  // o_*: the outer half-edges' opposites
   };
   enum Outcome { Reject, Pass, Outside };
+  const float never = std::numeric_limits<float>::infinity();
   // Evaluates the edge of half-edge h = 3 t0 + k on the current mesh (reads
   // only). Every triangle it reads lies in [lo, hi) (a chunk's), or it
   // returns Outside before reading it: so that chunks are evaluated and
@@ -259,6 +279,7 @@ FlipResult flip_edges_fairing(const Real* positions, std::size_t nv, IndexVec& t
     auto inside = [&](std::uint32_t t) { return t >= lo && t < hi; };
     const std::uint32_t t0 = h / 3;
     const std::uint32_t g = opp[h];
+    f.margin = never;
     if (g == kNoTriangle) return Reject;
     const std::uint32_t t1 = g / 3;
     if (t1 < t0) return Reject;  // the edge is its lower triangle's
@@ -295,11 +316,17 @@ FlipResult flip_edges_fairing(const Real* positions, std::size_t nv, IndexVec& t
     detail::sqrt12(sq);
     const float before = sq[0] + sq[1] + sq[2] + sq[3] + sq[4];
     const float after = sq[5] + sq[6] + sq[7] + sq[8] + sq[9];
-    if (!(after < before - min_gain)) return Reject;
+    if (!(after < before - min_gain)) {
+      const float m = after - before + min_gain;
+      f.margin = m >= 0 ? m : 0;  // (0 for a NaN)
+      return Reject;
+    }
     // (A zero normal: a degenerate triangle, old or new, never flipped.)
     if (detail::zero3(m0) || detail::zero3(m1) || detail::zero3(s_bc) || detail::zero3(s_ca) || detail::zero3(s_ad) ||
-        detail::zero3(s_db))
+        detail::zero3(s_db)) {
+      f.margin = 0;
       return Reject;
+    }
     if (!regular[a] || !regular[b] || !regular[c] || !regular[d]) return Reject;
     const Vec3 pa = pos(a), pb = pos(b), pc = pos(c), pd = pos(d);
     const double old_min = std::min(detail::sin_smallest_angle(pa, pb, pc), detail::sin_smallest_angle(pb, pa, pd));
@@ -308,6 +335,7 @@ FlipResult flip_edges_fairing(const Real* positions, std::size_t nv, IndexVec& t
     if (!(new_min >= std::min(sin_min_angle, old_min))) return Reject;
     // The edge (c, d) must not exist: walk c's fan (regular: closed), from
     // t0 across its in-edge of c, (b -> c), to the triangle of c -> b, ...
+    f.margin = 0;  // (an edge (c, d) elsewhere may come or go)
     std::uint32_t cur = t0, steps = 0;
     do {
       const std::uint32_t* x = T + 3 * std::size_t(cur);
@@ -325,6 +353,11 @@ FlipResult flip_edges_fairing(const Real* positions, std::size_t nv, IndexVec& t
   // 3t0+1: d->c (3t1+2), 3t0+2: c->a (o_ca); 3t1: d->b (o_db), 3t1+1: b->c
   // (o_bc), 3t1+2: c->d (3t0+1). The quad's boundary keeps its direction.
   // Writes t0, t1 and the four outer triangles (their opposites).
+  // drift: per triangle, the sum over this round's flips of it of how far
+  // the normal that each of its quad's sides sees moved (at most
+  // max |old - new| over the four pairs): a bend across such a side moves
+  // by no more, so an edge beyond whose margin exceeds twice its
+  // neighbours' drift still fails (below).
   auto apply = [&](const Candidate& f) {
     std::uint32_t* A = T + 3 * std::size_t(f.t0);
     std::uint32_t* B = T + 3 * std::size_t(f.t1);
@@ -345,13 +378,21 @@ FlipResult flip_edges_fairing(const Real* positions, std::size_t nv, IndexVec& t
   // chunks do not meet and each comes out as one thread alone would make
   // it. The edges that read outside their chunk go, in order, through
   // chunks 16 times as large in the same way, and what is left of them
-  // through a serial pass. The next round's edges: those of the triangles
-  // the flips changed or bordered (their bends, or their quads, changed).
-  std::vector<std::uint8_t> mark(nt, 0);
+  // through a serial pass. The next round's edges: those whose quad (their
+  // two triangles and the four beyond) holds a triangle that a flip
+  // rewrote after the edge was evaluated (a flip rewrites its two
+  // triangles: their corners and normals; of the four beyond only which of
+  // the two faces them, seen from the quad's side): an edge evaluated after
+  // the change saw it, and would only be rejected again. The order: level l
+  // (1: chunks, 2: large chunks, 3: serial), then the half-edge h; the item
+  // h is evaluated at time base(l) + 2 (h + 1), a flip there stamps its two
+  // triangles with that time + 1 (so the slot h itself, rewritten by the
+  // flip, counts as changed).
+
   // Runs the items (half-edges, ascending) through chunks of `size`
   // triangles (0: one chunk, the whole mesh, serially); the items that read
   // outside their chunk are returned, ascending.
-  auto run = [&](const std::vector<std::uint32_t>& items, std::size_t size) {
+  auto run = [&](const std::vector<std::uint32_t>& items, std::size_t size, int level) {
     const bool serial = size == 0;
     if (serial) size = nt;
     const std::size_t chunks = (nt + size - 1) / size;
@@ -367,12 +408,28 @@ FlipResult flip_edges_fairing(const Real* positions, std::size_t nv, IndexVec& t
       for (std::size_t q; (q = next_chunk.fetch_add(1, std::memory_order_relaxed)) < chunks;) {
         const std::uint32_t lo = std::uint32_t(q * size), hi = std::uint32_t(std::min(nt, (q + 1) * size));
         for (std::size_t i = from[q]; i < from[q + 1]; ++i) {
+          // (The opposite of an item a few ahead, and its triangles: the
+          // evaluation's chain of loads starts there.)
+          if (i + 8 < from[q + 1]) {
+            const std::uint32_t g = opp[items[i + 8]];
+            if (g != kNoTriangle) {
+              detail::prefetch(&opp[g]);
+              detail::prefetch(&T[g]);
+              detail::prefetch(&tn[g]);
+            }
+          }
+          if (i + 16 < from[q + 1]) detail::prefetch(&opp[items[i + 16]]);
           const Outcome o = evaluate(items[i], lo, hi, f);
-          if (o == Outside) out[q].push_back(items[i]);
+          if (o == Outside) {
+            out[q].push_back(items[i]);
+            continue;
+          }
+          if (timed) seen[items[i]] = std::uint8_t(level);
           if (o != Pass) continue;
           apply(f);
           ++flipped[q];
-          for (std::uint32_t t : {f.t0, f.t1, f.o_bc / 3, f.o_ca / 3, f.o_ad / 3, f.o_db / 3}) mark[t] = 1;
+          const std::uint32_t stamp = timed ? time_of(level, items[i]) + 1 : 1;
+          last[f.t0] = last[f.t1] = stamp;
         }
       }
     });
@@ -392,7 +449,7 @@ FlipResult flip_edges_fairing(const Real* positions, std::size_t nv, IndexVec& t
       parts[q].clear();
       for (std::uint32_t h = std::uint32_t(3 * lo); h < 3 * hi; ++h) {
         const std::uint32_t g = opp[h];
-        if (g != kNoTriangle && g / 3 > h / 3 && want(h / 3, g / 3)) parts[q].push_back(h);
+        if (g != kNoTriangle && g / 3 > h / 3 && want(h, g)) parts[q].push_back(h);
       }
     });
     work.clear();
@@ -401,19 +458,37 @@ FlipResult flip_edges_fairing(const Real* positions, std::size_t nv, IndexVec& t
   gather([](std::uint32_t, std::uint32_t) { return true; });
   for (int round = 0; round < max_rounds && !work.empty(); ++round) {
     const std::uint64_t flips0 = res.flips;
-    std::vector<std::uint32_t> left = run(work, chunk);
+    std::vector<std::uint32_t> left = run(work, chunk, 1);
     host_trace("clean-up: fairing chunks", left.size());
-    if (!left.empty()) left = run(left, 16 * chunk);
+    if (!left.empty()) left = run(left, 16 * chunk, 2);
     host_trace("clean-up: fairing large chunks", left.size());
-    if (!left.empty()) run(left, 0);
+    if (!left.empty()) run(left, 0, 3);
     host_trace("clean-up: fairing serial", res.flips - flips0);
     res.rounds = round + 1;
     if (res.flips == flips0 || round + 1 == max_rounds) break;
-    // The next work list: the edges of the marked triangles, each once
-    // (from its lower triangle); then the marks are cleared.
-    gather([&](std::uint32_t t, std::uint32_t o) { return (mark[t] | mark[o]) != 0; });
-    for_chunks(nt, chunk_count(nt, 65536), [&](std::size_t, std::size_t lo, std::size_t hi) {
-      std::fill(mark.begin() + lo, mark.begin() + hi, std::uint8_t(0));
+    // The next work list (each edge once, from its lower triangle): the
+    // edges whose triangles a flip rewrote after they were evaluated (or
+    // that were not evaluated: stamp 0), and the edges whose margin is no
+    // more than twice their neighbours' drift (each outer normal moves one
+    // bend before and one after; their margins, else, are kept, less that).
+    // Per triangle first: the drift of its three neighbours (an edge's
+    // quad: the sum of its two triangles' values, itself counted too: more
+    // than needed, never less). Then the stamps and drifts are cleared.
+    for_chunks(nt, lists, [&](std::size_t, std::size_t lo, std::size_t hi) {
+      for (std::size_t t = lo; t < hi; ++t) {
+        std::uint32_t x = last[t];
+        for (std::size_t h = 3 * t; h < 3 * t + 3; ++h)
+          if (opp[h] != kNoTriangle) x = std::max(x, last[opp[h] / 3]);
+        near[t] = x;
+      }
+    });
+    gather([&](std::uint32_t h, std::uint32_t g) {
+      const std::uint32_t x = std::max(near[h / 3], near[g / 3]);
+      return x != 0 && x > (seen[h] ? time_of(seen[h], h) : 0);
+    });
+    for_chunks(nt, lists, [&](std::size_t, std::size_t lo, std::size_t hi) {
+      std::fill(last.begin() + lo, last.begin() + hi, 0u);
+      std::fill(seen.begin() + 3 * lo, seen.begin() + 3 * hi, std::uint8_t(0));
     });
     host_trace("clean-up: fairing next edges", work.size());
   }
