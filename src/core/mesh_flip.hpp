@@ -442,15 +442,22 @@ FlipResult flip_edges_fairing(const Real* positions, std::size_t nv, IndexVec& t
   };
   // The first round's edges: all, each from its lower triangle.
   const std::size_t lists = chunk_count(nt, 65536);
-  std::vector<std::vector<std::uint32_t>> parts(lists);
+  std::vector<std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>>> parts(lists);
   std::vector<std::uint32_t> work;
+  // (Without a branch per half-edge: each is written, and kept by
+  // advancing the count; want(h, g) must read nothing beyond g for g = h.)
   auto gather = [&](const auto& want) {
     for_chunks(nt, lists, [&](std::size_t q, std::size_t lo, std::size_t hi) {
-      parts[q].clear();
+      auto& p = parts[q];
+      p.resize(3 * (hi - lo));
+      std::size_t n = 0;
       for (std::uint32_t h = std::uint32_t(3 * lo); h < 3 * hi; ++h) {
         const std::uint32_t g = opp[h];
-        if (g != kNoTriangle && g / 3 > h / 3 && want(h, g)) parts[q].push_back(h);
+        const bool edge = g != kNoTriangle && g / 3 > h / 3;
+        p[n] = h;
+        n += std::size_t(edge & want(h, edge ? g : h));
       }
+      p.resize(n);
     });
     work.clear();
     for (const auto& x : parts) work.insert(work.end(), x.begin(), x.end());
@@ -484,7 +491,8 @@ FlipResult flip_edges_fairing(const Real* positions, std::size_t nv, IndexVec& t
     });
     gather([&](std::uint32_t h, std::uint32_t g) {
       const std::uint32_t x = std::max(near[h / 3], near[g / 3]);
-      return x != 0 && x > (seen[h] ? time_of(seen[h], h) : 0);
+      const std::uint32_t at = seen[h] ? time_of(seen[h], h) : 0;
+      return x > at;
     });
     for_chunks(nt, lists, [&](std::size_t, std::size_t lo, std::size_t hi) {
       std::fill(last.begin() + lo, last.begin() + hi, 0u);
