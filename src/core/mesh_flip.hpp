@@ -80,12 +80,15 @@ constexpr std::uint32_t kNoTriangle = 0xffffffffu;
 // product of its two longest sides (the smallest angle, opposite the
 // shortest side, is at most 60 degrees, where the sine grows with the
 // angle); 0 for a zero-length side or a zero area.
-inline double sin_smallest_angle(const Vec3& p, const Vec3& q, const Vec3& r) {
-  const double a = norm(q - p), b = norm(r - q), c = norm(p - r);
+inline double sin_smallest_angle(double twice_area, double a, double b, double c) {
   const double lo = std::min(a, std::min(b, c));
   if (!(lo > 0)) return 0;
-  const double twice_area = norm(cross(q - p, r - p));
   return twice_area * lo / (a * b * c);
+}
+// The same of (p, q, r): sides a = |q - p|, b = |r - q|, c = |p - r|, twice
+// the area |(q - p) x (r - p)|.
+inline double sin_smallest_angle(const Vec3& p, const Vec3& q, const Vec3& r) {
+  return sin_smallest_angle(norm(cross(q - p, r - p)), norm(q - p), norm(r - q), norm(p - r));
 }
 
 // Unit normal of (p, q, r); zero for a zero area.
@@ -172,9 +175,10 @@ FlipResult flip_edges_fairing(const Real* positions, std::size_t nv, IndexVec& t
   // of a vertex are chained (head, next) by one atomic exchange each, in an
   // order that depends on the threads, but what the vertex makes of them
   // (below) does not depend on their order.
-  std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>> opp(3 * nt), next(3 * nt);
+  std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>> opp(3 * nt);
   std::vector<std::uint8_t> regular(nv);
   {
+    std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>> next(3 * nt);  // (freed after this block)
     std::unique_ptr<std::atomic<std::uint32_t>[]> head(new std::atomic<std::uint32_t>[nv]);
     for_chunks(nv, chunk_count(nv, 65536), [&](std::size_t, std::size_t lo, std::size_t hi) {
       for (std::size_t v = lo; v < hi; ++v) head[v].store(kNoTriangle, std::memory_order_relaxed);
@@ -329,9 +333,15 @@ FlipResult flip_edges_fairing(const Real* positions, std::size_t nv, IndexVec& t
     }
     if (!regular[a] || !regular[b] || !regular[c] || !regular[d]) return Reject;
     const Vec3 pa = pos(a), pb = pos(b), pc = pos(c), pd = pos(d);
-    const double old_min = std::min(detail::sin_smallest_angle(pa, pb, pc), detail::sin_smallest_angle(pb, pa, pd));
+    // (sin_smallest_angle of the four triangles, each side's length taken
+    // once: the same values.)
+    const double ab = norm(pb - pa), bc = norm(pc - pb), ca = norm(pa - pc), ad = norm(pd - pa), db = norm(pb - pd);
+    const double old_min = std::min(detail::sin_smallest_angle(norm(cross(pb - pa, pc - pa)), ab, bc, ca),
+                                    detail::sin_smallest_angle(norm(cross(pa - pb, pd - pb)), ab, ad, db));
     if (!(old_min >= kSinOneDegree)) return Reject;  // a bad triangle: the clean-up's, left alone
-    const double new_min = std::min(detail::sin_smallest_angle(pa, pd, pc), detail::sin_smallest_angle(pd, pb, pc));
+    const double cd = norm(pc - pd);
+    const double new_min = std::min(detail::sin_smallest_angle(norm(cross(pd - pa, pc - pa)), ad, cd, ca),
+                                    detail::sin_smallest_angle(norm(cross(pb - pd, pc - pd)), db, bc, cd));
     if (!(new_min >= std::min(sin_min_angle, old_min))) return Reject;
     // The edge (c, d) must not exist: walk c's fan (regular: closed), from
     // t0 across its in-edge of c, (b -> c), to the triangle of c -> b, ...
