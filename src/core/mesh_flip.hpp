@@ -199,19 +199,26 @@ FlipResult flip_edges_fairing(const Real* positions, std::size_t nv, IndexVec& t
       std::vector<std::uint32_t> cv, ov, nv_, rv;  // (vertices of more than 32 triangles)
       std::uint32_t ca[32], oa[32], na[32], ra[32];
       for (std::size_t v = lo; v < hi; ++v) {
-        std::uint32_t m = 0;
-        for (std::uint32_t i = head[v].load(std::memory_order_relaxed); i != kNoTriangle; i = next[i]) ++m;
+        // (One walk of the chain: into the arrays above, or, from the
+        // 33rd corner on, into the vectors.)
         std::uint32_t *c = ca, *o = oa, *n = na, *r = ra;
-        if (m > 32) {
-          cv.resize(m), ov.resize(m), nv_.resize(m), rv.resize(m);
-          c = cv.data(), o = ov.data(), n = nv_.data(), r = rv.data();
-        }
-        m = 0;
+        std::uint32_t m = 0;
         for (std::uint32_t i = head[v].load(std::memory_order_relaxed); i != kNoTriangle; i = next[i]) {
+          if (m == 32 && c == ca) {
+            cv.assign(ca, ca + 32), ov.assign(oa, oa + 32), nv_.assign(na, na + 32);
+          }
+          if (m >= 32) {
+            cv.resize(m + 1), ov.resize(m + 1), nv_.resize(m + 1);
+            c = cv.data(), o = ov.data(), n = nv_.data();
+          }
           c[m] = i;
           o[m] = T[detail::next1(i)];
           n[m] = T[detail::next2(i)];
           ++m;
+        }
+        if (m > 32) {
+          rv.resize(m);
+          r = rv.data();
         }
         // Out-edge j (v -> o[j]): its opposite o[j] -> v is the in-edge of
         // corner r[j].
