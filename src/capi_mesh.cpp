@@ -99,8 +99,10 @@ void postprocess_positions(const nbmc_params& params, PosVec& positions, HostMes
     const mesh::CleanupResult r = mesh::cleanup_mesh(positions, m.normals, m.triangles, cell);
     // After smoothing, the fairing flips (core/mesh_flip.hpp): the
     // diagonals that bend the surface least; no vertex moves. Not in the
-    // default clean-up: on the 1.65 M frame at r/2 they cost 0.37 s of host
-    // time on 16 threads, 6x a GPU run's whole time (bench/RESULTS.md).
+    // default clean-up: on the 1.65 M frame at r/2 they cost about 0.50 s of
+    // host CPU time (chunk-parallel since, 0.86 s before), against 0.24 s
+    // for the whole default post-processing on 2 threads (bench/RESULTS.md
+    // "Fairing flips, chunk-parallel").
     if (!first) {
       const mesh::FlipResult f = mesh::flip_edges_fairing(positions.data(), positions.size() / 3, m.triangles);
       host_trace("clean-up: fairing flips", f.flips);

@@ -41,10 +41,17 @@
 #include "trace.hpp"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstdint>
+#include <limits>
+#include <memory>
 #include <utility>
 #include <vector>
+
+#if defined(__SSE__) || defined(_M_X64)
+#include <xmmintrin.h>
+#endif
 
 namespace nbmc {
 namespace mesh {
@@ -55,6 +62,10 @@ constexpr double kFlipMinAngleDegrees = 5.0;
 // must bring: smaller ones change nothing visible and only cost rounds.
 constexpr double kFlipMinGain = 1e-3;
 constexpr double kFlipMaxDihedralDegrees = 60.0;
+// Triangles per chunk of the parallel rounds: large enough that few edges
+// read across a chunk's border (those go to the serial pass), small enough
+// for many chunks per thread.
+constexpr std::size_t kFlipChunkTriangles = 16384;
 
 struct FlipResult {
   std::uint64_t flips = 0;
@@ -69,12 +80,15 @@ constexpr std::uint32_t kNoTriangle = 0xffffffffu;
 // product of its two longest sides (the smallest angle, opposite the
 // shortest side, is at most 60 degrees, where the sine grows with the
 // angle); 0 for a zero-length side or a zero area.
-inline double sin_smallest_angle(const Vec3& p, const Vec3& q, const Vec3& r) {
-  const double a = norm(q - p), b = norm(r - q), c = norm(p - r);
+inline double sin_smallest_angle(double twice_area, double a, double b, double c) {
   const double lo = std::min(a, std::min(b, c));
   if (!(lo > 0)) return 0;
-  const double twice_area = norm(cross(q - p, r - p));
   return twice_area * lo / (a * b * c);
+}
+// The same of (p, q, r): sides a = |q - p|, b = |r - q|, c = |p - r|, twice
+// the area |(q - p) x (r - p)|.
+inline double sin_smallest_angle(const Vec3& p, const Vec3& q, const Vec3& r) {
+  return sin_smallest_angle(norm(cross(q - p, r - p)), norm(q - p), norm(r - q), norm(p - r));
 }
 
 // Unit normal of (p, q, r); zero for a zero area.
@@ -84,243 +98,424 @@ inline Vec3 unit_normal(const Vec3& p, const Vec3& q, const Vec3& r) {
   return l > 0 ? (1.0 / l) * n : Vec3{};
 }
 
+// Unit normal of (p, q, r) in float (the differences in the positions' own
+// precision, the rest in float: a flip's bends compare these); false and
+// zero for a zero area.
+#if defined(__GNUC__)
+#define NBMC_FLIP_INLINE inline __attribute__((always_inline))
+#else
+#define NBMC_FLIP_INLINE inline
+#endif
+template <class Real>
+NBMC_FLIP_INLINE bool unit_normal_f(const Real* P, std::uint32_t p, std::uint32_t q, std::uint32_t r, float* u) {
+  const Real* a = P + 3 * std::size_t(p);
+  const Real* b = P + 3 * std::size_t(q);
+  const Real* c = P + 3 * std::size_t(r);
+  const float e0 = float(b[0] - a[0]), e1 = float(b[1] - a[1]), e2 = float(b[2] - a[2]);
+  const float f0 = float(c[0] - a[0]), f1 = float(c[1] - a[1]), f2 = float(c[2] - a[2]);
+  const float x = e1 * f2 - e2 * f1, y = e2 * f0 - e0 * f2, z = e0 * f1 - e1 * f0;
+  const float l = std::sqrt(x * x + y * y + z * z);
+  if (!(l > 0)) {
+    u[0] = u[1] = u[2] = 0;
+    return false;
+  }
+  u[0] = x / l, u[1] = y / l, u[2] = z / l;
+  return true;
+}
+// The half-edges after h = 3 t + k in its triangle: 3 t + (k + 1) % 3 and
+// 3 t + (k + 2) % 3.
+inline std::uint32_t next1(std::uint32_t h) { return h % 3 == 2 ? h - 2 : h + 1; }
+inline std::uint32_t next2(std::uint32_t h) { return h % 3 == 0 ? h + 2 : h - 1; }
+inline void prefetch(const void* p) {
+#if defined(__GNUC__)
+  __builtin_prefetch(p);
+#else
+  (void)p;
+#endif
+}
+inline float dot3(const float* a, const float* b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
+inline bool zero3(const float* a) { return a[0] == 0 && a[1] == 0 && a[2] == 0; }
+// |a - b|^2.
+inline void diff2(const float* a, const float* b, float& out) {
+  const float x = a[0] - b[0], y = a[1] - b[1], z = a[2] - b[2];
+  out = x * x + y * y + z * z;
+}
+// The square roots of 12 floats in place: three packed square roots where
+// SSE exists, else one by one (both correctly rounded: the same bits).
+inline void sqrt12(float* v) {
+#if defined(__SSE__) || defined(_M_X64)
+  for (int i = 0; i < 12; i += 4) _mm_storeu_ps(v + i, _mm_sqrt_ps(_mm_loadu_ps(v + i)));
+#else
+  for (int i = 0; i < 12; ++i) v[i] = std::sqrt(v[i]);
+#endif
+}
+
 }  // namespace detail
 
 // Flips edges of the triangle mesh (positions: float or double, 3 per
 // vertex; triangles: 3 indices each, counter-clockwise) as described above.
+// chunk: the triangles per chunk of the parallel rounds (below; a fixed
+// size, so that the result does not depend on the thread count; the tests
+// pass small ones).
 template <class Real, class IndexVec>
 FlipResult flip_edges_fairing(const Real* positions, std::size_t nv, IndexVec& triangles,
-                              int max_rounds = kFlipRounds) {
+                              int max_rounds = kFlipRounds, std::size_t chunk = kFlipChunkTriangles) {
   using detail::kNoTriangle;
   FlipResult res;
   const std::size_t nt = triangles.size() / 3;
-  if (nt == 0 || nv == 0 || max_rounds <= 0) return res;
+  if (nt == 0 || nv == 0 || max_rounds <= 0 || 3 * nt >= kNoTriangle) return res;
+  if (chunk == 0) chunk = 1;
   std::uint32_t* T = triangles.data();
-  // Neighbour across edge k (T[3t+k] -> T[3t+(k+1)%3]) of every triangle:
-  // the one triangle with the opposite half-edge, where the edge is used by
-  // exactly these two triangles in opposite directions; else kNoTriangle.
   for (std::size_t i = 0; i < 3 * nt; ++i)
     if (T[i] >= nv) return res;  // not a mesh of these vertices: leave it alone
-  std::vector<std::uint32_t> nb(3 * nt, kNoTriangle);
-  // count[v]: the half-edges that start at v (the triangles that hold v).
-  std::vector<std::uint32_t> count(nv, 0), some(nv, kNoTriangle);
+  // The opposite half-edge of every half-edge h = 3 t + k (T[h] ->
+  // T[3t+(k+1)%3]): the one half-edge of the reverse direction, where the
+  // edge is used by exactly these two, in two different triangles; else
+  // kNoTriangle. Found at each vertex among its own triangles: the corners
+  // of a vertex are chained (head, next) by one atomic exchange each, in an
+  // order that depends on the threads, but what the vertex makes of them
+  // (below) does not depend on their order.
+  std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>> opp(3 * nt);
+  std::vector<std::uint8_t> regular(nv);
   {
-    // The half-edges grouped by their first vertex (CSR, in index order),
-    // each with its second vertex.
-    std::vector<std::uint32_t> start(nv + 1, 0);
-    std::vector<std::pair<std::uint32_t, std::uint32_t>> list(3 * nt);  // (head, half-edge)
-    for (std::size_t i = 0; i < 3 * nt; ++i) ++start[T[i] + 1];
-    for (std::size_t v = 0; v < nv; ++v) start[v + 1] += start[v];
-    {
-      std::vector<std::uint32_t> fill(start.begin(), start.end() - 1);
-      for (std::size_t t = 0; t < nt; ++t)
-        for (int k = 0; k < 3; ++k)
-          list[fill[T[3 * t + k]]++] = {T[3 * t + (k + 1) % 3], std::uint32_t(3 * t + k)};
-    }
-    for (std::size_t v = 0; v < nv; ++v) {
-      count[v] = start[v + 1] - start[v];
-      if (count[v]) some[v] = list[start[v]].second / 3;
-    }
-    // (Each vertex writes only the neighbours of its own half-edges: on the
-    // host threads.)
-    for_chunks(nv, chunk_count(nv, 4096), [&](std::size_t, std::size_t lo, std::size_t hi) {
-      for (std::size_t a = lo; a < hi; ++a)
-        for (std::uint32_t i = start[a]; i < start[a + 1]; ++i) {
-          const std::uint32_t b = list[i].first, h = list[i].second;
-          if (b == a) continue;
-          std::uint32_t same = 0, opposite = 0, other = 0;
-          for (std::uint32_t j = start[a]; j < start[a + 1]; ++j) same += list[j].first == b;
-          for (std::uint32_t j = start[b]; j < start[b + 1]; ++j)
-            if (list[j].first == a) ++opposite, other = list[j].second;
-          if (same == 1 && opposite == 1 && other / 3 != h / 3) nb[h] = other / 3;
+    std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>> next(3 * nt);  // (freed after this block)
+    std::unique_ptr<std::atomic<std::uint32_t>[]> head(new std::atomic<std::uint32_t>[nv]);
+    for_chunks(nv, chunk_count(nv, 65536), [&](std::size_t, std::size_t lo, std::size_t hi) {
+      for (std::size_t v = lo; v < hi; ++v) head[v].store(kNoTriangle, std::memory_order_relaxed);
+    });
+    for_chunks(nt, chunk_count(nt, 65536), [&](std::size_t, std::size_t lo, std::size_t hi) {
+      for (std::size_t i = 3 * lo; i < 3 * hi; ++i)
+        next[i] = head[T[i]].exchange(std::uint32_t(i), std::memory_order_relaxed);
+    });
+    host_trace("clean-up: fairing corner lists", nt);
+    // Per vertex v, for each of its corners i (triangle i / 3): the
+    // half-edge out of v (i: v -> o) and the one into v (3t+(k+2)%3: n ->
+    // v). The out-edge v -> o gets as opposite the in-edge o -> v when each
+    // is the only one of its direction; v is regular when its triangles
+    // form one closed fan through such edges: from each triangle, across its
+    // in-edge n -> v, to the triangle of the out-edge v -> n, one cycle
+    // through all of them.
+    for_chunks(nv, chunk_count(nv, 16384), [&](std::size_t, std::size_t lo, std::size_t hi) {
+      std::vector<std::uint32_t> cv, ov, nv_, rv;  // (vertices of more than 32 triangles)
+      std::uint32_t ca[32], oa[32], na[32], ra[32];
+      for (std::size_t v = lo; v < hi; ++v) {
+        // (One walk of the chain: into the arrays above, or, from the
+        // 33rd corner on, into the vectors.)
+        std::uint32_t *c = ca, *o = oa, *n = na, *r = ra;
+        std::uint32_t m = 0;
+        for (std::uint32_t i = head[v].load(std::memory_order_relaxed); i != kNoTriangle; i = next[i]) {
+          if (m == 32 && c == ca) {
+            cv.assign(ca, ca + 32), ov.assign(oa, oa + 32), nv_.assign(na, na + 32);
+          }
+          if (m >= 32) {
+            cv.resize(m + 1), ov.resize(m + 1), nv_.resize(m + 1);
+            c = cv.data(), o = ov.data(), n = nv_.data();
+          }
+          c[m] = i;
+          o[m] = T[detail::next1(i)];
+          n[m] = T[detail::next2(i)];
+          ++m;
         }
+        if (m > 32) {
+          rv.resize(m);
+          r = rv.data();
+        }
+        // Out-edge j (v -> o[j]): its opposite o[j] -> v is the in-edge of
+        // corner r[j].
+        bool fan = m >= 3;
+        for (std::uint32_t j = 0; j < m; ++j) {
+          std::uint32_t same = 0, rev = 0, at = 0;
+          for (std::uint32_t q = 0; q < m; ++q) {
+            same += o[q] == o[j];
+            const bool x = n[q] == o[j];
+            rev += x;
+            at = x ? q : at;
+          }
+          const bool ok = o[j] != v && same == 1 && rev == 1 && c[at] / 3 != c[j] / 3;
+          opp[c[j]] = ok ? detail::next2(c[at]) : kNoTriangle;
+          fan = fan && ok;
+          r[j] = at;
+        }
+        // Every out-edge so matched: j -> r[j] is a permutation (the o[j]
+        // differ, so do the r[j]); v is regular when it is one cycle.
+        if (fan) {
+          std::uint32_t steps = 0, j = 0;
+          do j = r[j], ++steps;
+          while (j != 0 && steps < m);
+          fan = j == 0 && steps == m;
+        }
+        regular[v] = fan;
+      }
     });
   }
   host_trace("clean-up: fairing neighbours", nt);
-  // Regular vertices: the fan walked around v through the neighbours closes
-  // after exactly as many triangles as hold v.
-  auto slot = [&](std::uint32_t t, std::uint32_t v) -> int {
-    for (int k = 0; k < 3; ++k)
-      if (T[3 * t + k] == v) return k;
-    return -1;
-  };
-  // Walks the fan of v from triangle t (which holds v); calls f(triangle)
-  // for each; returns the number of triangles, or 0 when the walk meets an
-  // edge without a neighbour or does not close within limit steps.
-  auto walk = [&](std::uint32_t v, std::uint32_t t, std::uint32_t limit, auto&& f) -> std::uint32_t {
-    std::uint32_t cur = t, n = 0;
-    do {
-      const int k = slot(cur, v);
-      if (k < 0) return 0;
-      f(cur);
-      ++n;
-      cur = nb[3 * std::size_t(cur) + std::size_t((k + 2) % 3)];  // across (prev, v)
-      if (cur == kNoTriangle || n > limit) return 0;
-    } while (cur != t);
-    return n;
-  };
-  std::vector<std::uint8_t> regular(nv, 0);
-  for_chunks(nv, chunk_count(nv, 4096), [&](std::size_t, std::size_t lo, std::size_t hi) {
-    for (std::size_t v = lo; v < hi; ++v)
-      if (some[v] != kNoTriangle && count[v] >= 3)
-        regular[v] = walk(std::uint32_t(v), some[v], count[v], [](std::uint32_t) {}) == count[v];
-  });
-
-  host_trace("clean-up: fairing regular vertices", nv);
   auto pos = [&](std::uint32_t v) { return load(positions, v); };
-  // Unit normals of the triangles, kept up to date through the flips.
-  // (In float: half the memory traffic of the evaluations; a flip compares
-  // bends of these rounded normals, the same on every run.)
-  std::vector<float> tnf(3 * nt);
-  auto set_normal = [&](std::size_t t, const Vec3& n) {
-    tnf[3 * t] = float(n.x), tnf[3 * t + 1] = float(n.y), tnf[3 * t + 2] = float(n.z);
-  };
-  auto normal_of = [&](std::size_t t) { return Vec3{tnf[3 * t], tnf[3 * t + 1], tnf[3 * t + 2]}; };
-  for (std::size_t t = 0; t < nt; ++t)
-    set_normal(t, detail::unit_normal(pos(T[3 * t]), pos(T[3 * t + 1]), pos(T[3 * t + 2])));
-  // Index of edge (x -> y) in triangle t, or -1.
-  auto edge_slot = [&](std::uint32_t t, std::uint32_t x, std::uint32_t y) -> int {
-    for (int k = 0; k < 3; ++k)
-      if (T[3 * std::size_t(t) + k] == x && T[3 * std::size_t(t) + (k + 1) % 3] == y) return k;
-    return -1;
-  };
+  // Unit normals of the triangles, kept up to date through the flips, in
+  // float: every bend below is taken from these in float arithmetic, the
+  // same on every run (no contraction into FMA: src/CMakeLists.txt).
+  std::vector<float, NoInitAllocator<float>> tn(3 * nt);
+  for_chunks(nt, chunk_count(nt, 65536), [&](std::size_t, std::size_t lo, std::size_t hi) {
+    for (std::size_t t = lo; t < hi; ++t) detail::unit_normal_f(positions, T[3 * t], T[3 * t + 1], T[3 * t + 2], &tn[3 * t]);
+  });
+  host_trace("clean-up: fairing normals", nt);
   const double sin_min_angle = std::sin(kFlipMinAngleDegrees * 3.14159265358979323846 / 180.0);
-  const double cos_max_dihedral = std::cos(kFlipMaxDihedralDegrees * 3.14159265358979323846 / 180.0);
-  // The bend of an edge: |n0 - n1| = 2 sin(angle / 2), within 5 % of the
-  // angle itself up to 60 degrees, without an acos.
-  auto bend = [](const Vec3& n0, const Vec3& n1) { return norm(n0 - n1); };
-  auto zero = [](const Vec3& n) { return n.x == 0 && n.y == 0 && n.z == 0; };
+  const float cos_max_dihedral = float(std::cos(kFlipMaxDihedralDegrees * 3.14159265358979323846 / 180.0));
+  const float min_gain = float(kFlipMinGain);
 
-  // A candidate flip: edge k of triangle t0 (the lower of its two), with
-  // what applying it needs.
+  std::vector<std::uint8_t> seen(3 * nt, 0);  // per half-edge: the level it was evaluated at (0: not)
+  std::vector<std::uint32_t> last(nt, 0);     // per triangle: the time of the last flip that changed it
+  std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>> near(nt);
+  const bool timed = 9 * std::uint64_t(nt) + 12 < std::uint64_t(kNoTriangle);  // (else: every change counts)
+  auto time_of = [&](int level, std::uint32_t h) {
+    return std::uint32_t(level - 1) * std::uint32_t(6 * nt + 4) + 2 * (h + 1);
+  };  // A flip found by evaluate: what apply needs.
   struct Candidate {
-    double gain = 0;
-    Vec3 u0, u1;
-    std::uint32_t t0 = 0, t1 = 0, a = 0, b = 0, c = 0, d = 0, n_bc = 0, n_ca = 0, n_ad = 0, n_db = 0;
+    float u0[3], u1[3];
+    // Of a rejected edge: how far the bends of its five edges are from
+    // passing (after - before + kFlipMinGain), or 0 when its rejection may
+    // change with its neighbourhood, or infinity when only its own quad's
+    // corners decide it (they stay while its two triangles do).
+    float margin;
+    std::uint32_t t0, t1, a, b, c, d, o_bc, o_ca, o_ad, o_db;  // o_*: the outer half-edges' opposites
   };
-  // Evaluates edge k of t0 on the current mesh (reads only); true when its
-  // flip is allowed and lowers the bend.
-  auto evaluate = [&](std::uint32_t t0, int k, Candidate& f) -> bool {
-    const std::uint32_t t1 = nb[3 * std::size_t(t0) + k];
-    if (t1 == kNoTriangle) return false;
-    const std::uint32_t a = T[3 * std::size_t(t0) + k], b = T[3 * std::size_t(t0) + (k + 1) % 3],
-                        c = T[3 * std::size_t(t0) + (k + 2) % 3];
-    const int k1 = edge_slot(t1, b, a);
-    if (k1 < 0) return false;
-    const std::uint32_t d = T[3 * std::size_t(t1) + (k1 + 2) % 3];
-    if (c == d || !regular[a] || !regular[b] || !regular[c] || !regular[d]) return false;
-    const Vec3 m0 = normal_of(t0), m1 = normal_of(t1);
-    const std::uint32_t n_bc = nb[3 * std::size_t(t0) + (k + 1) % 3], n_ca = nb[3 * std::size_t(t0) + (k + 2) % 3];
-    const std::uint32_t n_ad = nb[3 * std::size_t(t1) + (k1 + 1) % 3], n_db = nb[3 * std::size_t(t1) + (k1 + 2) % 3];
-    if (n_bc == kNoTriangle || n_ca == kNoTriangle || n_ad == kNoTriangle || n_db == kNoTriangle) return false;
-    const Vec3 s_bc = normal_of(n_bc), s_ca = normal_of(n_ca), s_ad = normal_of(n_ad), s_db = normal_of(n_db);
-    if (zero(m0) || zero(m1) || zero(s_bc) || zero(s_ca) || zero(s_ad) || zero(s_db)) return false;
+  enum Outcome { Reject, Pass, Outside };
+  const float never = std::numeric_limits<float>::infinity();
+  // Evaluates the edge of half-edge h = 3 t0 + k on the current mesh (reads
+  // only). Every triangle it reads lies in [lo, hi) (a chunk's), or it
+  // returns Outside before reading it: so that chunks are evaluated and
+  // flipped at once, each alone with its own triangles.
+  using detail::next1;
+  using detail::next2;
+  auto evaluate = [&](std::uint32_t h, std::uint32_t lo, std::uint32_t hi, Candidate& f) -> Outcome {
+    auto inside = [&](std::uint32_t t) { return t >= lo && t < hi; };
+    const std::uint32_t t0 = h / 3;
+    const std::uint32_t g = opp[h];
+    f.margin = never;
+    if (g == kNoTriangle) return Reject;
+    const std::uint32_t t1 = g / 3;
+    if (t1 < t0) return Reject;  // the edge is its lower triangle's
+    if (!inside(t1)) return Outside;
+    const std::uint32_t h1 = next1(h), h2 = next2(h), g1 = next1(g), g2 = next2(g);
+    const std::uint32_t a = T[h], b = T[h1], c = T[h2], d = T[g2];
+    if (c == d) return Reject;
+    const std::uint32_t o_bc = opp[h1], o_ca = opp[h2], o_ad = opp[g1], o_db = opp[g2];
+    if (o_bc == kNoTriangle || o_ca == kNoTriangle || o_ad == kNoTriangle || o_db == kNoTriangle) return Reject;
+    if (!inside(o_bc / 3) || !inside(o_ca / 3) || !inside(o_ad / 3) || !inside(o_db / 3)) return Outside;
+    // The bend test first, in float on the stored normals (most edges end
+    // here): the five edges' bends before and after.
+    const float* m0 = &tn[3 * std::size_t(t0)];
+    const float* m1 = &tn[3 * std::size_t(t1)];
+    const float* s_bc = &tn[3 * std::size_t(o_bc / 3)];
+    const float* s_ca = &tn[3 * std::size_t(o_ca / 3)];
+    const float* s_ad = &tn[3 * std::size_t(o_ad / 3)];
+    const float* s_db = &tn[3 * std::size_t(o_db / 3)];
+    if (!detail::unit_normal_f(positions, a, d, c, f.u0) || !detail::unit_normal_f(positions, d, b, c, f.u1))
+      return Reject;
+    if (detail::dot3(f.u0, f.u1) < cos_max_dihedral) return Reject;
+    float sq[12];
+    detail::diff2(m0, m1, sq[0]);
+    detail::diff2(m0, s_bc, sq[1]);
+    detail::diff2(m0, s_ca, sq[2]);
+    detail::diff2(m1, s_ad, sq[3]);
+    detail::diff2(m1, s_db, sq[4]);
+    detail::diff2(f.u0, f.u1, sq[5]);
+    detail::diff2(f.u1, s_bc, sq[6]);
+    detail::diff2(f.u0, s_ca, sq[7]);
+    detail::diff2(f.u0, s_ad, sq[8]);
+    detail::diff2(f.u1, s_db, sq[9]);
+    sq[10] = sq[11] = 0;
+    detail::sqrt12(sq);
+    const float before = sq[0] + sq[1] + sq[2] + sq[3] + sq[4];
+    const float after = sq[5] + sq[6] + sq[7] + sq[8] + sq[9];
+    if (!(after < before - min_gain)) {
+      const float m = after - before + min_gain;
+      f.margin = m >= 0 ? m : 0;  // (0 for a NaN)
+      return Reject;
+    }
+    // (A zero normal: a degenerate triangle, old or new, never flipped.)
+    if (detail::zero3(m0) || detail::zero3(m1) || detail::zero3(s_bc) || detail::zero3(s_ca) || detail::zero3(s_ad) ||
+        detail::zero3(s_db)) {
+      f.margin = 0;
+      return Reject;
+    }
+    if (!regular[a] || !regular[b] || !regular[c] || !regular[d]) return Reject;
     const Vec3 pa = pos(a), pb = pos(b), pc = pos(c), pd = pos(d);
-    // The new triangles' normals, rounded as they will be kept.
-    Vec3 u0 = detail::unit_normal(pa, pd, pc), u1 = detail::unit_normal(pd, pb, pc);
-    u0 = Vec3{float(u0.x), float(u0.y), float(u0.z)};
-    u1 = Vec3{float(u1.x), float(u1.y), float(u1.z)};
-    if (zero(u0) || zero(u1) || dot(u0, u1) < cos_max_dihedral) return false;
-    const double before = bend(m0, m1) + bend(m0, s_bc) + bend(m0, s_ca) + bend(m1, s_ad) + bend(m1, s_db);
-    const double after = bend(u0, u1) + bend(u1, s_bc) + bend(u0, s_ca) + bend(u0, s_ad) + bend(u1, s_db);
-    if (!(after < before - kFlipMinGain)) return false;
-    const double old_min = std::min(detail::sin_smallest_angle(pa, pb, pc), detail::sin_smallest_angle(pb, pa, pd));
-    if (!(old_min >= kSinOneDegree)) return false;  // a bad triangle: the clean-up's, left alone
-    const double new_min = std::min(detail::sin_smallest_angle(pa, pd, pc), detail::sin_smallest_angle(pd, pb, pc));
-    if (!(new_min >= std::min(sin_min_angle, old_min))) return false;
-    // The edge (c, d) must not exist: walk c's fan.
-    bool exists = false;
-    const std::uint32_t nc = walk(c, t0, std::uint32_t(nt), [&](std::uint32_t t) {
-      if (slot(t, d) >= 0) exists = true;
-    });
-    if (exists || nc == 0) return false;
-    f.gain = before - after;
-    f.u0 = u0, f.u1 = u1;
+    // (sin_smallest_angle of the four triangles, each side's length taken
+    // once: the same values.)
+    const double ab = norm(pb - pa), bc = norm(pc - pb), ca = norm(pa - pc), ad = norm(pd - pa), db = norm(pb - pd);
+    const double old_min = std::min(detail::sin_smallest_angle(norm(cross(pb - pa, pc - pa)), ab, bc, ca),
+                                    detail::sin_smallest_angle(norm(cross(pa - pb, pd - pb)), ab, ad, db));
+    if (!(old_min >= kSinOneDegree)) return Reject;  // a bad triangle: the clean-up's, left alone
+    const double cd = norm(pc - pd);
+    const double new_min = std::min(detail::sin_smallest_angle(norm(cross(pd - pa, pc - pa)), ad, cd, ca),
+                                    detail::sin_smallest_angle(norm(cross(pb - pd, pc - pd)), db, bc, cd));
+    if (!(new_min >= std::min(sin_min_angle, old_min))) return Reject;
+    // The edge (c, d) must not exist: walk c's fan (regular: closed), from
+    // t0 across its in-edge of c, (b -> c), to the triangle of c -> b, ...
+    f.margin = 0;  // (an edge (c, d) elsewhere may come or go)
+    std::uint32_t cur = t0, steps = 0;
+    do {
+      const std::uint32_t* x = T + 3 * std::size_t(cur);
+      if (x[0] == d || x[1] == d || x[2] == d) return Reject;
+      const std::uint32_t in = x[0] == c ? 2 : x[1] == c ? 0 : 1;  // the slot of c's in-edge
+      cur = opp[3 * cur + in] / 3;  // (regular: never kNoTriangle)
+      if (!inside(cur)) return Outside;
+      if (++steps > nt) return Reject;
+    } while (cur != t0);
     f.t0 = t0, f.t1 = t1, f.a = a, f.b = b, f.c = c, f.d = d;
-    f.n_bc = n_bc, f.n_ca = n_ca, f.n_ad = n_ad, f.n_db = n_db;
-    return true;
+    f.o_bc = o_bc, f.o_ca = o_ca, f.o_ad = o_ad, f.o_db = o_db;
+    return Pass;
   };
+  // t0 = (a, d, c), t1 = (d, b, c): half-edges 3t0: a->d (opposite o_ad),
+  // 3t0+1: d->c (3t1+2), 3t0+2: c->a (o_ca); 3t1: d->b (o_db), 3t1+1: b->c
+  // (o_bc), 3t1+2: c->d (3t0+1). The quad's boundary keeps its direction.
+  // Writes t0, t1 and the four outer triangles (their opposites).
+  // drift: per triangle, the sum over this round's flips of it of how far
+  // the normal that each of its quad's sides sees moved (at most
+  // max |old - new| over the four pairs): a bend across such a side moves
+  // by no more, so an edge beyond whose margin exceeds twice its
+  // neighbours' drift still fails (below).
   auto apply = [&](const Candidate& f) {
-    // t0 = (a, d, c), t1 = (d, b, c): edges t0: a->d (n_ad), d->c (t1), c->a (n_ca);
-    // t1: d->b (n_db), b->c (n_bc), c->d (t0).
     std::uint32_t* A = T + 3 * std::size_t(f.t0);
     std::uint32_t* B = T + 3 * std::size_t(f.t1);
     A[0] = f.a, A[1] = f.d, A[2] = f.c;
     B[0] = f.d, B[1] = f.b, B[2] = f.c;
-    std::uint32_t* NA = nb.data() + 3 * std::size_t(f.t0);
-    std::uint32_t* NB = nb.data() + 3 * std::size_t(f.t1);
-    NA[0] = f.n_ad, NA[1] = f.t1, NA[2] = f.n_ca;
-    NB[0] = f.n_db, NB[1] = f.n_bc, NB[2] = f.t0;
-    // The outer neighbours: n_ad's edge (d -> a) now faces t0, n_bc's (c -> b) t1.
-    const int ka = edge_slot(f.n_ad, f.d, f.a), kb = edge_slot(f.n_bc, f.c, f.b);
-    if (ka >= 0) nb[3 * std::size_t(f.n_ad) + ka] = f.t0;
-    if (kb >= 0) nb[3 * std::size_t(f.n_bc) + kb] = f.t1;
-    set_normal(f.t0, f.u0);
-    set_normal(f.t1, f.u1);
-  };
-  // The canonical id of the edge k of t: 3 t' + k' of its lower triangle t'.
-  auto edge_id = [&](std::uint32_t t, int k) -> std::uint32_t {
-    const std::uint32_t o = nb[3 * std::size_t(t) + k];
-    if (o == kNoTriangle) return kNoTriangle;
-    if (o > t) return 3 * t + std::uint32_t(k);
-    const int ko = edge_slot(o, T[3 * std::size_t(t) + (k + 1) % 3], T[3 * std::size_t(t) + k]);
-    return ko < 0 ? kNoTriangle : 3 * o + std::uint32_t(ko);
+    const std::uint32_t h0 = 3 * f.t0, h1 = 3 * f.t1;
+    opp[h0] = f.o_ad, opp[h0 + 1] = h1 + 2, opp[h0 + 2] = f.o_ca;
+    opp[h1] = f.o_db, opp[h1 + 1] = f.o_bc, opp[h1 + 2] = h0 + 1;
+    opp[f.o_ad] = h0, opp[f.o_ca] = h0 + 2, opp[f.o_db] = h1, opp[f.o_bc] = h1 + 1;
+    for (int i = 0; i < 3; ++i) tn[std::size_t(h0) + i] = f.u0[i], tn[std::size_t(h1) + i] = f.u1[i];
   };
 
-  // Rounds. First every edge of the work list is evaluated on the mesh as
-  // it is, on the host threads (each evaluation only reads: which edges
-  // pass depends only on the mesh); then, serially in the list's order,
-  // each edge that passed is evaluated again (an earlier flip of the round
-  // may have changed its quad or its neighbours) and flipped if it still
-  // passes: one pass of greedy flips over the edges that can gain. The next
-  // round's work list: the edges of the triangles the flips changed or
-  // bordered.
-  std::vector<std::uint32_t> work;
-  work.reserve(3 * nt / 2);
-  for (std::uint32_t t = 0; t < nt; ++t)
-    for (int k = 0; k < 3; ++k) {
-      const std::uint32_t o = nb[3 * std::size_t(t) + k];
-      if (o != kNoTriangle && o > t) work.push_back(3 * t + std::uint32_t(k));
-    }
-  std::vector<std::uint8_t> ok, mark(nt, 0);
-  for (int round = 0; round < max_rounds && !work.empty(); ++round) {
-    ok.assign(work.size(), 0);
-    for_chunks(work.size(), chunk_count(work.size(), 4096), [&](std::size_t, std::size_t lo, std::size_t hi) {
+  // Rounds. The triangles are cut into chunks of `chunk` (a fixed size:
+  // the same chunks on every thread count); the chunks are taken by the host
+  // threads, each walks the round's edges of its triangles (the edge's
+  // lower triangle there) in order and flips each that passes, at once,
+  // greedily: what it reads and writes lies in its chunk (evaluate), so the
+  // chunks do not meet and each comes out as one thread alone would make
+  // it. The edges that read outside their chunk go, in order, through
+  // chunks 16 times as large in the same way, and what is left of them
+  // through a serial pass. The next round's edges: those whose quad (their
+  // two triangles and the four beyond) holds a triangle that a flip
+  // rewrote after the edge was evaluated (a flip rewrites its two
+  // triangles: their corners and normals; of the four beyond only which of
+  // the two faces them, seen from the quad's side): an edge evaluated after
+  // the change saw it, and would only be rejected again. The order: level l
+  // (1: chunks, 2: large chunks, 3: serial), then the half-edge h; the item
+  // h is evaluated at time base(l) + 2 (h + 1), a flip there stamps its two
+  // triangles with that time + 1 (so the slot h itself, rewritten by the
+  // flip, counts as changed).
+
+  // Runs the items (half-edges, ascending) through chunks of `size`
+  // triangles (0: one chunk, the whole mesh, serially); the items that read
+  // outside their chunk are returned, ascending.
+  auto run = [&](const std::vector<std::uint32_t>& items, std::size_t size, int level) {
+    const bool serial = size == 0;
+    if (serial) size = nt;
+    const std::size_t chunks = (nt + size - 1) / size;
+    std::vector<std::size_t> from(chunks + 1);
+    for (std::size_t q = 0; q <= chunks; ++q)
+      from[q] = std::size_t(std::lower_bound(items.begin(), items.end(), std::uint32_t(3 * std::min(nt, q * size))) -
+                            items.begin());
+    std::vector<std::vector<std::uint32_t>> out(chunks);
+    std::vector<std::uint64_t> flipped(chunks, 0);
+    std::atomic<std::size_t> next_chunk{0};
+    on_threads(serial ? 1 : chunk_count(chunks, 1), [&](std::size_t) {
       Candidate f;
-      for (std::size_t i = lo; i < hi; ++i) ok[i] = evaluate(work[i] / 3, int(work[i] % 3), f);
-    });
-    host_trace("clean-up: fairing evaluation", work.size());
-    std::uint64_t flips = 0;
-    Candidate f;
-    for (std::size_t i = 0; i < work.size(); ++i) {
-      if (!ok[i]) continue;
-      const std::uint32_t t0 = work[i] / 3;
-      const int k = int(work[i] % 3);
-      // The edge may have moved (an earlier flip rewrote t0): only an edge
-      // that is still the lower triangle's edge k is looked at.
-      const std::uint32_t o = nb[3 * std::size_t(t0) + k];
-      if (o == kNoTriangle || o < t0 || !evaluate(t0, k, f)) continue;
-      apply(f);
-      ++flips;
-      for (std::uint32_t t : {f.t0, f.t1, f.n_bc, f.n_ca, f.n_ad, f.n_db}) mark[t] = 1;
-    }
-    host_trace("clean-up: fairing round", flips);
-    res.rounds = round + 1;
-    res.flips += flips;
-    if (flips == 0) break;
-    // The next work list: the edges of the marked triangles, in triangle
-    // order, each once (an edge between two marked triangles from the lower).
-    work.clear();
-    for (std::uint32_t t = 0; t < nt; ++t) {
-      if (!mark[t]) continue;
-      for (int k = 0; k < 3; ++k) {
-        const std::uint32_t o = nb[3 * std::size_t(t) + k];
-        if (o == kNoTriangle || (o < t && mark[o])) continue;
-        const std::uint32_t id = edge_id(t, k);
-        if (id != kNoTriangle) work.push_back(id);
+      for (std::size_t q; (q = next_chunk.fetch_add(1, std::memory_order_relaxed)) < chunks;) {
+        const std::uint32_t lo = std::uint32_t(q * size), hi = std::uint32_t(std::min(nt, (q + 1) * size));
+        for (std::size_t i = from[q]; i < from[q + 1]; ++i) {
+          // (The opposite of an item a few ahead, and its triangles: the
+          // evaluation's chain of loads starts there.)
+          if (i + 8 < from[q + 1]) {
+            const std::uint32_t g = opp[items[i + 8]];
+            if (g != kNoTriangle) {
+              detail::prefetch(&opp[g]);
+              detail::prefetch(&T[g]);
+              detail::prefetch(&tn[g]);
+            }
+          }
+          if (i + 16 < from[q + 1]) detail::prefetch(&opp[items[i + 16]]);
+          const Outcome o = evaluate(items[i], lo, hi, f);
+          if (o == Outside) {
+            out[q].push_back(items[i]);
+            continue;
+          }
+          if (timed) seen[items[i]] = std::uint8_t(level);
+          if (o != Pass) continue;
+          apply(f);
+          ++flipped[q];
+          const std::uint32_t stamp = timed ? time_of(level, items[i]) + 1 : 1;
+          last[f.t0] = last[f.t1] = stamp;
+        }
       }
+    });
+    std::vector<std::uint32_t> left;
+    for (std::size_t q = 0; q < chunks; ++q) {
+      res.flips += flipped[q];
+      left.insert(left.end(), out[q].begin(), out[q].end());
     }
-    std::fill(mark.begin(), mark.end(), std::uint8_t(0));
+    return left;
+  };
+  // The first round's edges: all, each from its lower triangle.
+  const std::size_t lists = chunk_count(nt, 65536);
+  std::vector<std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>>> parts(lists);
+  std::vector<std::uint32_t> work;
+  // (Without a branch per half-edge: each is written, and kept by
+  // advancing the count; want(h, g) must read nothing beyond g for g = h.)
+  auto gather = [&](const auto& want) {
+    for_chunks(nt, lists, [&](std::size_t q, std::size_t lo, std::size_t hi) {
+      auto& p = parts[q];
+      p.resize(3 * (hi - lo));
+      std::size_t n = 0;
+      for (std::uint32_t h = std::uint32_t(3 * lo); h < 3 * hi; ++h) {
+        const std::uint32_t g = opp[h];
+        const bool edge = g != kNoTriangle && g / 3 > h / 3;
+        p[n] = h;
+        n += std::size_t(edge & want(h, edge ? g : h));
+      }
+      p.resize(n);
+    });
+    work.clear();
+    for (const auto& x : parts) work.insert(work.end(), x.begin(), x.end());
+  };
+  gather([](std::uint32_t, std::uint32_t) { return true; });
+  for (int round = 0; round < max_rounds && !work.empty(); ++round) {
+    const std::uint64_t flips0 = res.flips;
+    std::vector<std::uint32_t> left = run(work, chunk, 1);
+    host_trace("clean-up: fairing chunks", left.size());
+    if (!left.empty()) left = run(left, 16 * chunk, 2);
+    host_trace("clean-up: fairing large chunks", left.size());
+    if (!left.empty()) run(left, 0, 3);
+    host_trace("clean-up: fairing serial", res.flips - flips0);
+    res.rounds = round + 1;
+    if (res.flips == flips0 || round + 1 == max_rounds) break;
+    // The next work list (each edge once, from its lower triangle): the
+    // edges whose triangles a flip rewrote after they were evaluated (or
+    // that were not evaluated: stamp 0), and the edges whose margin is no
+    // more than twice their neighbours' drift (each outer normal moves one
+    // bend before and one after; their margins, else, are kept, less that).
+    // Per triangle first: the drift of its three neighbours (an edge's
+    // quad: the sum of its two triangles' values, itself counted too: more
+    // than needed, never less). Then the stamps and drifts are cleared.
+    for_chunks(nt, lists, [&](std::size_t, std::size_t lo, std::size_t hi) {
+      for (std::size_t t = lo; t < hi; ++t) {
+        std::uint32_t x = last[t];
+        for (std::size_t h = 3 * t; h < 3 * t + 3; ++h)
+          if (opp[h] != kNoTriangle) x = std::max(x, last[opp[h] / 3]);
+        near[t] = x;
+      }
+    });
+    gather([&](std::uint32_t h, std::uint32_t g) {
+      const std::uint32_t x = std::max(near[h / 3], near[g / 3]);
+      const std::uint32_t at = seen[h] ? time_of(seen[h], h) : 0;
+      return x > at;
+    });
+    for_chunks(nt, lists, [&](std::size_t, std::size_t lo, std::size_t hi) {
+      std::fill(last.begin() + lo, last.begin() + hi, 0u);
+      std::fill(seen.begin() + 3 * lo, seen.begin() + 3 * hi, std::uint8_t(0));
+    });
+    host_trace("clean-up: fairing next edges", work.size());
   }
   return res;
 }
