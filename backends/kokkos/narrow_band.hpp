@@ -248,6 +248,7 @@ void build_narrow_band(const ExecSpace& space, MemoryTracker& tracker, const Gri
                        std::size_t n, Band<typename ExecSpace::memory_space>& band,
                        const Kokkos::View<const float*, typename ExecSpace::memory_space>& scale = {}) {
   using MemSpace = typename ExecSpace::memory_space;
+  constexpr bool host_memory = Kokkos::SpaceAccessibility<Kokkos::HostSpace, MemSpace>::accessible;
   ScopedRegion region("nbmc::narrow_band");
   const float inv_c = float(1.0 / g.cell);
   const float bw = float(p.band_width);
@@ -297,8 +298,12 @@ void build_narrow_band(const ExecSpace& space, MemoryTracker& tracker, const Gri
         if (!flags(i) || !box(i, lo, hi)) return;
         for (std::int64_t bz = lo[2] >> 3; bz <= (hi[2] >> 3); ++bz)
           for (std::int64_t by = lo[1] >> 3; by <= (hi[1] >> 3); ++by)
-            for (std::int64_t bx = lo[0] >> 3; bx <= (hi[0] >> 3); ++bx)
-              if (map.insert(morton3(std::uint32_t(bx), std::uint32_t(by), std::uint32_t(bz)))) ++acc;
+            for (std::int64_t bx = lo[0] >> 3; bx <= (hi[0] >> 3); ++bx) {
+              const std::uint64_t key = morton3(std::uint32_t(bx), std::uint32_t(by), std::uint32_t(bz));
+              if constexpr (host_memory)  // most keys are in already (HashMap::seen)
+                if (map.seen(key)) continue;
+              if (map.insert(key)) ++acc;
+            }
       },
       inserted);
   space.fence();
@@ -333,6 +338,12 @@ void build_narrow_band(const ExecSpace& space, MemoryTracker& tracker, const Gri
               const std::uint32_t b = map.find(
                   morton3(std::uint32_t(sx >> 1), std::uint32_t(sy >> 1), std::uint32_t(sz >> 1)));
               const std::size_t w = std::size_t(b) * 8 + ((sx & 1) | ((sy & 1) << 1) | ((sz & 1) << 2));
+              // Host: neighbouring surface particles' boxes overlap, so most
+              // of these bits are set already; a read (bits once set stay
+              // set) skips the atomic, which takes the line exclusively and
+              // contends between threads. The same words either way.
+              if constexpr (host_memory)
+                if ((Kokkos::volatile_load(&words(w)) & mask) == mask) continue;
               Kokkos::atomic_fetch_or(&words(w), mask);
             }
       });
