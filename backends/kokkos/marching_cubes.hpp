@@ -188,6 +188,7 @@ void for_each_band_vertex_by_block_host(const ExecSpace& space, const char* labe
 // corner that index() might still reject (grid box), never the reverse, so
 // f (which does the full test) sees every cell that matters: same results.
 // complete: the word's cells whose eight corners have their band bits set.
+// cw: the words of the cell's corners (corners_from_words).
 // GPU backends keep for_each_band_vertex (not instantiated for them).
 template <class ExecSpace>
 Buffer<std::uint64_t, typename ExecSpace::memory_space> inside_masks(
@@ -229,6 +230,33 @@ KOKKOS_FORCEINLINE_FUNCTION std::uint64_t all_corners(const std::uint64_t q[8]) 
   return py0 & shift_pz(py0, py1);
 }
 
+// Band indices of the 8 corners of a cell that for_each_mixed_cell_host
+// passes (bit `bit` of its word, all corners' band bits set), from its
+// words cw[d] (d = dx | dy << 1 | dz << 2: the word one step along the axes
+// set in d): corner c's word is cw of the axes where it crosses the word's
+// face. The values index_in_block gives (same word, same bit), without
+// looking blocks up in the hash map, as cell_corners does for a cell that
+// crosses a block face. The caller checks the grid box (cell_corners's
+// i + 1 < dims[0], ...), which the band bits do not.
+template <class MemSpace>
+KOKKOS_FORCEINLINE_FUNCTION void corners_from_words(const BandView<MemSpace>& band, const std::size_t cw[8], int bit,
+                                                    std::int64_t idx[8]) {
+  const int x = bit & 3, y = (bit >> 2) & 3, z = bit >> 4;
+  for (int c = 0; c < 8; ++c) {
+    const int dx = c & 1, dy = (c >> 1) & 1, dz = c >> 2;
+    const int d = (dx & int(x == 3)) | ((dy & int(y == 3)) << 1) | ((dz & int(z == 3)) << 2);
+    const int nbit = ((x + dx) & 3) | (((y + dy) & 3) << 2) | (((z + dz) & 3) << 4);
+    const std::size_t nw = cw[d];
+    idx[c] = std::int64_t(band.word_offset(nw)) + popcount64(band.words(nw) & ((std::uint64_t(1) << nbit) - 1));
+  }
+}
+// Whether cell (i, j, k)'s far corner lies in the grid (cell_corners's test).
+template <class MemSpace>
+KOKKOS_FORCEINLINE_FUNCTION bool cell_in_grid(const BandView<MemSpace>& band, std::int64_t i, std::int64_t j,
+                                              std::int64_t k) {
+  return i + 1 < band.dims[0] && j + 1 < band.dims[1] && k + 1 < band.dims[2];
+}
+
 template <class ExecSpace, class F>
 void for_each_mixed_cell_host(const ExecSpace& space, const char* label,
                               const BandView<typename ExecSpace::memory_space>& band, std::size_t n_words,
@@ -254,14 +282,17 @@ void for_each_mixed_cell_host(const ExecSpace& space, const char* label,
             looked = true;
           }
           std::uint64_t qb[8], qi[8], qo[8];
+          std::size_t cw[8];  // the words themselves (CellWords)
           for (int d = 0; d < 8; ++d) {
             const int o = s & d, t = s ^ d;  // block offset (carry), word in that block
             const std::uint32_t nbo = nb[o];
             if (nbo == ~0u) {
               qb[d] = qi[d] = qo[d] = 0;
+              cw[d] = ~std::size_t(0);
               continue;
             }
             const std::size_t nw = std::size_t(nbo) * 8 + std::size_t(t);
+            cw[d] = nw;
             qb[d] = band.words(nw);
             qi[d] = inside(nw);
             qo[d] = qb[d] & ~qi[d];
@@ -273,7 +304,7 @@ void for_each_mixed_cell_host(const ExecSpace& space, const char* label,
           while (cand) {
             const int bit = ctz64(cand);
             cand &= cand - 1;
-            f(w, bit, base + std::int64_t(popcount64(word & ((std::uint64_t(1) << bit) - 1))), complete);
+            f(w, bit, base + std::int64_t(popcount64(word & ((std::uint64_t(1) << bit) - 1))), complete, cw);
           }
         }
       });
@@ -302,10 +333,8 @@ McResult classify_cells(const ExecSpace& space, MemoryTracker& tracker,
   const std::size_t nb = info.extent(0);
   // tri_offset first holds each vertex's triangle count (0 where no cell).
   Kokkos::deep_copy(space, tri_offset, std::uint32_t(0));
-  const auto cell = KOKKOS_LAMBDA(const std::size_t w, const int bit, const std::int64_t self) {
-        std::int64_t i, j, k, idx[8];
-        band.vertex(w, bit, i, j, k);
-        if (!band.owns_cell(i, j, k) || !cell_corners(band, i, j, k, self, idx, std::uint32_t(w >> 3))) return;
+  // The case of the cell with corners idx (idx[0] = self), its crossed edges.
+  const auto classify = KOKKOS_LAMBDA(const std::int64_t self, const std::int64_t idx[8]) {
         int cs = 0;
         for (int c = 0; c < 8; ++c) cs |= (phi(idx[c]) < 0.f ? 1 : 0) << c;
         if (cs == 0 || cs == 255) return;
@@ -318,11 +347,22 @@ McResult classify_cells(const ExecSpace& space, MemoryTracker& tracker,
   if constexpr (Kokkos::SpaceAccessibility<Kokkos::HostSpace, typename ExecSpace::memory_space>::accessible)
     for_each_mixed_cell_host(
         space, "nbmc::marching_cubes::cases", band, n_words, inside_masks(space, tracker, band, n_words, phi).view(),
-        KOKKOS_LAMBDA(const std::size_t w, const int bit, const std::int64_t self, std::uint64_t) {
-          cell(w, bit, self);
+        [=](const std::size_t w, const int bit, const std::int64_t self, std::uint64_t, const std::size_t cw[8]) {
+          std::int64_t i, j, k, idx[8];
+          band.vertex(w, bit, i, j, k);
+          if (!band.owns_cell(i, j, k) || !cell_in_grid(band, i, j, k)) return;
+          corners_from_words(band, cw, bit, idx);  // cell_corners's values, without block lookups
+          classify(self, idx);
         });
   else
-    for_each_band_vertex(space, "nbmc::marching_cubes::cases", band, n_words, cell);
+    for_each_band_vertex(
+        space, "nbmc::marching_cubes::cases", band, n_words,
+        KOKKOS_LAMBDA(const std::size_t w, const int bit, const std::int64_t self) {
+          std::int64_t i, j, k, idx[8];
+          band.vertex(w, bit, i, j, k);
+          if (!band.owns_cell(i, j, k) || !cell_corners(band, i, j, k, self, idx, std::uint32_t(w >> 3))) return;
+          classify(self, idx);
+        });
   space.fence();
   std::uint64_t cells = 0;
   Kokkos::parallel_reduce(
@@ -347,8 +387,8 @@ McResult classify_cells(const ExecSpace& space, MemoryTracker& tracker,
 // minimum corners of the neighbour cells across its mixed faces that are not
 // entirely in the band (at most 6 cells, written to out); 0 if the cell is
 // not triangulated. Face f: axis a = f / 2, side = f % 2 (0: at the minimum).
-// The host scan (for_each_mixed_cell_host) passes the cell's bit in its word
-// and the word's `complete` mask: a face neighbour whose minimum corner lies
+// The host scan (for_each_mixed_cell_host) passes the cell's bit in its word,
+// its corner words (cw: corners_from_words) and the word's `complete` mask: a face neighbour whose minimum corner lies
 // in the same word is then known to be entirely in the band when its bit of
 // `complete` is set (its corners' band bits are set, and the grid check
 // below holds), without the 8 look-ups (bit < 0: always the look-ups).
@@ -356,9 +396,15 @@ template <class MemSpace>
 KOKKOS_INLINE_FUNCTION int leaks_at(const BandView<MemSpace>& band, const Kokkos::View<const float*, MemSpace>& phi,
                                     std::int64_t i, std::int64_t j, std::int64_t k, std::int64_t self,
                                     std::int64_t out[18], std::uint32_t block = ~0u, int bit = -1,
-                                    std::uint64_t complete = 0) {
+                                    std::uint64_t complete = 0, const std::size_t* cw = nullptr) {
   std::int64_t idx[8];
-  if (!band.owns_cell(i, j, k) || !cell_corners(band, i, j, k, self, idx, block)) return 0;
+  if (!band.owns_cell(i, j, k)) return 0;
+  if (cw) {  // the host scan's complete cell: its corners from its words
+    if (!cell_in_grid(band, i, j, k)) return 0;
+    corners_from_words(band, cw, bit, idx);
+  } else if (!cell_corners(band, i, j, k, self, idx, block)) {
+    return 0;
+  }
   int cs = 0;
   for (int c = 0; c < 8; ++c) cs |= (phi(idx[c]) < 0.f ? 1 : 0) << c;
   if (cs == 0 || cs == 255) return 0;
