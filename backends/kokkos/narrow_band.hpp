@@ -248,7 +248,7 @@ void build_narrow_band(const ExecSpace& space, MemoryTracker& tracker, const Gri
                        std::size_t n, Band<typename ExecSpace::memory_space>& band,
                        const Kokkos::View<const float*, typename ExecSpace::memory_space>& scale = {}) {
   using MemSpace = typename ExecSpace::memory_space;
-  // Host-only steps below (a type, not a constexpr local, inside the kernels' lambdas).
+  // Host-only steps below (a type, not a constexpr local, inside the kernels' lambdas for nvcc).
   using HostMemory = Kokkos::SpaceAccessibility<Kokkos::HostSpace, MemSpace>;
   ScopedRegion region("nbmc::narrow_band");
   const float inv_c = float(1.0 / g.cell);
@@ -302,8 +302,10 @@ void build_narrow_band(const ExecSpace& space, MemoryTracker& tracker, const Gri
           for (std::int64_t by = lo[1] >> 3; by <= (hi[1] >> 3); ++by)
             for (std::int64_t bx = lo[0] >> 3; bx <= (hi[0] >> 3); ++bx) {
               const std::uint64_t key = morton3(std::uint32_t(bx), std::uint32_t(by), std::uint32_t(bz));
-              if constexpr (HostMemory::accessible)  // most keys are in already (HashMap::seen)
-                if (map.seen(key)) continue;
+              // Host: most keys are in already (HashMap::seen). A plain if
+              // (constant, folded): nvcc rejects a lambda whose first use of
+              // a captured variable is inside an if constexpr.
+              if (HostMemory::accessible && map.seen(key)) continue;
               if (map.insert(key)) ++acc;
             }
       },
@@ -349,8 +351,7 @@ void build_narrow_band(const ExecSpace& space, MemoryTracker& tracker, const Gri
               // of these bits are set already; a read (bits once set stay
               // set) skips the atomic, which takes the line exclusively and
               // contends between threads. The same words either way.
-              if constexpr (HostMemory::accessible)
-                if ((Kokkos::volatile_load(&words(w)) & mask) == mask) continue;
+              if (HostMemory::accessible && (Kokkos::volatile_load(&words(w)) & mask) == mask) continue;
               Kokkos::atomic_fetch_or(&words(w), mask);
             }
       });
