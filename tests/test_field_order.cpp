@@ -571,3 +571,76 @@ TEST(HostSimdLanes, Dispatch) {
   if (e) setenv("NBMC_HOST_SIMD", saved.c_str(), 1);
   else unsetenv("NBMC_HOST_SIMD");
 }
+
+// The surface particles' colour-gradient sums of a group of particles at 4,
+// 8 and 16 lanes (surface_sums_host picks the width per group; each lane
+// must do the scalar loop's operations in its order): against that loop,
+// bit for bit, for groups of every size up to 16 and one spanning the
+// cell's end (lanes past `last` repeat its last particle).
+TEST(SurfaceSums, EveryLaneCountGivesTheScalarSums) {
+  std::mt19937 rng(14);
+  std::uniform_real_distribution<float> u(-1.f, 1.f);
+  const std::uint32_t n = 300;
+  std::vector<float> X(n), Y(n), Z(n);
+  for (std::uint32_t q = 0; q < n; ++q) {
+    X[q] = u(rng);
+    Y[q] = u(rng);
+    Z[q] = u(rng);
+  }
+  // Three "cells": ranges of particles in an order the scalar loop follows.
+  const std::uint32_t begin[3] = {0, 120, 200}, end[3] = {90, 200, 300};
+  const float h = 0.7f, h2 = h * h;
+  auto scalar = [&](std::uint32_t i, float g[3], int& count) {
+    float gx = 0, gy = 0, gz = 0;
+    count = 0;
+    for (int c = 0; c < 3; ++c)
+      for (std::uint32_t j = begin[c]; j < end[c]; ++j) {
+        const float dx = X[i] - X[j], dy = Y[i] - Y[j], dz = Z[i] - Z[j];
+        const float d2 = dx * dx + dy * dy + dz * dz;
+        const float q = d2 < h2 ? h2 - d2 : 0.f;
+        const float w = q * q;
+        gx += w * dx;
+        gy += w * dy;
+        gz += w * dz;
+        count += d2 < h2 ? 1 : 0;
+      }
+    g[0] = gx;
+    g[1] = gy;
+    g[2] = gz;
+  };
+  const int best = host_simd_lanes();
+  std::size_t checked = 0;
+  for (int lanes : {4, 8, 16}) {
+    if (lanes > best) continue;  // the CPU lacks them
+    for (std::uint32_t first : {0u, 37u, 91u})
+      for (std::uint32_t size = 1; size <= 17; ++size) {
+        const std::uint32_t last = first + size;
+        for (std::uint32_t i0 = first; i0 < last;) {
+          float gx[16], gy[16], gz[16];
+          int count[16];
+          const int L = surface_sums_host(X.data(), Y.data(), Z.data(), begin, end, 3, i0, last, h2, lanes, gx, gy,
+                                          gz, count);
+          EXPECT_LE(L, lanes);
+          for (int l = 0; l < L && i0 + std::uint32_t(l) < last; ++l) {
+            float g[3];
+            int c = 0;
+            scalar(i0 + std::uint32_t(l), g, c);
+            EXPECT_EQ(bits(gx[l]), bits(g[0])) << lanes << " lanes, particle " << i0 + l;
+            EXPECT_EQ(bits(gy[l]), bits(g[1])) << lanes << " lanes, particle " << i0 + l;
+            EXPECT_EQ(bits(gz[l]), bits(g[2])) << lanes << " lanes, particle " << i0 + l;
+            EXPECT_EQ(count[l], c) << lanes << " lanes, particle " << i0 + l;
+            ++checked;
+          }
+          i0 += std::uint32_t(L);
+        }
+      }
+  }
+  EXPECT_GT(checked, 0u);
+  // Groups of 9 or more particles take 16 lanes where the CPU has them, of 5
+  // to 8 take 8 (AVX2): the wide paths were the ones checked above.
+  float gx[16], gy[16], gz[16];
+  int count[16];
+  EXPECT_EQ(surface_sums_host(X.data(), Y.data(), Z.data(), begin, end, 3, 0, 12, h2, best, gx, gy, gz, count),
+            best);
+  EXPECT_EQ(surface_sums_host(X.data(), Y.data(), Z.data(), begin, end, 3, 0, 3, h2, best, gx, gy, gz, count), 4);
+}

@@ -308,10 +308,11 @@ void grow_band(const ExecSpace& space, MemoryTracker& tracker, const Grid& g,
           if (attempt == 0) inside = inside_masks(space, tracker, bv, n_words, cur_phi);
           for_each_mixed_cell_host(
               space, "nbmc::band_growth::leaks", bv, n_words, Kokkos::View<const std::uint64_t*, MemSpace>(inside.view()),
-              KOKKOS_LAMBDA(const std::size_t w, const int bit, const std::int64_t self, const std::uint64_t complete) {
+              KOKKOS_LAMBDA(const std::size_t w, const int bit, const std::int64_t self, const std::uint64_t complete,
+                            const std::size_t cw[8]) {
                 std::int64_t i, j, k, out[18];
                 bv.vertex(w, bit, i, j, k);
-                const int n = leaks_at(bv, cur_phi, i, j, k, self, out, std::uint32_t(w >> 3), bit, complete);
+                const int n = leaks_at(bv, cur_phi, i, j, k, self, out, std::uint32_t(w >> 3), bit, complete, cw);
                 if (n) rec.add_leaks(bv, out, n);
               });
         } else {

@@ -184,6 +184,20 @@ struct HashMap {
       slot = (slot + 1) & mask;
     }
   }
+  // Whether the key is in the map while other threads may be inserting: a
+  // key seen is there for good, a false may be stale (the caller then
+  // inserts). Host passes call it before insert, whose compare-and-swap
+  // takes the slot's cache line exclusively even for a key already there
+  // (most of their inserts), which contends between threads.
+  KOKKOS_INLINE_FUNCTION bool seen(std::uint64_t key) const {
+    std::uint64_t slot = hash64(key) & mask;
+    while (true) {
+      const std::uint64_t k = Kokkos::volatile_load(&keys(slot));
+      if (k == key) return true;
+      if (k == ~std::uint64_t(0)) return false;
+      slot = (slot + 1) & mask;
+    }
+  }
   // Slot of the key, or -1.
   KOKKOS_INLINE_FUNCTION std::int64_t find_slot(std::uint64_t key) const {
     std::uint64_t slot = hash64(key) & mask;

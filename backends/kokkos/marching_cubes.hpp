@@ -71,11 +71,12 @@ KOKKOS_INLINE_FUNCTION bool cell_corners(const BandView<MemSpace>& band, std::in
   return band.cell_indices(i, j, k, 1, idx, block);
 }
 
-template <class MemSpace>
-KOKKOS_INLINE_FUNCTION float gradient_component(const BandView<MemSpace>& band,
-                                                const Kokkos::View<const float*, MemSpace>& phi, std::int64_t i,
-                                                std::int64_t j, std::int64_t k, std::int64_t self, int axis,
-                                                float inv_c) {
+// band: anything with BandView's index(i, j, k) (a BandView, or the host's
+// NearBlocks).
+template <class Look, class MemSpace>
+KOKKOS_INLINE_FUNCTION float gradient_component(Look& band, const Kokkos::View<const float*, MemSpace>& phi,
+                                                std::int64_t i, std::int64_t j, std::int64_t k, std::int64_t self,
+                                                int axis, float inv_c) {
   const std::int64_t di = axis == 0, dj = axis == 1, dk = axis == 2;
   const std::int64_t p = band.index(i + di, j + dj, k + dk);
   const std::int64_t m = band.index(i - di, j - dj, k - dk);
@@ -111,6 +112,68 @@ void for_each_band_vertex(const ExecSpace& space, const char* label,
   }
 }
 
+// Host passes block by block: the band index of a grid vertex near block b
+// (in b or one of its 26 neighbouring blocks), each neighbouring block looked
+// up in the hash map once, on first use, instead of once per vertex (pass C
+// looked up to 13 blocks per mesh vertex: the other end of the edge and the
+// central differences at both ends; pass D 7 per cell that crosses a block
+// face). index() gives BandView::index's value for every vertex; farther
+// vertices are looked up directly.
+template <class MemSpace>
+struct NearBlocks {
+  static constexpr std::uint32_t kUnknown = ~0u - 1;  // not looked up yet (no band has 2^32 - 2 blocks)
+  const BandView<MemSpace>* band;
+  std::int64_t bx, by, bz;
+  std::uint32_t nb[27];  // (dx + 1) + 3 (dy + 1) + 9 (dz + 1)
+  NearBlocks(const BandView<MemSpace>& bv, std::size_t b) : band(&bv) {
+    const std::uint64_t key = bv.block_keys(b);
+    bx = std::int64_t(compact3(key));
+    by = std::int64_t(compact3(key >> 1));
+    bz = std::int64_t(compact3(key >> 2));
+    for (int q = 0; q < 27; ++q) nb[q] = kUnknown;
+    nb[13] = std::uint32_t(b);
+  }
+  std::int64_t index(std::int64_t i, std::int64_t j, std::int64_t k) {
+    const BandView<MemSpace>& v = *band;
+    if (i < 0 || j < 0 || k < 0 || i >= v.dims[0] || j >= v.dims[1] || k >= v.dims[2]) return -1;
+    const std::int64_t ox = (i >> 3) - bx + 1, oy = (j >> 3) - by + 1, oz = (k >> 3) - bz + 1;
+    std::uint32_t b;
+    if (std::uint64_t(ox) < 3 && std::uint64_t(oy) < 3 && std::uint64_t(oz) < 3) {
+      std::uint32_t& q = nb[ox + 3 * oy + 9 * oz];
+      if (q == kUnknown) q = v.blocks.find(morton3(std::uint32_t(i >> 3), std::uint32_t(j >> 3), std::uint32_t(k >> 3)));
+      b = q;
+    } else {
+      b = v.blocks.find(morton3(std::uint32_t(i >> 3), std::uint32_t(j >> 3), std::uint32_t(k >> 3)));
+    }
+    if (b == ~0u) return -1;
+    return v.index_in_block(b, i, j, k);
+  }
+  // BandView::cell_indices(i, j, k, 1, idx) (idx[0] is the caller's).
+  bool cell_indices(std::int64_t i, std::int64_t j, std::int64_t k, std::int64_t idx[8]) {
+    for (int c = 1; c < 8; ++c) {
+      idx[c] = index(i + (c & 1), j + ((c >> 1) & 1), k + ((c >> 2) & 1));
+      if (idx[c] < 0) return false;
+    }
+    return true;
+  }
+};
+
+// Host backends: f(near, w, bit, self) for every band vertex, one work item
+// per block (dynamic schedule), near: the block's NearBlocks.
+template <class ExecSpace, class F>
+void for_each_band_vertex_by_block_host(const ExecSpace& space, const char* label,
+                                        const BandView<typename ExecSpace::memory_space>& band, std::size_t n_words,
+                                        const F& f) {
+  using MemSpace = typename ExecSpace::memory_space;
+  Kokkos::parallel_for(
+      label, Kokkos::RangePolicy<ExecSpace, Kokkos::Schedule<Kokkos::Dynamic>>(space, 0, n_words / 8),
+      [=](const std::size_t b) {
+        NearBlocks<MemSpace> near(band, b);
+        for (std::size_t w = 8 * b; w < 8 * b + 8; ++w)
+          band.for_each_vertex(w, [&](const int bit, const std::int64_t self) { f(near, w, bit, self); });
+      });
+}
+
 // Host backends: an exact filter for the whole-band cell passes (round-0 leak
 // detection, pass A). Most band vertices are the minimum corner of no
 // triangulated cell (a corner outside the band, or eight corners of one
@@ -125,6 +188,7 @@ void for_each_band_vertex(const ExecSpace& space, const char* label,
 // corner that index() might still reject (grid box), never the reverse, so
 // f (which does the full test) sees every cell that matters: same results.
 // complete: the word's cells whose eight corners have their band bits set.
+// cw: the words of the cell's corners (corners_from_words).
 // GPU backends keep for_each_band_vertex (not instantiated for them).
 template <class ExecSpace>
 Buffer<std::uint64_t, typename ExecSpace::memory_space> inside_masks(
@@ -166,6 +230,33 @@ KOKKOS_FORCEINLINE_FUNCTION std::uint64_t all_corners(const std::uint64_t q[8]) 
   return py0 & shift_pz(py0, py1);
 }
 
+// Band indices of the 8 corners of a cell that for_each_mixed_cell_host
+// passes (bit `bit` of its word, all corners' band bits set), from its
+// words cw[d] (d = dx | dy << 1 | dz << 2: the word one step along the axes
+// set in d): corner c's word is cw of the axes where it crosses the word's
+// face. The values index_in_block gives (same word, same bit), without
+// looking blocks up in the hash map, as cell_corners does for a cell that
+// crosses a block face. The caller checks the grid box (cell_corners's
+// i + 1 < dims[0], ...), which the band bits do not.
+template <class MemSpace>
+KOKKOS_FORCEINLINE_FUNCTION void corners_from_words(const BandView<MemSpace>& band, const std::size_t cw[8], int bit,
+                                                    std::int64_t idx[8]) {
+  const int x = bit & 3, y = (bit >> 2) & 3, z = bit >> 4;
+  for (int c = 0; c < 8; ++c) {
+    const int dx = c & 1, dy = (c >> 1) & 1, dz = c >> 2;
+    const int d = (dx & int(x == 3)) | ((dy & int(y == 3)) << 1) | ((dz & int(z == 3)) << 2);
+    const int nbit = ((x + dx) & 3) | (((y + dy) & 3) << 2) | (((z + dz) & 3) << 4);
+    const std::size_t nw = cw[d];
+    idx[c] = std::int64_t(band.word_offset(nw)) + popcount64(band.words(nw) & ((std::uint64_t(1) << nbit) - 1));
+  }
+}
+// Whether cell (i, j, k)'s far corner lies in the grid (cell_corners's test).
+template <class MemSpace>
+KOKKOS_FORCEINLINE_FUNCTION bool cell_in_grid(const BandView<MemSpace>& band, std::int64_t i, std::int64_t j,
+                                              std::int64_t k) {
+  return i + 1 < band.dims[0] && j + 1 < band.dims[1] && k + 1 < band.dims[2];
+}
+
 template <class ExecSpace, class F>
 void for_each_mixed_cell_host(const ExecSpace& space, const char* label,
                               const BandView<typename ExecSpace::memory_space>& band, std::size_t n_words,
@@ -191,14 +282,17 @@ void for_each_mixed_cell_host(const ExecSpace& space, const char* label,
             looked = true;
           }
           std::uint64_t qb[8], qi[8], qo[8];
+          std::size_t cw[8];  // the words themselves (CellWords)
           for (int d = 0; d < 8; ++d) {
             const int o = s & d, t = s ^ d;  // block offset (carry), word in that block
             const std::uint32_t nbo = nb[o];
             if (nbo == ~0u) {
               qb[d] = qi[d] = qo[d] = 0;
+              cw[d] = ~std::size_t(0);
               continue;
             }
             const std::size_t nw = std::size_t(nbo) * 8 + std::size_t(t);
+            cw[d] = nw;
             qb[d] = band.words(nw);
             qi[d] = inside(nw);
             qo[d] = qb[d] & ~qi[d];
@@ -210,7 +304,7 @@ void for_each_mixed_cell_host(const ExecSpace& space, const char* label,
           while (cand) {
             const int bit = ctz64(cand);
             cand &= cand - 1;
-            f(w, bit, base + std::int64_t(popcount64(word & ((std::uint64_t(1) << bit) - 1))), complete);
+            f(w, bit, base + std::int64_t(popcount64(word & ((std::uint64_t(1) << bit) - 1))), complete, cw);
           }
         }
       });
@@ -239,10 +333,8 @@ McResult classify_cells(const ExecSpace& space, MemoryTracker& tracker,
   const std::size_t nb = info.extent(0);
   // tri_offset first holds each vertex's triangle count (0 where no cell).
   Kokkos::deep_copy(space, tri_offset, std::uint32_t(0));
-  const auto cell = KOKKOS_LAMBDA(const std::size_t w, const int bit, const std::int64_t self) {
-        std::int64_t i, j, k, idx[8];
-        band.vertex(w, bit, i, j, k);
-        if (!band.owns_cell(i, j, k) || !cell_corners(band, i, j, k, self, idx, std::uint32_t(w >> 3))) return;
+  // The case of the cell with corners idx (idx[0] = self), its crossed edges.
+  const auto classify = KOKKOS_LAMBDA(const std::int64_t self, const std::int64_t idx[8]) {
         int cs = 0;
         for (int c = 0; c < 8; ++c) cs |= (phi(idx[c]) < 0.f ? 1 : 0) << c;
         if (cs == 0 || cs == 255) return;
@@ -255,11 +347,22 @@ McResult classify_cells(const ExecSpace& space, MemoryTracker& tracker,
   if constexpr (Kokkos::SpaceAccessibility<Kokkos::HostSpace, typename ExecSpace::memory_space>::accessible)
     for_each_mixed_cell_host(
         space, "nbmc::marching_cubes::cases", band, n_words, inside_masks(space, tracker, band, n_words, phi).view(),
-        KOKKOS_LAMBDA(const std::size_t w, const int bit, const std::int64_t self, std::uint64_t) {
-          cell(w, bit, self);
+        [=](const std::size_t w, const int bit, const std::int64_t self, std::uint64_t, const std::size_t cw[8]) {
+          std::int64_t i, j, k, idx[8];
+          band.vertex(w, bit, i, j, k);
+          if (!band.owns_cell(i, j, k) || !cell_in_grid(band, i, j, k)) return;
+          corners_from_words(band, cw, bit, idx);  // cell_corners's values, without block lookups
+          classify(self, idx);
         });
   else
-    for_each_band_vertex(space, "nbmc::marching_cubes::cases", band, n_words, cell);
+    for_each_band_vertex(
+        space, "nbmc::marching_cubes::cases", band, n_words,
+        KOKKOS_LAMBDA(const std::size_t w, const int bit, const std::int64_t self) {
+          std::int64_t i, j, k, idx[8];
+          band.vertex(w, bit, i, j, k);
+          if (!band.owns_cell(i, j, k) || !cell_corners(band, i, j, k, self, idx, std::uint32_t(w >> 3))) return;
+          classify(self, idx);
+        });
   space.fence();
   std::uint64_t cells = 0;
   Kokkos::parallel_reduce(
@@ -284,8 +387,8 @@ McResult classify_cells(const ExecSpace& space, MemoryTracker& tracker,
 // minimum corners of the neighbour cells across its mixed faces that are not
 // entirely in the band (at most 6 cells, written to out); 0 if the cell is
 // not triangulated. Face f: axis a = f / 2, side = f % 2 (0: at the minimum).
-// The host scan (for_each_mixed_cell_host) passes the cell's bit in its word
-// and the word's `complete` mask: a face neighbour whose minimum corner lies
+// The host scan (for_each_mixed_cell_host) passes the cell's bit in its word,
+// its corner words (cw: corners_from_words) and the word's `complete` mask: a face neighbour whose minimum corner lies
 // in the same word is then known to be entirely in the band when its bit of
 // `complete` is set (its corners' band bits are set, and the grid check
 // below holds), without the 8 look-ups (bit < 0: always the look-ups).
@@ -293,9 +396,15 @@ template <class MemSpace>
 KOKKOS_INLINE_FUNCTION int leaks_at(const BandView<MemSpace>& band, const Kokkos::View<const float*, MemSpace>& phi,
                                     std::int64_t i, std::int64_t j, std::int64_t k, std::int64_t self,
                                     std::int64_t out[18], std::uint32_t block = ~0u, int bit = -1,
-                                    std::uint64_t complete = 0) {
+                                    std::uint64_t complete = 0, const std::size_t* cw = nullptr) {
   std::int64_t idx[8];
-  if (!band.owns_cell(i, j, k) || !cell_corners(band, i, j, k, self, idx, block)) return 0;
+  if (!band.owns_cell(i, j, k)) return 0;
+  if (cw) {  // the host scan's complete cell: its corners from its words
+    if (!cell_in_grid(band, i, j, k)) return 0;
+    corners_from_words(band, cw, bit, idx);
+  } else if (!cell_corners(band, i, j, k, self, idx, block)) {
+    return 0;
+  }
   int cs = 0;
   for (int c = 0; c < 8; ++c) cs |= (phi(idx[c]) < 0.f ? 1 : 0) << c;
   if (cs == 0 || cs == 255) return 0;
@@ -424,7 +533,73 @@ std::vector<std::int64_t> find_band_leaks(const ExecSpace& space, const BandView
 
 // Pass C: intersection points (absolute; Real: float, or double for
 // nbmc_params.double_positions) and normals. The point is computed in double
-// either way; only the store rounds it.
+// either way; only the store rounds it. One band vertex's edges; band
+// indices from look (the BandView, or on the host its block's NearBlocks).
+template <class MemSpace, class Real>
+struct VertexPass {
+  BandView<MemSpace> band;
+  Kokkos::View<const float*, MemSpace> phi;
+  Kokkos::View<const std::uint32_t*, MemSpace> info, vert_offset;
+  Kokkos::View<Real*, MemSpace> positions;
+  Kokkos::View<float*, MemSpace> normals;
+  Kokkos::View<std::uint64_t*, MemSpace> keys;
+  Kokkos::View<std::uint8_t*, MemSpace> axes;
+  bool with_normals, with_keys;
+  double o0, o1, o2, c;
+  float inv_c;
+
+  template <class Look>
+  KOKKOS_INLINE_FUNCTION void operator()(Look& look, const std::size_t w, const int bit,
+                                         const std::int64_t self) const {
+    const std::uint32_t edges = (info(self) >> 8) & 7u;
+    if (!edges) return;
+    std::int64_t i, j, k;
+    band.vertex(w, bit, i, j, k);
+    std::uint32_t out = vert_offset(self);
+    // The gradient at this vertex, the same for each of its edges: computed
+    // for the first one only (the same values as computing it per edge).
+    float g0[3];
+    bool have_g0 = false;
+    for (int a = 0; a < 3; ++a) {
+      if (!(edges & (1u << a))) continue;
+      const std::int64_t di = a == 0, dj = a == 1, dk = a == 2;
+      const std::int64_t other = look.index(i + di, j + dj, k + dk);
+      const float f0 = phi(self), f1 = phi(other);
+      float t = f0 / (f0 - f1);
+      t = t < 0.f ? 0.f : (t > 1.f ? 1.f : t);
+      positions(3 * out) = Real(o0 + (double(i) + double(t) * double(di)) * c);
+      positions(3 * out + 1) = Real(o1 + (double(j) + double(t) * double(dj)) * c);
+      positions(3 * out + 2) = Real(o2 + (double(k) + double(t) * double(dk)) * c);
+      if (with_keys) {
+        keys(out) = band_order_key(i, j, k);
+        axes(out) = std::uint8_t(a);
+      }
+      if (with_normals) {
+        if (!have_g0) {
+          for (int b = 0; b < 3; ++b) g0[b] = gradient_component(look, phi, i, j, k, self, b, inv_c);
+          have_g0 = true;
+        }
+        float n[3];
+        for (int b = 0; b < 3; ++b) {
+          const float g1 = gradient_component(look, phi, i + di, j + dj, k + dk, other, b, inv_c);
+          n[b] = (1.f - t) * g0[b] + t * g1;
+        }
+        float len2 = n[0] * n[0] + n[1] * n[1] + n[2] * n[2];
+        if (!(len2 > 1e-30f)) {  // flat field: the edge direction, inside -> outside
+          n[0] = n[1] = n[2] = 0.f;
+          n[a] = f1 > f0 ? 1.f : -1.f;
+          len2 = 1.f;
+        }
+        const float inv = 1.f / Kokkos::Experimental::sqrt(len2);
+        normals(3 * out) = n[0] * inv;
+        normals(3 * out + 1) = n[1] * inv;
+        normals(3 * out + 2) = n[2] * inv;
+      }
+      ++out;
+    }
+  }
+};
+
 template <class ExecSpace, class Real>
 void compute_vertices(const ExecSpace& space, const BandView<typename ExecSpace::memory_space>& band,
                       std::size_t n_words, const Grid& g,
@@ -435,56 +610,36 @@ void compute_vertices(const ExecSpace& space, const BandView<typename ExecSpace:
                       const Kokkos::View<float*, typename ExecSpace::memory_space>& normals, bool with_normals,
                       const Kokkos::View<std::uint64_t*, typename ExecSpace::memory_space>& keys = {},
                       const Kokkos::View<std::uint8_t*, typename ExecSpace::memory_space>& axes = {}) {
+  using MemSpace = typename ExecSpace::memory_space;
   ScopedRegion region("nbmc::marching_cubes::vertices");
-  const bool with_keys = keys.extent(0) > 0;  // a subdomain's piece: where each vertex goes in the frame
-  const double o0 = g.origin[0], o1 = g.origin[1], o2 = g.origin[2], c = g.cell;
-  const float inv_c = float(1.0 / g.cell);
-  for_each_band_vertex(
-      space, "nbmc::marching_cubes::vertices", band, n_words,
-      KOKKOS_LAMBDA(const std::size_t w, const int bit, const std::int64_t self) {
-        {
-          const std::uint32_t edges = (info(self) >> 8) & 7u;
-          if (edges) {
-            std::int64_t i, j, k;
-            band.vertex(w, bit, i, j, k);
-            std::uint32_t out = vert_offset(self);
-            for (int a = 0; a < 3; ++a) {
-              if (!(edges & (1u << a))) continue;
-              const std::int64_t di = a == 0, dj = a == 1, dk = a == 2;
-              const std::int64_t other = band.index(i + di, j + dj, k + dk);
-              const float f0 = phi(self), f1 = phi(other);
-              float t = f0 / (f0 - f1);
-              t = t < 0.f ? 0.f : (t > 1.f ? 1.f : t);
-              positions(3 * out) = Real(o0 + (double(i) + double(t) * double(di)) * c);
-              positions(3 * out + 1) = Real(o1 + (double(j) + double(t) * double(dj)) * c);
-              positions(3 * out + 2) = Real(o2 + (double(k) + double(t) * double(dk)) * c);
-              if (with_keys) {
-                keys(out) = band_order_key(i, j, k);
-                axes(out) = std::uint8_t(a);
-              }
-              if (with_normals) {
-                float n[3];
-                for (int b = 0; b < 3; ++b) {
-                  const float g0 = gradient_component(band, phi, i, j, k, self, b, inv_c);
-                  const float g1 = gradient_component(band, phi, i + di, j + dj, k + dk, other, b, inv_c);
-                  n[b] = (1.f - t) * g0 + t * g1;
-                }
-                float len2 = n[0] * n[0] + n[1] * n[1] + n[2] * n[2];
-                if (!(len2 > 1e-30f)) {  // flat field: the edge direction, inside -> outside
-                  n[0] = n[1] = n[2] = 0.f;
-                  n[a] = f1 > f0 ? 1.f : -1.f;
-                  len2 = 1.f;
-                }
-                const float inv = 1.f / Kokkos::Experimental::sqrt(len2);
-                normals(3 * out) = n[0] * inv;
-                normals(3 * out + 1) = n[1] * inv;
-                normals(3 * out + 2) = n[2] * inv;
-              }
-              ++out;
-            }
-          }
-        }
-      });
+  VertexPass<MemSpace, Real> pass;
+  pass.band = band;
+  pass.phi = phi;
+  pass.info = info;
+  pass.vert_offset = vert_offset;
+  pass.positions = positions;
+  pass.normals = normals;
+  pass.keys = keys;
+  pass.axes = axes;
+  pass.with_normals = with_normals;
+  pass.with_keys = keys.extent(0) > 0;  // a subdomain's piece: where each vertex goes in the frame
+  pass.o0 = g.origin[0];
+  pass.o1 = g.origin[1];
+  pass.o2 = g.origin[2];
+  pass.c = g.cell;
+  pass.inv_c = float(1.0 / g.cell);
+  if constexpr (Kokkos::SpaceAccessibility<Kokkos::HostSpace, MemSpace>::accessible)
+    for_each_band_vertex_by_block_host(
+        space, "nbmc::marching_cubes::vertices", band, n_words,
+        [=](NearBlocks<MemSpace>& near, const std::size_t w, const int bit, const std::int64_t self) {
+          pass(near, w, bit, self);
+        });
+  else
+    for_each_band_vertex(
+        space, "nbmc::marching_cubes::vertices", band, n_words,
+        KOKKOS_LAMBDA(const std::size_t w, const int bit, const std::int64_t self) {
+          pass(pass.band, w, bit, self);
+        });
   space.fence();
 }
 
@@ -500,14 +655,9 @@ void compute_triangles(const ExecSpace& space, const BandView<typename ExecSpace
   ScopedRegion region("nbmc::marching_cubes::triangles");
   const bool with_keys = cell_keys.extent(0) > 0;  // per triangle: its cell's place in the frame
   constexpr int W = 3 * mc::kMaxTriangles;
-  for_each_band_vertex(
-      space, "nbmc::marching_cubes::triangles", band, n_words,
-      KOKKOS_LAMBDA(const std::size_t w, const int bit, const std::int64_t self) {
-        const int cs = int(info(self) & 0xffu);
-        if (!cs) return;
-        std::int64_t i, j, k, idx[8];
-        band.vertex(w, bit, i, j, k);
-        cell_corners(band, i, j, k, self, idx, std::uint32_t(w >> 3));
+  // The cell's triangles, from its corners' band indices (idx).
+  const auto emit = KOKKOS_LAMBDA(const std::int64_t i, const std::int64_t j, const std::int64_t k,
+                                  const std::int64_t self, const int cs, const std::int64_t idx[8]) {
         const std::uint64_t out = tri_offset(self);
         const int nt = tables.count(cs);
         for (int t = 0; t < 3 * nt; ++t) {
@@ -519,7 +669,37 @@ void compute_triangles(const ExecSpace& space, const BandView<typename ExecSpace
         }
         if (with_keys)
           for (int t = 0; t < nt; ++t) cell_keys(out + std::uint64_t(t)) = band_order_key(i, j, k);
-      });
+      };
+  if constexpr (Kokkos::SpaceAccessibility<Kokkos::HostSpace, typename ExecSpace::memory_space>::accessible) {
+    // Cells inside the block find their corners there; those crossing its
+    // faces in the block's neighbours (NearBlocks), not in the hash map.
+    for_each_band_vertex_by_block_host(
+        space, "nbmc::marching_cubes::triangles", band, n_words,
+        [=](NearBlocks<typename ExecSpace::memory_space>& near, const std::size_t w, const int bit,
+            const std::int64_t self) {
+          const int cs = int(info(self) & 0xffu);
+          if (!cs) return;
+          std::int64_t i, j, k, idx[8];
+          band.vertex(w, bit, i, j, k);
+          idx[0] = self;
+          if ((i & 7) != 7 && (j & 7) != 7 && (k & 7) != 7)
+            cell_corners(band, i, j, k, self, idx, std::uint32_t(w >> 3));
+          else
+            near.cell_indices(i, j, k, idx);
+          emit(i, j, k, self, cs, idx);
+        });
+  } else {
+    for_each_band_vertex(
+        space, "nbmc::marching_cubes::triangles", band, n_words,
+        KOKKOS_LAMBDA(const std::size_t w, const int bit, const std::int64_t self) {
+          const int cs = int(info(self) & 0xffu);
+          if (!cs) return;
+          std::int64_t i, j, k, idx[8];
+          band.vertex(w, bit, i, j, k);
+          cell_corners(band, i, j, k, self, idx, std::uint32_t(w >> 3));
+          emit(i, j, k, self, cs, idx);
+        });
+  }
   space.fence();
 }
 

@@ -248,6 +248,8 @@ void build_narrow_band(const ExecSpace& space, MemoryTracker& tracker, const Gri
                        std::size_t n, Band<typename ExecSpace::memory_space>& band,
                        const Kokkos::View<const float*, typename ExecSpace::memory_space>& scale = {}) {
   using MemSpace = typename ExecSpace::memory_space;
+  // Host-only steps below (a type, not a constexpr local, inside the kernels' lambdas for nvcc).
+  using HostMemory = Kokkos::SpaceAccessibility<Kokkos::HostSpace, MemSpace>;
   ScopedRegion region("nbmc::narrow_band");
   const float inv_c = float(1.0 / g.cell);
   const float bw = float(p.band_width);
@@ -286,6 +288,7 @@ void build_narrow_band(const ExecSpace& space, MemoryTracker& tracker, const Gri
       bound);
   const std::uint64_t grid_blocks = std::uint64_t(g.block_dims(0)) * g.block_dims(1) * g.block_dims(2);
   band.blocks.allocate(space, tracker, "band::block_map", std::size_t(std::min(bound, grid_blocks)));
+  trace("band: bound, map", bound);
 
   // 2. Insert the blocks.
   auto map = band.blocks.map;
@@ -297,14 +300,22 @@ void build_narrow_band(const ExecSpace& space, MemoryTracker& tracker, const Gri
         if (!flags(i) || !box(i, lo, hi)) return;
         for (std::int64_t bz = lo[2] >> 3; bz <= (hi[2] >> 3); ++bz)
           for (std::int64_t by = lo[1] >> 3; by <= (hi[1] >> 3); ++by)
-            for (std::int64_t bx = lo[0] >> 3; bx <= (hi[0] >> 3); ++bx)
-              if (map.insert(morton3(std::uint32_t(bx), std::uint32_t(by), std::uint32_t(bz)))) ++acc;
+            for (std::int64_t bx = lo[0] >> 3; bx <= (hi[0] >> 3); ++bx) {
+              const std::uint64_t key = morton3(std::uint32_t(bx), std::uint32_t(by), std::uint32_t(bz));
+              // Host: most keys are in already (HashMap::seen). A plain if
+              // (constant, folded): nvcc rejects a lambda whose first use of
+              // a captured variable is inside an if constexpr.
+              if (HostMemory::accessible && map.seen(key)) continue;
+              if (map.insert(key)) ++acc;
+            }
       },
       inserted);
   space.fence();
   band.n_blocks = inserted;
+  trace("band: insert blocks", inserted);
   check_band_blocks<MemSpace>(band.n_blocks);
   collect_sorted_keys(space, tracker, band);
+  trace("band: sorted block keys", band.n_blocks);
   number_blocks(space, band);  // before marking: the marking looks blocks up
 
   // 3. Set the bits: one atomic OR per (particle, 4x4x4 sub-block).
@@ -318,25 +329,34 @@ void build_narrow_band(const ExecSpace& space, MemoryTracker& tracker, const Gri
         for (std::int64_t sz = lo[2] >> 2; sz <= (hi[2] >> 2); ++sz)
           for (std::int64_t sy = lo[1] >> 2; sy <= (hi[1] >> 2); ++sy)
             for (std::int64_t sx = lo[0] >> 2; sx <= (hi[0] >> 2); ++sx) {
-              // Per-axis 4-bit masks of the box inside this sub-block.
-              std::uint64_t mask = 0;
+              // The bits of the box inside this sub-block.
               const std::int64_t x0 = (sx << 2) > lo[0] ? (sx << 2) : lo[0];
               const std::int64_t x1 = (sx << 2) + 3 < hi[0] ? (sx << 2) + 3 : hi[0];
               const std::int64_t y0 = (sy << 2) > lo[1] ? (sy << 2) : lo[1];
               const std::int64_t y1 = (sy << 2) + 3 < hi[1] ? (sy << 2) + 3 : hi[1];
               const std::int64_t z0 = (sz << 2) > lo[2] ? (sz << 2) : lo[2];
               const std::int64_t z1 = (sz << 2) + 3 < hi[2] ? (sz << 2) + 3 : hi[2];
-              std::uint64_t row = 0;
-              for (std::int64_t x = x0; x <= x1; ++x) row |= std::uint64_t(1) << (x & 3);
-              for (std::int64_t z = z0; z <= z1; ++z)
-                for (std::int64_t y = y0; y <= y1; ++y) mask |= row << (((y & 3) << 2) | ((z & 3) << 4));
+              // The x row (4 bits), copied to the rows y0..y1 (nibbles) and
+              // then to the layers z0..z1 (16-bit groups) by multiplying with
+              // a one in each: the copies do not overlap, so the product is
+              // their OR (the loop over y and z this replaces).
+              const std::uint64_t row = ((std::uint64_t(2) << (x1 & 3)) - 1) & ~((std::uint64_t(1) << (x0 & 3)) - 1);
+              const std::uint64_t ys = (0x1111ull >> (4 * (3 - ((y1 - y0) & 3)))) << (4 * (y0 & 3));
+              const std::uint64_t zs = (0x0001000100010001ull >> (16 * (3 - ((z1 - z0) & 3)))) << (16 * (z0 & 3));
+              const std::uint64_t mask = (row * ys) * zs;
               const std::uint32_t b = map.find(
                   morton3(std::uint32_t(sx >> 1), std::uint32_t(sy >> 1), std::uint32_t(sz >> 1)));
               const std::size_t w = std::size_t(b) * 8 + ((sx & 1) | ((sy & 1) << 1) | ((sz & 1) << 2));
+              // Host: neighbouring surface particles' boxes overlap, so most
+              // of these bits are set already; a read (bits once set stay
+              // set) skips the atomic, which takes the line exclusively and
+              // contends between threads. The same words either way.
+              if (HostMemory::accessible && (Kokkos::volatile_load(&words(w)) & mask) == mask) continue;
               Kokkos::atomic_fetch_or(&words(w), mask);
             }
       });
   space.fence();
+  trace("band: mark", band.n_blocks);
   finish_band(space, tracker, band);
 }
 

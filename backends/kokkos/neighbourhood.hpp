@@ -289,13 +289,15 @@ void build_neighbourhood(const ExecSpace& space, MemoryTracker& tracker, const d
 #endif
   if (radii) order_by_radius(r, n, radii);
 
-  // Cells: start indices of each run of equal keys.
-  std::vector<std::uint32_t> starts;
-  starts.reserve(n / 4 + 2);
-  for (std::size_t i = 0; i < n; ++i)
-    if (i == 0 || r[i].key != r[i - 1].key) starts.push_back(std::uint32_t(i));
-  out.n_cells = starts.size();
-  starts.push_back(std::uint32_t(n));
+  // Cells: start indices of each run of equal keys, counted, then written
+  // by a parallel scan (a serial pass over the handlers was a serial part of
+  // this stage: about 10 ms for the 1.65 M frame).
+  std::uint64_t n_cells = 0;
+  Kokkos::parallel_reduce(
+      "nbmc::neighbourhood::count_cells", Kokkos::RangePolicy<HostPolicyExec>(host_space, 0, n),
+      [=](const std::size_t i, std::uint64_t& acc) { acc += (i == 0 || r[i].key != r[i - 1].key) ? 1 : 0; },
+      n_cells);
+  out.n_cells = std::size_t(n_cells);
 
   out.pos = Buffer<float, MemSpace>(tracker, "neighbourhood::positions", 3 * n);
   out.perm = Buffer<std::uint32_t, MemSpace>(tracker, "neighbourhood::permutation", n);
@@ -314,9 +316,18 @@ void build_neighbourhood(const ExecSpace& space, MemoryTracker& tracker, const d
           hpos(2 * n + i) = r[i].z;
           hperm(i) = r[i].index;
         });
+    Kokkos::parallel_scan(
+        "nbmc::neighbourhood::cells", Kokkos::RangePolicy<HostPolicyExec>(host_space, 0, n),
+        [=](const std::size_t i, std::uint64_t& c, const bool final) {
+          const bool first = i == 0 || r[i].key != r[i - 1].key;
+          if (final && first) {
+            hstart(c) = std::uint32_t(i);
+            hkeys(c) = r[i].key;
+          }
+          c += first ? 1 : 0;
+        });
     host_space.fence();
-    for (std::size_t c = 0; c < out.n_cells; ++c) hkeys(c) = r[starts[c]].key;
-    std::memcpy(hstart.data(), starts.data(), starts.size() * sizeof(std::uint32_t));
+    hstart(out.n_cells) = std::uint32_t(n);
     Kokkos::deep_copy(space, out.pos.view(), hpos);
     Kokkos::deep_copy(space, out.perm.view(), hperm);
     Kokkos::deep_copy(space, out.cell_keys.view(), hkeys);

@@ -28,6 +28,7 @@
 #include "field_common.hpp"
 #include "grid.hpp"
 #include "neighbourhood.hpp"
+#include "scalar_field.hpp"  // host_simd_lanes, NBMC_HOST_AVX2 / NBMC_HOST_AVX512
 
 #include <cmath>
 
@@ -38,11 +39,104 @@ namespace Details {
 // "crowded": the rest density puts about 8 there.
 constexpr std::uint32_t kCrowdedCell = 2048;
 
+#if !defined(__CUDA_ARCH__)
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wpsabi"  // 32- and 64-byte vectors never cross a call that is not inlined
+#endif
+// The colour-gradient sums of particles i0, i0 + 1, ... (L of them, one per
+// lane; lanes past last - 1 repeat it and are not used) over the n_cells
+// ranges [begin, end), in the order of the scalar loop in
+// surface_particles_of_cell: each lane does the scalar operations, so the
+// sums are the same bit for bit for any L. Results in gx..count[0, L).
+template <int L>
+inline void surface_sums_lanes(const float* X, const float* Y, const float* Z, const std::uint32_t* begin,
+                               const std::uint32_t* end, int n_cells, std::uint32_t i0, std::uint32_t last, float h2,
+                               float* gx_out, float* gy_out, float* gz_out, int* count_out) {
+  using F = typename HostSimd<L>::F;
+  using I = typename HostSimd<L>::I;
+  const F vh2 = lanes_of<F>(h2), zero = lanes_of<F>(0.f);
+  F xi, yi, zi;
+  for (int l = 0; l < L; ++l) {
+    const std::uint32_t i = i0 + std::uint32_t(l) < last ? i0 + std::uint32_t(l) : last - 1;
+    xi[l] = X[i];
+    yi[l] = Y[i];
+    zi[l] = Z[i];
+  }
+  F gx = zero, gy = zero, gz = zero;
+  I count = I{};
+  for (int c = 0; c < n_cells; ++c)
+    for (std::uint32_t j = begin[c]; j < end[c]; ++j) {
+      const F dx = xi - lanes_of<F>(X[j]), dy = yi - lanes_of<F>(Y[j]), dz = zi - lanes_of<F>(Z[j]);
+      const F d2 = dx * dx + dy * dy + dz * dz;
+      const I in = d2 < vh2;
+      const F q = (F)((I)(vh2 - d2) & in);
+      const F w = q * q;
+      gx += w * dx;
+      gy += w * dy;
+      gz += w * dz;
+      count -= in;
+    }
+  for (int l = 0; l < L; ++l) {
+    gx_out[l] = gx[l];
+    gy_out[l] = gy[l];
+    gz_out[l] = gz[l];
+    count_out[l] = count[l];
+  }
+}
+// 8 lanes where the CPU has AVX2, 16 where it has AVX-512F (host_simd_lanes),
+// compiled as the field's tile kernels are (scalar_field.hpp).
+#if defined(NBMC_HOST_AVX2)
+__attribute__((target("avx2"), flatten)) inline void surface_sums_avx2(
+    const float* X, const float* Y, const float* Z, const std::uint32_t* begin, const std::uint32_t* end, int n_cells,
+    std::uint32_t i0, std::uint32_t last, float h2, float* gx, float* gy, float* gz, int* count) {
+  surface_sums_lanes<8>(X, Y, Z, begin, end, n_cells, i0, last, h2, gx, gy, gz, count);
+}
+#endif
+#if defined(NBMC_HOST_AVX512)
+__attribute__((target("avx512f"), flatten)) inline void surface_sums_avx512(
+    const float* X, const float* Y, const float* Z, const std::uint32_t* begin, const std::uint32_t* end, int n_cells,
+    std::uint32_t i0, std::uint32_t last, float h2, float* gx, float* gy, float* gz, int* count) {
+  surface_sums_lanes<16>(X, Y, Z, begin, end, n_cells, i0, last, h2, gx, gy, gz, count);
+}
+#endif
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic pop
+#endif
+
+// The sums of the next group of particles from i0 on: as few lanes of 4, 8
+// or 16 as cover the particles left (a cell holds about 8 at rest density,
+// so 16 lanes would mostly idle), at most `lanes` (host_simd_lanes).
+// Returns the group's lane count.
+inline int surface_sums_host(const float* X, const float* Y, const float* Z, const std::uint32_t* begin,
+                             const std::uint32_t* end, int n_cells, std::uint32_t i0, std::uint32_t last, float h2,
+                             int lanes, float* gx, float* gy, float* gz, int* count) {
+  const std::uint32_t left = last - i0;
+#if defined(NBMC_HOST_AVX512)
+  if (lanes >= 16 && left > 8) {
+    surface_sums_avx512(X, Y, Z, begin, end, n_cells, i0, last, h2, gx, gy, gz, count);
+    return 16;
+  }
+#endif
+#if defined(NBMC_HOST_AVX2)
+  if (lanes >= 8 && left > 4) {
+    surface_sums_avx2(X, Y, Z, begin, end, n_cells, i0, last, h2, gx, gy, gz, count);
+    return 8;
+  }
+#endif
+  (void)lanes;
+  (void)left;
+  surface_sums_lanes<4>(X, Y, Z, begin, end, n_cells, i0, last, h2, gx, gy, gz, count);
+  return 4;
+}
+#endif
+
 // Marks the particles of occupied neighbour cell `cell`: the 27 neighbour
 // cells around it (range 1) are looked up once for all particles of the cell. Each
 // particle's colour gradient is summed in one order on every backend: the
 // cells in z, y, x order, their particles in sorted order (the host computes
-// kHostLanes particles i at a time, one lane each, with the same operations).
+// 4, 8 or 16 particles i at a time, one lane each, with the same operations;
+// `lanes`: the most it may use, host_simd_lanes).
 // Radii: scale is (r_max / h)^3 * 945 / (32 pi) and h_abs = h in double.
 template <bool Radii, class MemSpace>
 KOKKOS_INLINE_FUNCTION std::size_t surface_particles_of_cell(const NeighbourView<MemSpace>& nb,
@@ -50,8 +144,9 @@ KOKKOS_INLINE_FUNCTION std::size_t surface_particles_of_cell(const NeighbourView
                                                              std::size_t cell, int range, float h, float scale,
                                                              float threshold, int min_neighbours,
                                                              const Kokkos::View<std::uint8_t*, MemSpace>& flags,
-                                                             double h_abs = 0) {
+                                                             double h_abs = 0, int lanes = 4) {
   constexpr int kMaxCells = 27;  // range 1: cells at least h wide
+  (void)lanes;                   // the host's groups below only
   // A cell crowded far beyond any fluid density (256x the rest density: a
   // solver blow-up, or many particles at one point) is all surface, without
   // the pairwise test that would cost its count squared.
@@ -137,34 +232,15 @@ KOKKOS_INLINE_FUNCTION std::size_t surface_particles_of_cell(const NeighbourView
     mark(i, gx, gy, gz, count, scale);
   }
 #else
-  // The loop above, for kHostLanes particles i at once (the last lanes of the
-  // last group repeat particle last - 1, and are not used).
-  constexpr int L = kHostLanes;
-  const HostVecF vh2 = host_splat(h2), zero = host_splat(0.f);
-  for (std::uint32_t i0 = first; i0 < last; i0 += L) {
-    HostVecF xi, yi, zi;
-    for (int l = 0; l < L; ++l) {
-      const std::uint32_t i = i0 + std::uint32_t(l) < last ? i0 + std::uint32_t(l) : last - 1;
-      xi[l] = X[i];
-      yi[l] = Y[i];
-      zi[l] = Z[i];
-    }
-    HostVecF gx = zero, gy = zero, gz = zero;
-    HostVecI count = (HostVecI)zero;
-    for (int c = 0; c < n_cells; ++c)
-      for (std::uint32_t j = begin[c]; j < end[c]; ++j) {
-        const HostVecF dx = xi - host_splat(X[j]), dy = yi - host_splat(Y[j]), dz = zi - host_splat(Z[j]);
-        const HostVecF d2 = dx * dx + dy * dy + dz * dz;
-        const HostVecI in = d2 < vh2;
-        const HostVecF q = (HostVecF)((HostVecI)(vh2 - d2) & in);
-        const HostVecF w = q * q;
-        gx += w * dx;
-        gy += w * dy;
-        gz += w * dz;
-        count -= in;
-      }
+  // The loop above, for groups of 4, 8 or 16 particles i at once
+  // (surface_sums_host: one lane each, the same operations).
+  float gx[16], gy[16], gz[16];
+  int count[16];
+  for (std::uint32_t i0 = first; i0 < last;) {
+    const int L = surface_sums_host(X, Y, Z, begin, end, n_cells, i0, last, h2, lanes, gx, gy, gz, count);
     for (int l = 0; l < L && i0 + std::uint32_t(l) < last; ++l)
       mark(i0 + std::uint32_t(l), gx[l], gy[l], gz[l], count[l], scale);
+    i0 += std::uint32_t(L);
   }
 #endif
   }
@@ -196,6 +272,7 @@ std::size_t mark_surface_particles(const ExecSpace& space, const NeighbourView<t
   const float scale = float(p.spacing * p.spacing * p.spacing * 945.0 / (32.0 * 3.14159265358979 * h9) * p.surface_radius);
   const float threshold = float(p.color_threshold);
   const int min_neighbours = p.neighbour_threshold;
+  const int lanes = host_simd_lanes();  // host groups of particles (4 on a GPU: unused there)
   std::size_t count = 0;
   if (p.radius_ref > 0) {  // per-particle radii (radii.hpp): p.spacing is r_max
     const double rh = p.spacing / p.surface_radius;
@@ -216,7 +293,8 @@ std::size_t mark_surface_particles(const ExecSpace& space, const NeighbourView<t
       "nbmc::surface_particles",
       Kokkos::RangePolicy<ExecSpace, Kokkos::Schedule<Kokkos::Dynamic>>(space, 0, n_cells),
       KOKKOS_LAMBDA(const std::size_t c, std::size_t& acc) {
-        acc += surface_particles_of_cell<false>(nb, keys, c, range, h, scale, threshold, min_neighbours, flags);
+        acc += surface_particles_of_cell<false>(nb, keys, c, range, h, scale, threshold, min_neighbours, flags, 0,
+                                                lanes);
       },
       count);
   space.fence();
