@@ -125,7 +125,7 @@ struct NearBlocks {
   const BandView<MemSpace>* band;
   std::int64_t bx, by, bz;
   std::uint32_t nb[27];  // (dx + 1) + 3 (dy + 1) + 9 (dz + 1)
-  NearBlocks(const BandView<MemSpace>& bv, std::size_t b) : band(&bv) {
+  KOKKOS_INLINE_FUNCTION NearBlocks(const BandView<MemSpace>& bv, std::size_t b) : band(&bv) {
     const std::uint64_t key = bv.block_keys(b);
     bx = std::int64_t(compact3(key));
     by = std::int64_t(compact3(key >> 1));
@@ -133,7 +133,9 @@ struct NearBlocks {
     for (int q = 0; q < 27; ++q) nb[q] = kUnknown;
     nb[13] = std::uint32_t(b);
   }
-  std::int64_t index(std::int64_t i, std::int64_t j, std::int64_t k) {
+  // (Host backends only; KOKKOS_INLINE_FUNCTION for nvcc: the passes' functors
+  // that call it are compiled for both.)
+  KOKKOS_INLINE_FUNCTION std::int64_t index(std::int64_t i, std::int64_t j, std::int64_t k) {
     const BandView<MemSpace>& v = *band;
     if (i < 0 || j < 0 || k < 0 || i >= v.dims[0] || j >= v.dims[1] || k >= v.dims[2]) return -1;
     const std::int64_t ox = (i >> 3) - bx + 1, oy = (j >> 3) - by + 1, oz = (k >> 3) - bz + 1;
@@ -149,7 +151,7 @@ struct NearBlocks {
     return v.index_in_block(b, i, j, k);
   }
   // BandView::cell_indices(i, j, k, 1, idx) (idx[0] is the caller's).
-  bool cell_indices(std::int64_t i, std::int64_t j, std::int64_t k, std::int64_t idx[8]) {
+  KOKKOS_INLINE_FUNCTION bool cell_indices(std::int64_t i, std::int64_t j, std::int64_t k, std::int64_t idx[8]) {
     for (int c = 1; c < 8; ++c) {
       idx[c] = index(i + (c & 1), j + ((c >> 1) & 1), k + ((c >> 2) & 1));
       if (idx[c] < 0) return false;
@@ -264,7 +266,9 @@ void for_each_mixed_cell_host(const ExecSpace& space, const char* label,
                               const F& f) {
   Kokkos::parallel_for(
       label, Kokkos::RangePolicy<ExecSpace, Kokkos::Schedule<Kokkos::Dynamic>>(space, 0, n_words / 8),
-      KOKKOS_LAMBDA(const std::size_t b) {
+      // A host lambda (host backends only): f may be one too, and nvcc
+      // refuses a host lambda's type inside a KOKKOS_LAMBDA.
+      [=](const std::size_t b) {
         const std::uint64_t key = band.block_keys(b);
         const std::uint32_t bx = std::uint32_t(compact3(key)), by = std::uint32_t(compact3(key >> 1)),
                             bz = std::uint32_t(compact3(key >> 2));
