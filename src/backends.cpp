@@ -7,6 +7,7 @@
 #include <Kokkos_Core.hpp>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <condition_variable>
 #include <cstdlib>
@@ -413,11 +414,40 @@ std::size_t host_threads_of(const nbmc_context& ctx) {
   return ctx.num_threads > 0 ? std::size_t(ctx.num_threads) : 0;
 }
 
+namespace {
+// The host loops of a call on the Kokkos thread run on its OpenMP threads
+// (ScopedHostExecutor in core/parallel.hpp): libgomp's threads spin for
+// milliseconds after each parallel region, and other threads started then
+// share the cores with them (an H100 machine's 16 cores: the copy of the
+// mesh from the GPU took 6-9 ms on the pool's threads, 2.7-3.2 ms on
+// these; bench/RESULTS.md). Not inside a parallel region (a task's own
+// loop, or a partition of a smaller context) and not with fewer threads
+// than tasks: the tasks may wait for each other.
+bool openmp_host_executor(std::size_t n, HostTask task, const void* ctx) {
+#if defined(_OPENMP) && defined(KOKKOS_ENABLE_OPENMP)
+  if (omp_in_parallel() || n > std::size_t(omp_get_max_threads()) || n > std::size_t(pool_threads())) return false;
+  std::atomic<bool> whole{true};
+#pragma omp parallel num_threads(int(n))
+  {
+    if (std::size_t(omp_get_num_threads()) == n)
+      task(ctx, std::size_t(omp_get_thread_num()));
+    else
+      whole.store(false, std::memory_order_relaxed);  // (a smaller team: nobody runs a task)
+  }
+  return whole.load(std::memory_order_relaxed);
+#else
+  (void)n; (void)task; (void)ctx;
+  return false;
+#endif
+}
+}  // namespace
+
 void run_on_kokkos_thread(nbmc_context& ctx, const std::function<void()>& fn) {
   std::lock_guard<std::mutex> lock(g_run_mutex[ctx.backend]);
   const std::size_t threads = host_threads_of(ctx);
   kokkos_thread().run([&] {
-    const ScopedHostThreads limit(threads);  // (stitching, subdomain packing)
+    const ScopedHostThreads limit(threads);  // (stitching, subdomain packing, post-processing)
+    const ScopedHostExecutor executor(openmp_host_executor);
     fn();
   });
 }

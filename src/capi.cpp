@@ -490,7 +490,10 @@ int32_t nbmc_context_reconstruct(nbmc_context* ctx, const nbmc_params* params, n
       m->spheres.push_back(radius);
     }
   }
-  ctx->postprocess = nbmc::postprocess_mesh(full, m->mesh, st, ctx->memory, feature ? &fp : nullptr);
+  // (On the Kokkos thread: its loops run on the threads the pipeline ran on.)
+  nbmc::run_on_kokkos_thread(*ctx, [&] {
+    ctx->postprocess = nbmc::postprocess_mesh(full, m->mesh, st, ctx->memory, feature ? &fp : nullptr);
+  });
   // The post-processing's estimates were counted while each step ran.
   ctx->peak_memory = std::max(ctx->peak_memory, ctx->memory.peak.load());
   // On the final vertices, after the clean-up and smoothing.

@@ -239,6 +239,18 @@ struct HashMapStorage {
 void device_sort_pairs(const Kokkos::Cuda& space, MemoryTracker& tracker, std::uint64_t* keys_in,
                        std::uint64_t* keys_out, std::uint32_t* vals_in, std::uint32_t* vals_out, std::size_t n,
                        int end_bit);
+
+// One device array to copy into host memory.
+struct DownloadSegment {
+  void* host;
+  const void* device;
+  std::size_t bytes;
+};
+// Copies the segments from device to (pageable, possibly untouched) host
+// memory after the work queued on `space`: through a pinned staging ring,
+// the GPU's copy of one chunk overlapping the host threads' copy of the
+// previous one (pipeline_cuda.cpp).
+void download_segments(const Kokkos::Cuda& space, const DownloadSegment* segments, std::size_t n);
 #endif
 
 // Exclusive scan of counts into offsets (which may be the same view); returns the total.

@@ -488,6 +488,19 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
       compute_triangles(space, bv, n_words, tables, cinfo, cvoff,
                         Kokkos::View<const std::uint32_t*, MemSpace>(tri_offset.view()), dtri.view(), dtkeys.view());
       lap(5);
+#if defined(KOKKOS_ENABLE_CUDA)
+      if constexpr (std::is_same<ExecSpace, Kokkos::Cuda>::value) {
+        const DownloadSegment segments[] = {
+            {hpos.data(), dpos.data(), hpos.extent(0) * sizeof(Real)},
+            {hnrm.data(), dnrm.data(), hnrm.extent(0) * sizeof(float)},
+            {htri.data(), dtri.data(), htri.extent(0) * sizeof(std::uint32_t)},
+            {hvkeys.data(), dvkeys.data(), hvkeys.extent(0) * sizeof(std::uint64_t)},
+            {haxes.data(), daxes.data(), haxes.extent(0) * sizeof(std::uint8_t)},
+            {htkeys.data(), dtkeys.data(), htkeys.extent(0) * sizeof(std::uint64_t)}};
+        download_segments(space, segments, sizeof(segments) / sizeof(segments[0]));
+        return;
+      }
+#endif
       if (hvkeys.extent(0)) {
         Kokkos::deep_copy(space, hvkeys, dvkeys.view());
         Kokkos::deep_copy(space, haxes, daxes.view());

@@ -65,6 +65,30 @@ class ScopedHostThreads {
   std::size_t old_;
 };
 
+// Another way to run a loop's tasks on this thread: run(n, task, ctx) runs
+// task(ctx, t) for every t in [0, n), each on a thread of its own at the
+// same time (tasks may wait for each other), and returns true, or runs
+// nothing and returns false. The C API sets one for the duration of a call
+// on its Kokkos thread (ScopedHostExecutor): the OpenMP threads Kokkos has
+// just used, which spin for a while after each of its loops and would
+// compete with the pool's threads for the cores.
+using HostTask = void (*)(const void*, std::size_t);
+using HostExecutor = bool (*)(std::size_t n, HostTask task, const void* ctx);
+inline HostExecutor& host_executor() {
+  static thread_local HostExecutor executor = nullptr;
+  return executor;
+}
+class ScopedHostExecutor {
+ public:
+  explicit ScopedHostExecutor(HostExecutor e) : old_(host_executor()) { host_executor() = e; }
+  ~ScopedHostExecutor() { host_executor() = old_; }
+  ScopedHostExecutor(const ScopedHostExecutor&) = delete;
+  ScopedHostExecutor& operator=(const ScopedHostExecutor&) = delete;
+
+ private:
+  HostExecutor old_;
+};
+
 // Chunks for `count` items: one per hardware thread (at most the limit
 // above), each at least `min_items` long (at least one chunk).
 inline std::size_t chunk_count(std::size_t count, std::size_t min_items) {
@@ -98,7 +122,7 @@ bool spin_until(const Ready& ready, std::chrono::microseconds spin) {
 
 class ThreadPool {
  public:
-  using Task = void (*)(const void*, std::size_t);
+  using Task = HostTask;
   static constexpr std::size_t kMaxWorkers = 1024;
 
   ThreadPool() : pid_(process_id()), hardware_(std::max(1u, std::thread::hardware_concurrency())) {}
@@ -264,7 +288,7 @@ void on_threads(std::size_t n, const F& f) {
   const auto task = [](const void* ctx, std::size_t t) { (*static_cast<const Guarded*>(ctx))(t); };
   if (n == 1) {
     guarded(0);
-  } else if (n > 1) {
+  } else if (n > 1 && !(host_executor() != nullptr && host_executor()(n, task, &guarded))) {
     detail::ThreadPool* p = detail::host_pool();
     if (p == nullptr || !p->run(n, task, &guarded)) {
       std::vector<std::thread> threads;
