@@ -83,8 +83,9 @@ namespace Details {
 // previous chunk on to its destination, faulting its pages in in parallel.
 // The host threads are Kokkos' (OpenMP): they have just run the pipeline's
 // host steps and spin for a while after each; starting other threads now
-// would compete with them for the cores (an H100 machine: 6-9 ms instead of
-// 3.2-3.8 ms for the 1.65 M frame's mesh at r/2, bench/RESULTS.md).
+// would compete with them for the cores (an H100 machine, the 1.65 M
+// frame's mesh at r/2: 6-9 ms on other threads, 2.7-3.2 ms on these;
+// bench/RESULTS.md, "Session 24").
 void download_segments(const Kokkos::Cuda& space, const DownloadSegment* segments, std::size_t n) {
   using HostExec = Kokkos::DefaultHostExecutionSpace;
   const cudaStream_t stream = space.cuda_stream();
