@@ -236,14 +236,15 @@ class Cleaner {
  public:
   Cleaner(Real* positions, float* normals, std::size_t nv, std::uint32_t* tri, std::size_t nt)
       : P_(positions), N_(normals), nv_(nv), T_(tri), nt_(nt), alive_own_(nt), irregular_own_(nv), next_own_(nv),
-        tail_own_(nv) {
+        tail_own_(nv), expanded_(nv) {
     // The per-triangle and per-vertex arrays are left unwritten by their
     // allocation and filled here on all host threads: the kernel maps (and
     // clears) a fresh array's pages when they are first written, a few
     // microseconds per 4 KiB page, which one thread writing them all (as a
     // value-initialized std::vector does) pays alone. Each vertex chunk also
     // finds its part of the bounding box.
-    // (alive_ is filled by the triangle round of the incidence build below.)
+    // (alive_ and state_ are filled by the triangle round of the incidence
+    // build below.)
     const std::size_t vchunks = chunk_count(nv, 65536);
     std::vector<std::array<double, 6>> box(vchunks);  // lo, hi
     for_chunks(nv, vchunks, [&](std::size_t k, std::size_t b, std::size_t e) {
@@ -251,6 +252,7 @@ class Cleaner {
         next_[v] = kNone;
         tail_[v] = std::uint32_t(v);
         irregular_[v] = kFanUnknown;  // (found when first asked: irregular())
+        expanded_[v] = 0;
       }
       // As bounding_extent: every chunk starts from vertex 0 (so a NaN
       // coordinate is ignored, or not, exactly as in its serial loop).
@@ -313,8 +315,10 @@ class Cleaner {
       // map, less to write and read back), and tri's reads stay local.
       std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>> corners(sorted ? at[parts * tparts] : 0);
       std::vector<BadList> bad(tparts);
+      state_.resize(nt);  // (unwritten: cleared here by each thread for its triangles)
       for_chunks(nt, tparts, [&](std::size_t k, std::size_t b, std::size_t e) {
         std::fill(alive_.begin() + b, alive_.begin() + e, std::uint8_t(1));
+        std::fill(state_.begin() + b, state_.begin() + e, kUnseen);
         if (sorted) {
           std::vector<std::size_t> w(parts);
           for (std::size_t r = 0; r < parts; ++r) w[r] = at[r * tparts + k];
@@ -890,7 +894,9 @@ class Cleaner {
   // walk stops when it passes the size limit. Returns the triangles removed.
   std::uint64_t drop_small_bad_components(const BadList& bad, double max_volume) {
     forget_failures();
-    state_.assign(nt_, kUnseen);  // (kSolid meant "not all degenerate" above)
+    // (kSolid meant "not all degenerate" above.)
+    for (std::uint32_t t : walked_) state_[t] = kUnseen;
+    walked_.clear();
     std::uint64_t removed = 0;
     for (const auto& b : bad) {
       const std::uint32_t t0 = std::get<2>(b);
@@ -943,22 +949,29 @@ class Cleaner {
 
   // Component walks (drop_*_components): a triangle's state.
   static constexpr std::uint8_t kUnseen = 0, kInWalk = 1, kSolid = 2, kRemoved = 3;
-  bool visited(std::uint32_t t) const { return !state_.empty() && state_[t] != kUnseen; }
+  bool visited(std::uint32_t t) const { return state_[t] != kUnseen; }
   // Collects into component_ the alive triangles connected to t0 through
   // shared vertices, breadth first, until `keep_going(t)` says no for a
   // triangle reached (that one is still collected) or more than `limit`
   // triangles are collected (0: no limit).
   template <class F>
   void walk_component(std::uint32_t t0, std::size_t limit, const F& keep_going) {
-    if (state_.empty()) state_.assign(nt_, kUnseen);
     component_.clear();
     component_.push_back(t0);
     bool go = keep_going(t0);
     if (state_[t0] == kUnseen) state_[t0] = kInWalk;
+    // Each vertex's fan once (a vertex is in about six of the triangles
+    // collected): a second time it would give only triangles collected
+    // already, in the walk (or it would have stopped), so the walk is the
+    // same.
     for (std::size_t i = 0; i < component_.size() && go; ++i) {
       const std::uint32_t t = component_[i];
       for (int k = 0; k < 3 && go; ++k) {
-        fan(T_[3 * std::size_t(t) + k], scratch_);
+        const std::uint32_t v = T_[3 * std::size_t(t) + k];
+        if (expanded_[v]) continue;
+        expanded_[v] = 1;
+        expanded_list_.push_back(v);
+        fan(v, scratch_);
         for (std::uint32_t u : scratch_) {
           if (state_[u] == kInWalk) continue;
           component_.push_back(u);
@@ -971,6 +984,8 @@ class Cleaner {
         }
       }
     }
+    for (std::uint32_t v : expanded_list_) expanded_[v] = 0;
+    expanded_list_.clear();
   }
   // Ends a walk: its triangles are marked (kSolid: part of a component that
   // stays; kRemoved: removed now).
@@ -978,6 +993,7 @@ class Cleaner {
     for (std::uint32_t t : component_) {
       if (state_[t] != kInWalk) continue;
       state_[t] = to;
+      walked_.push_back(t);
       if (to != kRemoved) continue;
       for (int k = 0; k < 3; ++k) irregular(T_[3 * std::size_t(t) + k]);  // (fixed before the write: see irregular())
       alive_[t] = 0;
@@ -2610,8 +2626,14 @@ class Cleaner {
   // What the repairs changed since the last bad_triangles_after(): vertices
   // moved or renamed into, triangles rewritten in place.
   std::vector<std::uint32_t> changed_vertices_, changed_triangles_;
-  std::vector<std::uint8_t> state_;       // per triangle, of the component walks
-  std::vector<std::uint32_t> component_;  // the triangles of the current walk
+  // The component walks (the main Cleaner's): per triangle, its state, and
+  // per vertex, whether the current walk has taken its fan (both cleared in
+  // the constructor, on all host threads: a fresh array cleared by one
+  // thread pays the mapping of its pages alone); the triangles whose state
+  // a walk set and the vertices it took, so that they alone are cleared
+  // again; the triangles of the current walk.
+  Bytes state_, expanded_;
+  std::vector<std::uint32_t> walked_, expanded_list_, component_;
 
   // repair_pass: a worker (a per-thread Cleaner on the main one's arrays)
   // logs its writes, defers its new incidences and keeps its own counts
