@@ -616,6 +616,10 @@ class Cleaner {
       }
       return repaired;
     };
+    if (!hooks.check_skips && every_item_skips(bad)) {
+      skipped_ = n;
+      return finish(0);
+    }
     if (threads <= 1) {
       std::uint64_t repaired = 0;
       skip_mismatches_ = 0;
@@ -809,6 +813,39 @@ class Cleaner {
   }
   // Items of the last pass skipped (their failure had to repeat).
   std::size_t last_skipped() const { return skipped_; }
+
+  // Whether every item of a pass about to start (`bad`) must skip: each failed before (in failed_) and its
+  // region is unchanged since. Then the pass repairs nothing and changes
+  // nothing (the items' outcomes: their failures again, written here), and
+  // needs neither its items in order nor reservations: the checks only
+  // read, on the host threads (a pass of retries of the same failures, as
+  // at YT10's creases, took 13-15 rounds of conflicting items). The passes
+  // after the first of a round hold such retries, and the last pass of a
+  // round often nothing else. Stops at the first item that would be tried.
+  bool every_item_skips(const BadList& bad) {
+    const std::size_t n = bad.size();
+    if (n == 0 || failed_.empty() || merge_clusters) return false;
+    for (const auto& b : bad)
+      if (failed_before(std::get<2>(b)) == 0) return false;
+    const std::size_t min_items = repair_pass_hooks().min_items;
+    const std::size_t threads = chunk_count(n, min_items > 0 ? min_items : kSkipCheckMinItems);
+    while (workers_.size() < threads) workers_.emplace_back(new Cleaner(*this, WorkerTag{}));
+    std::atomic<bool> tried{false};
+    for_chunks(n, threads, [&](std::size_t k, std::size_t b, std::size_t e) {
+      Cleaner& me = threads > 1 ? *workers_[k] : *this;
+      me.last_resort = last_resort;  // (region() depends on it; a worker's is set here)
+      for (std::size_t pos = b; pos < e && !tried.load(std::memory_order_relaxed); ++pos) {
+        const std::uint32_t t = std::get<2>(bad[pos]), failed_at = failed_before(t);
+        me.region(t, me.region_);
+        if (unchanged_since(me.region_, failed_at)) outcome_[pos] = failed_at;
+        else tried.store(true, std::memory_order_relaxed);
+      }
+    });
+    return !tried.load();
+  }
+  // every_item_skips' chunks: at least this many items each (a check, the
+  // region of a triangle, costs a few microseconds).
+  static constexpr std::size_t kSkipCheckMinItems = 32;
 
   // Skipping hopeless retries. repair(t) reads only its region (region():
   // the positions and triangles of its vertices; the tests check its
