@@ -814,14 +814,15 @@ class Cleaner {
   // Items of the last pass skipped (their failure had to repeat).
   std::size_t last_skipped() const { return skipped_; }
 
-  // Whether every item of a pass about to start (`bad`) must skip: each failed before (in failed_) and its
-  // region is unchanged since. Then the pass repairs nothing and changes
-  // nothing (the items' outcomes: their failures again, written here), and
-  // needs neither its items in order nor reservations: the checks only
-  // read, on the host threads (a pass of retries of the same failures, as
-  // at YT10's creases, took 13-15 rounds of conflicting items). The passes
-  // after the first of a round hold such retries, and the last pass of a
-  // round often nothing else. Stops at the first item that would be tried.
+  // Whether every item of a pass about to start (`bad`) must skip: each
+  // failed before (in failed_) and its region is unchanged since. Then the
+  // pass repairs nothing and changes nothing (the items' outcomes: their
+  // failures again, written here), and needs neither its items in order nor
+  // reservations: the checks only read, on the host threads (such a pass of
+  // retries, as at YT10's creases, took 13-15 rounds of conflicting items).
+  // The passes after the first of a round hold such retries, and the last
+  // pass of a round often nothing else. Stops at the first item that would
+  // be tried.
   bool every_item_skips(const BadList& bad) {
     const std::size_t n = bad.size();
     if (n == 0 || failed_.empty() || merge_clusters) return false;
