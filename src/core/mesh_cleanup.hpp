@@ -93,10 +93,11 @@
 //    kSmallComponentCells cells (cell^3): droplets the grid cannot resolve
 //    (such as a flat ZB05 droplet of 22 triangles and 0.3 cell^3).
 //    CleanupResult counts their triangles.
-// Cost: the adjacency, the irregular-vertex marking and one scan of every
-// triangle run on all host threads; after that only the bad triangles and
+// Cost: the adjacency and one scan of every triangle run on all host
+// threads (whether a vertex is regular is found only for the vertices the
+// repairs ask about); after that only the bad triangles and
 // what the repairs changed are looked at again (each pass, on all host
-// threads from 4096 triangles), and only the components of the bad
+// threads from 1024 items), and only the components of the bad
 // triangles left are walked (serially). A bad triangle whose repair failed
 // is not tried again in the round's later passes while no vertex of its
 // region (below) changes: its repair would fail again (exactly: see
@@ -181,9 +182,9 @@ namespace detail {
 
 // For the tests: repair_pass runs on several threads from this many bad
 // triangles per thread (the library: Cleaner::kParallelMinItems), as does
-// bad_triangles_after from this many triangles looked at (4096), and, when
-// undo_after_round > 0, undoes its pass after that round (as when a region
-// grew) and runs it serially.
+// bad_triangles_after from this many items looked at (Cleaner::kListMinItems),
+// and, when undo_after_round > 0, undoes its pass after that round (as when a
+// region grew) and runs it serially.
 struct RepairPassHooks {
   std::size_t min_items = 0;  // 0: kParallelMinItems
   std::size_t undo_after_round = 0;
@@ -234,20 +235,24 @@ template <class Real>
 class Cleaner {
  public:
   Cleaner(Real* positions, float* normals, std::size_t nv, std::uint32_t* tri, std::size_t nt)
-      : P_(positions), N_(normals), nv_(nv), T_(tri), nt_(nt), alive_own_(nt), next_own_(nv), tail_own_(nv) {
+      : P_(positions), N_(normals), nv_(nv), T_(tri), nt_(nt), alive_own_(nt), irregular_own_(nv), next_own_(nv),
+        tail_own_(nv), expanded_(nv) {
     // The per-triangle and per-vertex arrays are left unwritten by their
     // allocation and filled here on all host threads: the kernel maps (and
     // clears) a fresh array's pages when they are first written, a few
     // microseconds per 4 KiB page, which one thread writing them all (as a
     // value-initialized std::vector does) pays alone. Each vertex chunk also
     // finds its part of the bounding box.
-    // (alive_ is filled by the triangle round of the incidence build below.)
+    // (alive_ and state_ are filled by the triangle round of the incidence
+    // build below.)
     const std::size_t vchunks = chunk_count(nv, 65536);
     std::vector<std::array<double, 6>> box(vchunks);  // lo, hi
     for_chunks(nv, vchunks, [&](std::size_t k, std::size_t b, std::size_t e) {
       for (std::size_t v = b; v < e; ++v) {
         next_[v] = kNone;
         tail_[v] = std::uint32_t(v);
+        irregular_[v] = kFanUnknown;  // (found when first asked: irregular())
+        expanded_[v] = 0;
       }
       // As bounding_extent: every chunk starts from vertex 0 (so a NaN
       // coordinate is ignored, or not, exactly as in its serial loop).
@@ -310,8 +315,10 @@ class Cleaner {
       // map, less to write and read back), and tri's reads stay local.
       std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>> corners(sorted ? at[parts * tparts] : 0);
       std::vector<BadList> bad(tparts);
+      state_.resize(nt);  // (unwritten: cleared here by each thread for its triangles)
       for_chunks(nt, tparts, [&](std::size_t k, std::size_t b, std::size_t e) {
         std::fill(alive_.begin() + b, alive_.begin() + e, std::uint8_t(1));
+        std::fill(state_.begin() + b, state_.begin() + e, kUnseen);
         if (sorted) {
           std::vector<std::size_t> w(parts);
           for (std::size_t r = 0; r < parts; ++r) w[r] = at[r * tparts + k];
@@ -363,10 +370,6 @@ class Cleaner {
       });
       host_trace("clean-up: incidence lists", nt);
     }
-    // (Not in the list round: its vertex ranges are powers of two, uneven
-    // on a few threads, and fewer than the threads on many.)
-    mark_irregular();
-    host_trace("clean-up: irregular vertices", nv);
   }
 
   // A worker of repair_pass: the main Cleaner's mesh and arrays, its own
@@ -424,6 +427,11 @@ class Cleaner {
     return bad;
   }
 
+  // bad_triangles_after's chunks: at least this many items each (a changed
+  // vertex's fan and classes cost about 0.3 us: a chunk of 1024 about
+  // 0.3 ms; after the first pass of the 1.65 M frame at r/2, 20-25 k items,
+  // 4096 left 10 of 16 threads idle).
+  static constexpr std::size_t kListMinItems = 1024;
   // The same list as bad_triangles(), from the list before the repairs
   // since (`before`) and what they changed: a triangle that was good and
   // whose vertices neither moved nor were renamed is still good, so only the
@@ -439,7 +447,7 @@ class Cleaner {
     const std::size_t nb = before.size(), ncv = changed_vertices_.size(), nct = changed_triangles_.size();
     const std::size_t total = nb + ncv + nct;
     const std::size_t min_items = repair_pass_hooks().min_items;
-    const std::size_t chunks = chunk_count(total, min_items > 0 ? min_items : 4096);
+    const std::size_t chunks = chunk_count(total, min_items > 0 ? min_items : kListMinItems);
     if (chunks > 1) {
       std::vector<BadList> part(chunks);
       for_chunks(total, chunks, [&](std::size_t k, std::size_t b, std::size_t e) {
@@ -491,7 +499,7 @@ class Cleaner {
     if (!alive_[t] || tri_class(t) == 0) return false;
     const std::uint32_t* v = T_ + 3 * std::size_t(t);
     for (int k = 0; k < 3; ++k)
-      if (irregular_[v[k]]) return false;
+      if (irregular(v[k])) return false;
     // First what keeps every triangle: moving a vertex, flipping an edge.
     Candidate best;
     // The shortest move of each vertex that works (a quarter, half or all
@@ -608,6 +616,10 @@ class Cleaner {
       }
       return repaired;
     };
+    if (!hooks.check_skips && every_item_skips(bad)) {
+      skipped_ = n;
+      return finish(0);
+    }
     if (threads <= 1) {
       std::uint64_t repaired = 0;
       skip_mismatches_ = 0;
@@ -802,6 +814,40 @@ class Cleaner {
   // Items of the last pass skipped (their failure had to repeat).
   std::size_t last_skipped() const { return skipped_; }
 
+  // Whether every item of a pass about to start (`bad`) must skip: each
+  // failed before (in failed_) and its region is unchanged since. Then the
+  // pass repairs nothing and changes nothing (the items' outcomes: their
+  // failures again, written here), and needs neither its items in order nor
+  // reservations: the checks only read, on the host threads (such a pass of
+  // retries, as at YT10's creases, took 13-15 rounds of conflicting items).
+  // The passes after the first of a round hold such retries, and the last
+  // pass of a round often nothing else. Stops at the first item that would
+  // be tried.
+  bool every_item_skips(const BadList& bad) {
+    const std::size_t n = bad.size();
+    if (n == 0 || failed_.empty() || merge_clusters) return false;
+    for (const auto& b : bad)
+      if (failed_before(std::get<2>(b)) == 0) return false;
+    const std::size_t min_items = repair_pass_hooks().min_items;
+    const std::size_t threads = chunk_count(n, min_items > 0 ? min_items : kSkipCheckMinItems);
+    while (workers_.size() < threads) workers_.emplace_back(new Cleaner(*this, WorkerTag{}));
+    std::atomic<bool> tried{false};
+    for_chunks(n, threads, [&](std::size_t k, std::size_t b, std::size_t e) {
+      Cleaner& me = threads > 1 ? *workers_[k] : *this;
+      me.last_resort = last_resort;  // (region() depends on it; a worker's is set here)
+      for (std::size_t pos = b; pos < e && !tried.load(std::memory_order_relaxed); ++pos) {
+        const std::uint32_t t = std::get<2>(bad[pos]), failed_at = failed_before(t);
+        me.region(t, me.region_);
+        if (unchanged_since(me.region_, failed_at)) outcome_[pos] = failed_at;
+        else tried.store(true, std::memory_order_relaxed);
+      }
+    });
+    return !tried.load();
+  }
+  // every_item_skips' chunks: at least this many items each (a check, the
+  // region of a triangle, costs a few microseconds).
+  static constexpr std::size_t kSkipCheckMinItems = 32;
+
   // Skipping hopeless retries. repair(t) reads only its region (region():
   // the positions and triangles of its vertices; the tests check its
   // writes), and what it finds there decides. A repair stamps each vertex
@@ -886,7 +932,9 @@ class Cleaner {
   // walk stops when it passes the size limit. Returns the triangles removed.
   std::uint64_t drop_small_bad_components(const BadList& bad, double max_volume) {
     forget_failures();
-    state_.assign(nt_, kUnseen);  // (kSolid meant "not all degenerate" above)
+    // (kSolid meant "not all degenerate" above.)
+    for (std::uint32_t t : walked_) state_[t] = kUnseen;
+    walked_.clear();
     std::uint64_t removed = 0;
     for (const auto& b : bad) {
       const std::uint32_t t0 = std::get<2>(b);
@@ -939,22 +987,29 @@ class Cleaner {
 
   // Component walks (drop_*_components): a triangle's state.
   static constexpr std::uint8_t kUnseen = 0, kInWalk = 1, kSolid = 2, kRemoved = 3;
-  bool visited(std::uint32_t t) const { return !state_.empty() && state_[t] != kUnseen; }
+  bool visited(std::uint32_t t) const { return state_[t] != kUnseen; }
   // Collects into component_ the alive triangles connected to t0 through
   // shared vertices, breadth first, until `keep_going(t)` says no for a
   // triangle reached (that one is still collected) or more than `limit`
   // triangles are collected (0: no limit).
   template <class F>
   void walk_component(std::uint32_t t0, std::size_t limit, const F& keep_going) {
-    if (state_.empty()) state_.assign(nt_, kUnseen);
     component_.clear();
     component_.push_back(t0);
     bool go = keep_going(t0);
     if (state_[t0] == kUnseen) state_[t0] = kInWalk;
+    // Each vertex's fan once (a vertex is in about six of the triangles
+    // collected): a second time it would give only triangles collected
+    // already, in the walk (or it would have stopped), so the walk is the
+    // same.
     for (std::size_t i = 0; i < component_.size() && go; ++i) {
       const std::uint32_t t = component_[i];
       for (int k = 0; k < 3 && go; ++k) {
-        fan(T_[3 * std::size_t(t) + k], scratch_);
+        const std::uint32_t v = T_[3 * std::size_t(t) + k];
+        if (expanded_[v]) continue;
+        expanded_[v] = 1;
+        expanded_list_.push_back(v);
+        fan(v, scratch_);
         for (std::uint32_t u : scratch_) {
           if (state_[u] == kInWalk) continue;
           component_.push_back(u);
@@ -967,6 +1022,8 @@ class Cleaner {
         }
       }
     }
+    for (std::uint32_t v : expanded_list_) expanded_[v] = 0;
+    expanded_list_.clear();
   }
   // Ends a walk: its triangles are marked (kSolid: part of a component that
   // stays; kRemoved: removed now).
@@ -974,7 +1031,10 @@ class Cleaner {
     for (std::uint32_t t : component_) {
       if (state_[t] != kInWalk) continue;
       state_[t] = to;
-      if (to == kRemoved) alive_[t] = 0;
+      walked_.push_back(t);
+      if (to != kRemoved) continue;
+      for (int k = 0; k < 3; ++k) irregular(T_[3 * std::size_t(t) + k]);  // (fixed before the write: see irregular())
+      alive_[t] = 0;
     }
   }
 
@@ -987,39 +1047,45 @@ class Cleaner {
   // A vertex is regular when each of its edges is used once in each
   // direction (two triangles, opposite orientations) and its triangles form
   // one closed fan; the others, and the vertices of triangles that repeat a
-  // vertex, are never touched.
-  void mark_irregular() {
-    irregular_.resize(nv_);  // (every vertex written below, by its chunk's thread)
-    for_chunks(nv_, chunk_count(nv_, 16384), [&](std::size_t, std::size_t vb, std::size_t ve) {
-      std::vector<std::pair<std::uint32_t, std::uint32_t>> in;  // (previous vertex, local index)
-      std::vector<std::uint32_t> out;                           // next vertex, by local index
-      for (std::size_t v = vb; v < ve; ++v) {
-        const std::uint32_t b = start_[v], e = start_[v + 1];
-        // Almost every fan is small: one_closed_fan's small case on the
-        // stack, without the vectors.
-        if (e - b <= kSmallFan) {
-          irregular_[v] = small_closed_fan(std::uint32_t(v), b, e) ? 0 : 1;
-          continue;
-        }
-        bool ok = e - b >= 3;
-        in.clear();
-        out.clear();
-        for (std::uint32_t i = b; i < e && ok; ++i) {
-          const std::uint32_t* w = T_ + 3 * std::size_t(incident_[i]);
-          const int k = w[0] == v ? 0 : w[1] == v ? 1 : 2;
-          const std::uint32_t nx = w[(k + 1) % 3], pv = w[(k + 2) % 3];
-          if (nx == v || pv == v) ok = false;
-          out.push_back(nx);
-          in.push_back({pv, i - b});
-        }
-        if (ok) ok = one_closed_fan(in, out);
-        irregular_[v] = ok ? 0 : 1;
-      }
-    });
+  // vertex, are never touched. Judged on the input mesh, but only for the
+  // vertices the repairs ask about (a few per cent of them; a pass over
+  // every vertex cost 6.5 ms of the clean-up on 16 threads): a vertex's flag
+  // is found when first asked, or before the first write to one of its
+  // triangles (touch(), settle_component()), from its lists as built (every
+  // triangle in them still holds it then, unchanged). So it is the input's,
+  // whenever asked. Relaxed atomics: in a round of repair_pass, several
+  // threads finding their regions may ask about the same vertex at once
+  // (they compute the same flag; nothing writes its triangles then), and in
+  // the commit step a repair asks only about vertices in its own region.
+  static constexpr std::uint8_t kFanUnknown = 0, kFanRegular = 1, kFanIrregular = 2;
+  bool irregular(std::uint32_t v) const {
+    std::uint8_t s = load_relaxed(irregular_[v]);
+    if (s == kFanUnknown) {
+      s = one_closed_fan_as_built(v) ? kFanRegular : kFanIrregular;
+      store_relaxed(irregular_[v], s);
+    }
+    return s == kFanIrregular;
+  }
+  bool one_closed_fan_as_built(std::uint32_t v) const {
+    const std::uint32_t b = start_[v], e = start_[v + 1];
+    // Almost every fan is small: one_closed_fan's small case on the stack,
+    // without the vectors.
+    if (e - b <= kSmallFan) return small_closed_fan(v, b, e);
+    std::vector<std::pair<std::uint32_t, std::uint32_t>> in;  // (previous vertex, local index)
+    std::vector<std::uint32_t> out;                           // next vertex, by local index
+    for (std::uint32_t i = b; i < e; ++i) {
+      const std::uint32_t* w = T_ + 3 * std::size_t(incident_[i]);
+      const int k = w[0] == v ? 0 : w[1] == v ? 1 : 2;
+      const std::uint32_t nx = w[(k + 1) % 3], pv = w[(k + 2) % 3];
+      if (nx == v || pv == v) return false;
+      out.push_back(nx);
+      in.push_back({pv, i - b});
+    }
+    return one_closed_fan(in, out);
   }
 
-  // mark_irregular's test for v with a list [b, e) of at most kSmallFan
-  // triangles: exactly its loop and one_closed_fan's small case.
+  // The test for v with a list [b, e) of at most kSmallFan triangles:
+  // exactly the loop above and one_closed_fan's small case.
   static constexpr std::uint32_t kSmallFan = 16;
   bool small_closed_fan(std::uint32_t v, std::uint32_t b, std::uint32_t e) const {
     const std::uint32_t n = e - b;
@@ -1243,7 +1309,7 @@ class Cleaner {
   // its tangent plane (the normal of its fan): the fan keeps its triangles.
   // (The shortest of a quarter, half or all the way that works, in `out`.)
   void consider_move(std::uint32_t t, std::uint32_t v, Candidate& out) {
-    if (irregular_[v]) return;
+    if (irregular(v)) return;
     fan(v, fa_);
     ring(v, fa_, ra_);
     if (ra_.empty()) return;
@@ -1289,7 +1355,7 @@ class Cleaner {
   bool prepare_positions(const std::vector<std::uint32_t>& vs, bool fan_ready = false) {
     around_.clear();
     for (std::uint32_t x : vs) {
-      if (irregular_[x]) return false;
+      if (irregular(x)) return false;
       if (!fan_ready) fan(x, fa_);
       around_.insert(around_.end(), fa_.begin(), fa_.end());
     }
@@ -1399,7 +1465,7 @@ class Cleaner {
     if (!alive_[t]) return;
     const std::uint32_t* v = T_ + 3 * std::size_t(t);
     out.assign(v, v + 3);
-    if (irregular_[v[0]] || irregular_[v[1]] || irregular_[v[2]] || tri_class(t) == 0) {
+    if (irregular(v[0]) || irregular(v[1]) || irregular(v[2]) || tri_class(t) == 0) {
       std::sort(out.begin(), out.end());
       return;
     }
@@ -1587,7 +1653,7 @@ class Cleaner {
     for (std::uint32_t c : candidates) {
       const Vec3 pa = load(P_, a), pb = load(P_, b), pc = load(P_, c);
       if (!(norm(pc - pa) < near && norm(pc - pb) < near)) continue;
-      if (irregular_[c]) continue;
+      if (irregular(c)) continue;
       // (a, b, c) must be no triangle.
       bool face = false;
       for (std::uint32_t u : fa_)
@@ -1862,7 +1928,7 @@ class Cleaner {
     // the others, (k, x, y) with k in K, leaves the edge x -> y.
     std::vector<std::uint32_t> star;
     for (std::uint32_t x : K) {
-      if (irregular_[x]) return;
+      if (irregular(x)) return;
       fan(x, scratch_);
       star.insert(star.end(), scratch_.begin(), scratch_.end());
     }
@@ -1874,7 +1940,7 @@ class Cleaner {
       const std::uint32_t* w = T_ + 3 * std::size_t(u);
       int on = 0, k_on = 0;
       for (int k = 0; k < 3; ++k) {
-        if (irregular_[w[k]]) return;
+        if (irregular(w[k])) return;
         if (in_k(w[k])) ++on, k_on = k;
       }
       if (on >= 2) cand.removed.push_back(u);
@@ -2110,7 +2176,7 @@ class Cleaner {
     for (int g = 0; g < 2; ++g) rep[g] = *std::min_element(ends[g]->begin(), ends[g]->end());
     std::vector<std::uint32_t> star;
     for (const auto& x : group) {
-      if (irregular_[x.first]) return;
+      if (irregular(x.first)) return;
       fan(x.first, scratch_);
       star.insert(star.end(), scratch_.begin(), scratch_.end());
     }
@@ -2122,7 +2188,7 @@ class Cleaner {
       int count[2] = {0, 0};
       std::array<std::uint32_t, 3> nw;
       for (int k = 0; k < 3; ++k) {
-        if (irregular_[w[k]]) return;
+        if (irregular(w[k])) return;
         const int g = end_of(w[k]);
         nw[k] = g < 0 ? w[k] : rep[g];
         if (g >= 0) ++count[g];
@@ -2377,7 +2443,7 @@ class Cleaner {
     if (t2 == kNone) return;
     const std::uint32_t* w = T_ + 3 * std::size_t(t2);
     const std::uint32_t d = w[0] != a && w[0] != b ? w[0] : w[1] != a && w[1] != b ? w[1] : w[2];
-    if (d == c || irregular_[d]) return;
+    if (d == c || irregular(d)) return;
     fan(c, fb_);
     ring(c, fb_, rb_);
     if (std::binary_search(rb_.begin(), rb_.end(), d)) return;  // edge c-d exists
@@ -2467,7 +2533,10 @@ class Cleaner {
   // the repair's time (touch): a triangle's old vertices here, its new ones
   // are vertices whose position the same repair writes (a collapse's or a
   // cut's kept ends, a merge's loop vertices) or were its old ones (flips).
+  // (Before the first such write, v's flag of the input mesh is fixed:
+  // irregular().)
   void touch(std::uint32_t v) {
+    irregular(v);
     if (!mod_.empty() && mod_[v] < now_) mod_[v] = now_;
   }
   void touch_triangle(std::uint32_t t) {
@@ -2595,8 +2664,14 @@ class Cleaner {
   // What the repairs changed since the last bad_triangles_after(): vertices
   // moved or renamed into, triangles rewritten in place.
   std::vector<std::uint32_t> changed_vertices_, changed_triangles_;
-  std::vector<std::uint8_t> state_;       // per triangle, of the component walks
-  std::vector<std::uint32_t> component_;  // the triangles of the current walk
+  // The component walks (the main Cleaner's): per triangle, its state, and
+  // per vertex, whether the current walk has taken its fan (both cleared in
+  // the constructor, on all host threads: a fresh array cleared by one
+  // thread pays the mapping of its pages alone); the triangles whose state
+  // a walk set and the vertices it took, so that they alone are cleared
+  // again; the triangles of the current walk.
+  Bytes state_, expanded_;
+  std::vector<std::uint32_t> walked_, expanded_list_, component_;
 
   // repair_pass: a worker (a per-thread Cleaner on the main one's arrays)
   // logs its writes, defers its new incidences and keeps its own counts
