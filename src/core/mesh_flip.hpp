@@ -474,6 +474,10 @@ FlipResult flip_edges_fairing(const Real* positions, std::size_t nv, IndexVec& t
         // (The stamps of the round before are all in near: cleared here,
         // by the chunk that alone writes them in this level.)
         std::fill(last.begin() + lo, last.begin() + hi, 0u);
+        // (Counted and listed here, stored once: neighbouring chunks run at
+        // once, and their slots of flipped and out share cache lines.)
+        std::uint64_t made = 0;
+        std::vector<std::uint32_t> leave;
         for (std::uint32_t h = 3 * lo; h < 3 * hi; ++h) {
           // (The opposite a few half-edges ahead, and its triangle's: the
           // evaluation's chain of loads starts there.)
@@ -495,15 +499,17 @@ FlipResult flip_edges_fairing(const Real* positions, std::size_t nv, IndexVec& t
           if (!take) continue;
           const Outcome o = evaluate(h, lo, hi, f, std::false_type());
           if (o == Outside) {
-            out[q].push_back(h);
+            leave.push_back(h);
             continue;
           }
           if (timed) seen[h] = 1;
           if (o != Pass) continue;
           apply(f);
-          ++flipped[q];
+          ++made;
           last[f.t0] = last[f.t1] = timed ? time_of(1, h) + 1 : 1;
         }
+        flipped[q] = made;
+        out[q] = std::move(leave);
       }
     });
     std::vector<std::uint32_t> pending;
@@ -527,19 +533,23 @@ FlipResult flip_edges_fairing(const Real* positions, std::size_t nv, IndexVec& t
         Candidate f;
         for (std::size_t q; (q = next_chunk.fetch_add(1, std::memory_order_relaxed)) < large;) {
           const std::uint32_t lo = std::uint32_t(q * size), hi = std::uint32_t(std::min(nt, (q + 1) * size));
+          std::uint64_t n = 0;
+          std::vector<std::uint32_t> leave;
           for (std::size_t i = from[q]; i < from[q + 1]; ++i) {
             const std::uint32_t h = pending[i];
             const Outcome o = evaluate(h, lo, hi, f, std::false_type());
             if (o == Outside) {
-              rest[q].push_back(h);
+              leave.push_back(h);
               continue;
             }
             if (timed) seen[h] = 2;
             if (o != Pass) continue;
             apply(f);
-            ++made[q];
+            ++n;
             last[f.t0] = last[f.t1] = timed ? time_of(2, h) + 1 : 1;
           }
+          made[q] = n;
+          rest[q] = std::move(leave);
         }
       });
       pending.clear();
@@ -580,6 +590,8 @@ FlipResult flip_edges_fairing(const Real* positions, std::size_t nv, IndexVec& t
         }
       });
       for_chunks(items.size(), parts, [&](std::size_t q, std::size_t lo, std::size_t hi) {
+        std::uint64_t n = 0;
+        std::vector<Found> lost;
         for (std::size_t i = lo; i < hi; ++i) {
           const Found& x = items[i];
           if (!x.valid) continue;
@@ -587,14 +599,16 @@ FlipResult flip_edges_fairing(const Real* positions, std::size_t nv, IndexVec& t
           const std::uint64_t key = key_hi | detail::scramble(x.h);
           auto held = [&](std::uint32_t v) { return claim[v].load(std::memory_order_relaxed) == key; };
           if (!(held(f.a) && held(f.b) && held(f.c) && held(f.d))) {
-            again[q].push_back(x);
+            lost.push_back(x);
             continue;
           }
           apply(f);
-          ++made[q];
+          ++n;
           last[f.t0] = last[f.t1] = timed ? time_of(level, x.h) + 1 : 1;
           moved[f.a] = moved[f.b] = moved[f.c] = moved[f.d] = std::uint32_t(pass);
         }
+        made[q] = n;
+        again[q] = std::move(lost);
       });
       items.clear();
       for (std::size_t q = 0; q < parts; ++q) {
