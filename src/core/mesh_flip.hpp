@@ -184,11 +184,13 @@ FlipResult flip_edges_fairing(const Real* positions, std::size_t nv, IndexVec& t
   if (nt == 0 || nv == 0 || max_rounds <= 0 || 3 * nt >= kNoTriangle) return res;
   if (chunk == 0) chunk = 1;
   std::uint32_t* T = triangles.data();
+  // The host threads, started once for the twenty to forty steps below.
+  HostTeam team(chunk_count(nt, 1024));
   {
     // Not a mesh of these vertices: leave it alone. (On the host threads:
     // serial, this alone took a few ms, as much as the rest at 16 threads.)
     std::atomic<bool> foreign{false};
-    for_chunks(nt, chunk_count(nt, 65536), [&](std::size_t, std::size_t lo, std::size_t hi) {
+    team.chunks(nt, chunk_count(nt, 65536), [&](std::size_t, std::size_t lo, std::size_t hi) {
       bool out = false;
       for (std::size_t i = 3 * lo; i < 3 * hi; ++i) out |= T[i] >= nv;
       if (out) foreign.store(true, std::memory_order_relaxed);
@@ -213,14 +215,14 @@ FlipResult flip_edges_fairing(const Real* positions, std::size_t nv, IndexVec& t
   {
     std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>> next(3 * nt);  // (freed after this block)
     std::unique_ptr<std::atomic<std::uint32_t>[]> head(new std::atomic<std::uint32_t>[nv]);
-    for_chunks(nv, chunk_count(nv, 65536), [&](std::size_t, std::size_t lo, std::size_t hi) {
+    team.chunks(nv, chunk_count(nv, 65536), [&](std::size_t, std::size_t lo, std::size_t hi) {
       for (std::size_t v = lo; v < hi; ++v) {
         head[v].store(kNoTriangle, std::memory_order_relaxed);
         claim[v].store(0, std::memory_order_relaxed);
         moved[v] = 0;
       }
     });
-    for_chunks(nt, chunk_count(nt, 65536), [&](std::size_t, std::size_t lo, std::size_t hi) {
+    team.chunks(nt, chunk_count(nt, 65536), [&](std::size_t, std::size_t lo, std::size_t hi) {
       for (std::size_t i = 3 * lo; i < 3 * hi; ++i)
         next[i] = head[T[i]].exchange(std::uint32_t(i), std::memory_order_relaxed);
     });
@@ -232,7 +234,7 @@ FlipResult flip_edges_fairing(const Real* positions, std::size_t nv, IndexVec& t
     // form one closed fan through such edges: from each triangle, across its
     // in-edge n -> v, to the triangle of the out-edge v -> n, one cycle
     // through all of them.
-    for_chunks(nv, chunk_count(nv, 16384), [&](std::size_t, std::size_t lo, std::size_t hi) {
+    team.chunks(nv, chunk_count(nv, 16384), [&](std::size_t, std::size_t lo, std::size_t hi) {
       std::vector<std::uint32_t> cv, ov, nv_, rv;  // (vertices of more than 32 triangles)
       std::uint32_t ca[32], oa[32], na[32], ra[32];
       for (std::size_t v = lo; v < hi; ++v) {
@@ -291,7 +293,7 @@ FlipResult flip_edges_fairing(const Real* positions, std::size_t nv, IndexVec& t
   // float: every bend below is taken from these in float arithmetic, the
   // same on every run (no contraction into FMA: src/CMakeLists.txt).
   std::vector<float, NoInitAllocator<float>> tn(3 * nt);
-  for_chunks(nt, chunk_count(nt, 65536), [&](std::size_t, std::size_t lo, std::size_t hi) {
+  team.chunks(nt, chunk_count(nt, 65536), [&](std::size_t, std::size_t lo, std::size_t hi) {
     for (std::size_t t = lo; t < hi; ++t) detail::unit_normal_f(positions, T[3 * t], T[3 * t + 1], T[3 * t + 2], &tn[3 * t]);
   });
   host_trace("clean-up: fairing normals", nt);
@@ -454,7 +456,7 @@ FlipResult flip_edges_fairing(const Real* positions, std::size_t nv, IndexVec& t
   for (int round = 0; round < max_rounds; ++round) {
     const std::uint64_t flips0 = res.flips;
     if (round > 0) {
-      for_chunks(nt, chunk_count(nt, 65536), [&](std::size_t, std::size_t lo, std::size_t hi) {
+      team.chunks(nt, chunk_count(nt, 65536), [&](std::size_t, std::size_t lo, std::size_t hi) {
         for (std::size_t t = lo; t < hi; ++t) {
           std::uint32_t x = last[t];
           for (std::size_t h = 3 * t; h < 3 * t + 3; ++h)
@@ -467,7 +469,7 @@ FlipResult flip_edges_fairing(const Real* positions, std::size_t nv, IndexVec& t
     std::vector<std::vector<std::uint32_t>> out(chunks);
     std::vector<std::uint64_t> flipped(chunks, 0);
     std::atomic<std::size_t> next_chunk{0};
-    on_threads(chunk_count(chunks, 1), [&](std::size_t) {
+    team.run(chunk_count(chunks, 1), [&](std::size_t) {
       Candidate f;
       for (std::size_t q; (q = next_chunk.fetch_add(1, std::memory_order_relaxed)) < chunks;) {
         const std::uint32_t lo = std::uint32_t(q * chunk), hi = std::uint32_t(std::min(nt, (q + 1) * chunk));
@@ -529,7 +531,7 @@ FlipResult flip_edges_fairing(const Real* positions, std::size_t nv, IndexVec& t
       std::vector<std::vector<std::uint32_t>> rest(large);
       std::vector<std::uint64_t> made(large, 0);
       next_chunk = 0;
-      on_threads(chunk_count(large, 1), [&](std::size_t) {
+      team.run(chunk_count(large, 1), [&](std::size_t) {
         Candidate f;
         for (std::size_t q; (q = next_chunk.fetch_add(1, std::memory_order_relaxed)) < large;) {
           const std::uint32_t lo = std::uint32_t(q * size), hi = std::uint32_t(std::min(nt, (q + 1) * size));
@@ -573,7 +575,7 @@ FlipResult flip_edges_fairing(const Real* positions, std::size_t nv, IndexVec& t
         while (c < key && !claim[v].compare_exchange_weak(c, key, std::memory_order_relaxed)) {
         }
       };
-      for_chunks(items.size(), parts, [&](std::size_t, std::size_t lo, std::size_t hi) {
+      team.chunks(items.size(), parts, [&](std::size_t, std::size_t lo, std::size_t hi) {
         for (std::size_t i = lo; i < hi; ++i) {
           Found& x = items[i];
           const Candidate& f = x.f;
@@ -589,7 +591,7 @@ FlipResult flip_edges_fairing(const Real* positions, std::size_t nv, IndexVec& t
           take(f.a, key), take(f.b, key), take(f.c, key), take(f.d, key);
         }
       });
-      for_chunks(items.size(), parts, [&](std::size_t q, std::size_t lo, std::size_t hi) {
+      team.chunks(items.size(), parts, [&](std::size_t q, std::size_t lo, std::size_t hi) {
         std::uint64_t n = 0;
         std::vector<Found> lost;
         for (std::size_t i = lo; i < hi; ++i) {

@@ -5,8 +5,11 @@
 #pragma once
 
 #include <algorithm>
+#include <condition_variable>
 #include <cstddef>
+#include <cstdint>
 #include <exception>
+#include <functional>
 #include <mutex>
 #include <thread>
 #include <vector>
@@ -65,5 +68,109 @@ template <class F>
 void for_chunks(std::size_t count, std::size_t chunks, const F& f) {
   on_threads(chunks, [&](std::size_t k) { f(k, count * k / chunks, count * (k + 1) / chunks); });
 }
+
+// A team of host threads for a series of parallel steps: started once
+// (size - 1 threads beside the caller's), then woken for each step instead
+// of started and joined anew (on_threads: about 0.2-0.7 ms for 16 threads a
+// call, as much as a short step of the fairing flips). run(n, f): f(t) for
+// t in [0, n), on the caller and at most size - 1 of the team (each takes
+// t, t + m, ... for m = min(n, size)); rethrows the first exception. One
+// step at a time, from the thread that made the team.
+class HostTeam {
+ public:
+  explicit HostTeam(std::size_t size) : size_(std::max<std::size_t>(1, size)) {
+    try {
+      for (std::size_t p = 1; p < size_; ++p) threads_.emplace_back([this, p] { work(p); });
+    } catch (...) {
+      stop();  // (a thread that could not start: the others end first)
+      throw;
+    }
+  }
+  ~HostTeam() { stop(); }
+  HostTeam(const HostTeam&) = delete;
+  HostTeam& operator=(const HostTeam&) = delete;
+
+  template <class F>
+  void run(std::size_t n, const F& f) {
+    const std::size_t m = std::min(n, size_);
+    if (m == 0) return;
+    auto part = [&f, n, m](std::size_t p) {
+      for (std::size_t t = p; t < n; t += m) f(t);
+    };
+    if (m == 1) {
+      part(0);
+      return;
+    }
+    {
+      std::lock_guard<std::mutex> lock(m_);
+      job_ = part;
+      want_ = m;
+      left_ = m - 1;
+      err_ = nullptr;
+      ++step_;
+    }
+    wake_.notify_all();
+    std::exception_ptr mine;
+    try {
+      part(0);
+    } catch (...) {
+      mine = std::current_exception();
+    }
+    std::unique_lock<std::mutex> lock(m_);
+    done_.wait(lock, [&] { return left_ == 0; });
+    job_ = nullptr;
+    if (!mine) mine = err_;
+    lock.unlock();
+    if (mine) std::rethrow_exception(mine);
+  }
+  // f(chunk, begin, end) over `chunks` contiguous chunks of [0, count), as
+  // for_chunks.
+  template <class F>
+  void chunks(std::size_t count, std::size_t chunks, const F& f) {
+    run(chunks, [&](std::size_t k) { f(k, count * k / chunks, count * (k + 1) / chunks); });
+  }
+
+ private:
+  void stop() {
+    {
+      std::lock_guard<std::mutex> lock(m_);
+      stop_ = true;
+    }
+    wake_.notify_all();
+    for (std::thread& th : threads_) th.join();
+  }
+  void work(std::size_t p) {
+    std::uint64_t seen = 0;
+    for (;;) {
+      std::function<void(std::size_t)> job;
+      {
+        std::unique_lock<std::mutex> lock(m_);
+        wake_.wait(lock, [&] { return stop_ || step_ != seen; });
+        if (stop_) return;
+        seen = step_;
+        if (p >= want_) continue;  // (not in this step)
+        job = job_;
+      }
+      std::exception_ptr e;
+      try {
+        job(p);
+      } catch (...) {
+        e = std::current_exception();
+      }
+      std::lock_guard<std::mutex> lock(m_);
+      if (e && !err_) err_ = e;
+      if (--left_ == 0) done_.notify_one();
+    }
+  }
+  const std::size_t size_;
+  std::mutex m_;
+  std::condition_variable wake_, done_;
+  std::function<void(std::size_t)> job_;
+  std::size_t want_ = 0, left_ = 0;
+  std::uint64_t step_ = 0;
+  bool stop_ = false;
+  std::exception_ptr err_;
+  std::vector<std::thread> threads_;  // (last: started once the rest is set)
+};
 
 }  // namespace nbmc
