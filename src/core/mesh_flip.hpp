@@ -447,7 +447,7 @@ FlipResult flip_edges_fairing(const Real* positions, std::size_t nv, IndexVec& t
   // latest stamp over its quad (near, computed before) is later than its
   // evaluation in the round before.
   const std::size_t chunks = (nt + chunk - 1) / chunk;
-  std::uint64_t pass = 0;
+  std::uint64_t pass = 0;  // the conflict-free passes so far, all rounds: claim's and moved's clock
   struct Found {
     Candidate f;
     std::uint32_t h;
