@@ -44,8 +44,8 @@
 #include <atomic>
 #include <cmath>
 #include <cstdint>
-#include <limits>
 #include <memory>
+#include <type_traits>
 #include <utility>
 #include <vector>
 
@@ -136,18 +136,36 @@ inline void prefetch(const void* p) {
 inline float dot3(const float* a, const float* b) { return a[0] * b[0] + a[1] * b[1] + a[2] * b[2]; }
 inline bool zero3(const float* a) { return a[0] == 0 && a[1] == 0 && a[2] == 0; }
 // |a - b|^2.
-inline void diff2(const float* a, const float* b, float& out) {
+inline float diff2(const float* a, const float* b) {
   const float x = a[0] - b[0], y = a[1] - b[1], z = a[2] - b[2];
-  out = x * x + y * y + z * z;
+  return x * x + y * y + z * z;
 }
-// The square roots of 12 floats in place: three packed square roots where
-// SSE exists, else one by one (both correctly rounded: the same bits).
-inline void sqrt12(float* v) {
+// The square roots of four floats into out: one packed square root where
+// SSE exists, else one by one (both correctly rounded: the same bits). The
+// operands go in through registers: a packed load of four separate scalar
+// stores would stall on the store forwarding (about a fifth of the
+// evaluation's time when they went through memory).
+inline void sqrt4(float a, float b, float c, float d, float* out) {
 #if defined(__SSE__) || defined(_M_X64)
-  for (int i = 0; i < 12; i += 4) _mm_storeu_ps(v + i, _mm_sqrt_ps(_mm_loadu_ps(v + i)));
+  _mm_storeu_ps(out, _mm_sqrt_ps(_mm_setr_ps(a, b, c, d)));
 #else
-  for (int i = 0; i < 12; ++i) v[i] = std::sqrt(v[i]);
+  out[0] = std::sqrt(a), out[1] = std::sqrt(b), out[2] = std::sqrt(c), out[3] = std::sqrt(d);
 #endif
+}
+
+// A fixed permutation of the 32-bit integers that scatters neighbours
+// (xor-shifts and odd multipliers, each invertible): the conflict-free
+// passes' priorities. By the half-edge itself (neighbours have close
+// numbers), a run of neighbouring edges that all pass would be flipped one
+// by one, a pass each (about 30 passes on the 1.65 M frame); scattered, most
+// runs are broken at once.
+inline std::uint32_t scramble(std::uint32_t x) {
+  x ^= x >> 16;
+  x *= 0x7feb352du;
+  x ^= x >> 15;
+  x *= 0x846ca68bu;
+  x ^= x >> 16;
+  return x;
 }
 
 }  // namespace detail
@@ -166,8 +184,19 @@ FlipResult flip_edges_fairing(const Real* positions, std::size_t nv, IndexVec& t
   if (nt == 0 || nv == 0 || max_rounds <= 0 || 3 * nt >= kNoTriangle) return res;
   if (chunk == 0) chunk = 1;
   std::uint32_t* T = triangles.data();
-  for (std::size_t i = 0; i < 3 * nt; ++i)
-    if (T[i] >= nv) return res;  // not a mesh of these vertices: leave it alone
+  // (The twenty to forty parallel steps below wake the persistent host
+  // threads of parallel.hpp; none starts threads of its own.)
+  {
+    // Not a mesh of these vertices: leave it alone. (On the host threads:
+    // serial, this alone took a few ms, as much as the rest at 16 threads.)
+    std::atomic<bool> foreign{false};
+    for_chunks(nt, chunk_count(nt, 65536), [&](std::size_t, std::size_t lo, std::size_t hi) {
+      bool out = false;
+      for (std::size_t i = 3 * lo; i < 3 * hi; ++i) out |= T[i] >= nv;
+      if (out) foreign.store(true, std::memory_order_relaxed);
+    });
+    if (foreign.load()) return res;
+  }
   // The opposite half-edge of every half-edge h = 3 t + k (T[h] ->
   // T[3t+(k+1)%3]): the one half-edge of the reverse direction, where the
   // edge is used by exactly these two, in two different triangles; else
@@ -176,12 +205,22 @@ FlipResult flip_edges_fairing(const Real* positions, std::size_t nv, IndexVec& t
   // order that depends on the threads, but what the vertex makes of them
   // (below) does not depend on their order.
   std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>> opp(3 * nt);
-  std::vector<std::uint8_t> regular(nv);
+  std::vector<std::uint8_t, NoInitAllocator<std::uint8_t>> regular(nv);
+  // Per vertex, of the conflict-free passes (below): the highest claim,
+  // (pass << 32) | scramble(half-edge), and the last pass that flipped an
+  // edge of its (pass counts on through the rounds: neither is ever
+  // cleared). Set here with the corner lists' heads.
+  std::unique_ptr<std::atomic<std::uint64_t>[]> claim(new std::atomic<std::uint64_t>[nv]);
+  std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>> moved(nv);
   {
     std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>> next(3 * nt);  // (freed after this block)
     std::unique_ptr<std::atomic<std::uint32_t>[]> head(new std::atomic<std::uint32_t>[nv]);
     for_chunks(nv, chunk_count(nv, 65536), [&](std::size_t, std::size_t lo, std::size_t hi) {
-      for (std::size_t v = lo; v < hi; ++v) head[v].store(kNoTriangle, std::memory_order_relaxed);
+      for (std::size_t v = lo; v < hi; ++v) {
+        head[v].store(kNoTriangle, std::memory_order_relaxed);
+        claim[v].store(0, std::memory_order_relaxed);
+        moved[v] = 0;
+      }
     });
     for_chunks(nt, chunk_count(nt, 65536), [&](std::size_t, std::size_t lo, std::size_t hi) {
       for (std::size_t i = 3 * lo; i < 3 * hi; ++i)
@@ -262,35 +301,38 @@ FlipResult flip_edges_fairing(const Real* positions, std::size_t nv, IndexVec& t
   const float cos_max_dihedral = float(std::cos(kFlipMaxDihedralDegrees * 3.14159265358979323846 / 180.0));
   const float min_gain = float(kFlipMinGain);
 
-  std::vector<std::uint8_t> seen(3 * nt, 0);  // per half-edge: the level it was evaluated at (0: not)
-  std::vector<std::uint32_t> last(nt, 0);     // per triangle: the time of the last flip that changed it
+  // The rounds' bookkeeping (below): per half-edge the level it was last
+  // evaluated at (0: not this round), per triangle the time of the last
+  // flip that rewrote it and the latest such time over it and its three
+  // neighbours. (All set by the rounds' chunks, each its own, in parallel.)
+  std::vector<std::uint8_t, NoInitAllocator<std::uint8_t>> seen(3 * nt);
+  std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>> last(nt);
   std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>> near(nt);
-  const bool timed = 9 * std::uint64_t(nt) + 12 < std::uint64_t(kNoTriangle);  // (else: every change counts)
+  constexpr int kMaxLevel = 255;  // (seen's range)
+  const std::uint64_t span = 6 * std::uint64_t(nt) + 4;
+  const bool timed = 2 * span + 2 * kMaxLevel < std::uint64_t(kNoTriangle);  // (else: every change counts)
   auto time_of = [&](int level, std::uint32_t h) {
-    return std::uint32_t(level - 1) * std::uint32_t(6 * nt + 4) + 2 * (h + 1);
-  };  // A flip found by evaluate: what apply needs.
+    return level <= 2 ? std::uint32_t((level - 1) * span) + 2 * (h + 1)
+                      : std::uint32_t(2 * span) + 2 * std::uint32_t(level - 3);
+  };
+  // A flip found by evaluate: what apply needs.
   struct Candidate {
     float u0[3], u1[3];
-    // Of a rejected edge: how far the bends of its five edges are from
-    // passing (after - before + kFlipMinGain), or 0 when its rejection may
-    // change with its neighbourhood, or infinity when only its own quad's
-    // corners decide it (they stay while its two triangles do).
-    float margin;
     std::uint32_t t0, t1, a, b, c, d, o_bc, o_ca, o_ad, o_db;  // o_*: the outer half-edges' opposites
   };
   enum Outcome { Reject, Pass, Outside };
-  const float never = std::numeric_limits<float>::infinity();
   // Evaluates the edge of half-edge h = 3 t0 + k on the current mesh (reads
   // only). Every triangle it reads lies in [lo, hi) (a chunk's), or it
   // returns Outside before reading it: so that chunks are evaluated and
-  // flipped at once, each alone with its own triangles.
+  // flipped at once, each alone with its own triangles. whole: true when
+  // [lo, hi) is the whole mesh (a type: one copy of this for the chunks,
+  // inlined there, one for the conflict-free passes).
   using detail::next1;
   using detail::next2;
-  auto evaluate = [&](std::uint32_t h, std::uint32_t lo, std::uint32_t hi, Candidate& f) -> Outcome {
-    auto inside = [&](std::uint32_t t) { return t >= lo && t < hi; };
+  auto evaluate = [&](std::uint32_t h, std::uint32_t lo, std::uint32_t hi, Candidate& f, auto whole) -> Outcome {
+    auto inside = [&](std::uint32_t t) { return whole || (t >= lo && t < hi); };
     const std::uint32_t t0 = h / 3;
     const std::uint32_t g = opp[h];
-    f.margin = never;
     if (g == kNoTriangle) return Reject;
     const std::uint32_t t1 = g / 3;
     if (t1 < t0) return Reject;  // the edge is its lower triangle's
@@ -313,31 +355,17 @@ FlipResult flip_edges_fairing(const Real* positions, std::size_t nv, IndexVec& t
       return Reject;
     if (detail::dot3(f.u0, f.u1) < cos_max_dihedral) return Reject;
     float sq[12];
-    detail::diff2(m0, m1, sq[0]);
-    detail::diff2(m0, s_bc, sq[1]);
-    detail::diff2(m0, s_ca, sq[2]);
-    detail::diff2(m1, s_ad, sq[3]);
-    detail::diff2(m1, s_db, sq[4]);
-    detail::diff2(f.u0, f.u1, sq[5]);
-    detail::diff2(f.u1, s_bc, sq[6]);
-    detail::diff2(f.u0, s_ca, sq[7]);
-    detail::diff2(f.u0, s_ad, sq[8]);
-    detail::diff2(f.u1, s_db, sq[9]);
-    sq[10] = sq[11] = 0;
-    detail::sqrt12(sq);
+    using detail::diff2;
+    detail::sqrt4(diff2(m0, m1), diff2(m0, s_bc), diff2(m0, s_ca), diff2(m1, s_ad), sq);
+    detail::sqrt4(diff2(m1, s_db), diff2(f.u0, f.u1), diff2(f.u1, s_bc), diff2(f.u0, s_ca), sq + 4);
+    detail::sqrt4(diff2(f.u0, s_ad), diff2(f.u1, s_db), 0.0f, 0.0f, sq + 8);
     const float before = sq[0] + sq[1] + sq[2] + sq[3] + sq[4];
     const float after = sq[5] + sq[6] + sq[7] + sq[8] + sq[9];
-    if (!(after < before - min_gain)) {
-      const float m = after - before + min_gain;
-      f.margin = m >= 0 ? m : 0;  // (0 for a NaN)
-      return Reject;
-    }
+    if (!(after < before - min_gain)) return Reject;
     // (A zero normal: a degenerate triangle, old or new, never flipped.)
     if (detail::zero3(m0) || detail::zero3(m1) || detail::zero3(s_bc) || detail::zero3(s_ca) || detail::zero3(s_ad) ||
-        detail::zero3(s_db)) {
-      f.margin = 0;
+        detail::zero3(s_db))
       return Reject;
-    }
     if (!regular[a] || !regular[b] || !regular[c] || !regular[d]) return Reject;
     const Vec3 pa = pos(a), pb = pos(b), pc = pos(c), pd = pos(d);
     // (sin_smallest_angle of the four triangles, each side's length taken
@@ -352,7 +380,6 @@ FlipResult flip_edges_fairing(const Real* positions, std::size_t nv, IndexVec& t
     if (!(new_min >= std::min(sin_min_angle, old_min))) return Reject;
     // The edge (c, d) must not exist: walk c's fan (regular: closed), from
     // t0 across its in-edge of c, (b -> c), to the triangle of c -> b, ...
-    f.margin = 0;  // (an edge (c, d) elsewhere may come or go)
     std::uint32_t cur = t0, steps = 0;
     do {
       const std::uint32_t* x = T + 3 * std::size_t(cur);
@@ -370,11 +397,6 @@ FlipResult flip_edges_fairing(const Real* positions, std::size_t nv, IndexVec& t
   // 3t0+1: d->c (3t1+2), 3t0+2: c->a (o_ca); 3t1: d->b (o_db), 3t1+1: b->c
   // (o_bc), 3t1+2: c->d (3t0+1). The quad's boundary keeps its direction.
   // Writes t0, t1 and the four outer triangles (their opposites).
-  // drift: per triangle, the sum over this round's flips of it of how far
-  // the normal that each of its quad's sides sees moved (at most
-  // max |old - new| over the four pairs): a bend across such a side moves
-  // by no more, so an edge beyond whose margin exceeds twice its
-  // neighbours' drift still fails (below).
   auto apply = [&](const Candidate& f) {
     std::uint32_t* A = T + 3 * std::size_t(f.t0);
     std::uint32_t* B = T + 3 * std::size_t(f.t1);
@@ -393,129 +415,212 @@ FlipResult flip_edges_fairing(const Real* positions, std::size_t nv, IndexVec& t
   // lower triangle there) in order and flips each that passes, at once,
   // greedily: what it reads and writes lies in its chunk (evaluate), so the
   // chunks do not meet and each comes out as one thread alone would make
-  // it. The edges that read outside their chunk go, in order, through
-  // chunks 16 times as large in the same way, and what is left of them
-  // through a serial pass. The next round's edges: those whose quad (their
-  // two triangles and the four beyond) holds a triangle that a flip
-  // rewrote after the edge was evaluated (a flip rewrites its two
-  // triangles: their corners and normals; of the four beyond only which of
-  // the two faces them, seen from the quad's side): an edge evaluated after
-  // the change saw it, and would only be rejected again. The order: level l
-  // (1: chunks, 2: large chunks, 3: serial), then the half-edge h; the item
-  // h is evaluated at time base(l) + 2 (h + 1), a flip there stamps its two
-  // triangles with that time + 1 (so the slot h itself, rewritten by the
-  // flip, counts as changed).
-
-  // Runs the items (half-edges, ascending) through chunks of `size`
-  // triangles (0: one chunk, the whole mesh, serially); the items that read
-  // outside their chunk are returned, ascending.
-  auto run = [&](const std::vector<std::uint32_t>& items, std::size_t size, int level) {
-    const bool serial = size == 0;
-    if (serial) size = nt;
-    const std::size_t chunks = (nt + size - 1) / size;
-    std::vector<std::size_t> from(chunks + 1);
-    for (std::size_t q = 0; q <= chunks; ++q)
-      from[q] = std::size_t(std::lower_bound(items.begin(), items.end(), std::uint32_t(3 * std::min(nt, q * size))) -
-                            items.begin());
+  // it. Each chunk picks its own edges of the round as it walks them (no
+  // list; below). The edges that read outside their chunk (about 6 % in the
+  // first round) go, in order, through chunks 16 times as large in the same
+  // way (level 2), and what is left of them (about 2 %: neighbours far away
+  // in the triangles' order) through conflict-free passes (levels 3, 4, ...;
+  // before, a serial greedy pass, which dominated at many threads): all of
+  // them are evaluated on the same mesh (read only, in parallel), each that
+  // passes claims the quad's four corners with its priority (a fixed
+  // scramble of its half-edge: atomic maxima, so the claims do not depend on
+  // the threads), and those that hold all four are flipped at once, in
+  // parallel. That is safe: an edge's test reads its two triangles, the four
+  // beyond (their normals) and the fan of c, all at one of its corners (and
+  // the opposites of half-edges out of or into a corner), and a flip writes
+  // only triangles and half-edges whose corners are all its own; so flips of
+  // disjoint corners read nothing another writes and do not meet. The
+  // others are looked at again in the next pass, evaluated again only when
+  // a flip of that pass took one of their corners. The highest priority
+  // that passes always holds its claims, so every pass flips.
+  //
+  // The next round's edges: those whose quad (their two triangles and the
+  // four beyond) holds a triangle that a flip rewrote after the edge was
+  // evaluated (a flip rewrites its two triangles: their corners and
+  // normals; of the four beyond only which of the two faces them, seen from
+  // the quad's side): an edge evaluated after the change saw it, and would
+  // only be rejected again. The times: level 1 and 2 evaluate half-edge h
+  // at base(l) + 2 (h + 1), a pass at level l >= 3 all its edges at one
+  // time, after those; a flip stamps its two triangles with its
+  // evaluation's time + 1 (so the slot h itself, rewritten by the flip,
+  // counts as changed). The rounds but the first take an edge when the
+  // latest stamp over its quad (near, computed before) is later than its
+  // evaluation in the round before.
+  const std::size_t chunks = (nt + chunk - 1) / chunk;
+  std::uint64_t pass = 0;  // the conflict-free passes so far, all rounds: claim's and moved's clock
+  struct Found {
+    Candidate f;
+    std::uint32_t h;
+    bool valid;  // f is h's flip on the current mesh
+  };
+  for (int round = 0; round < max_rounds; ++round) {
+    const std::uint64_t flips0 = res.flips;
+    if (round > 0) {
+      for_chunks(nt, chunk_count(nt, 65536), [&](std::size_t, std::size_t lo, std::size_t hi) {
+        for (std::size_t t = lo; t < hi; ++t) {
+          std::uint32_t x = last[t];
+          for (std::size_t h = 3 * t; h < 3 * t + 3; ++h)
+            if (opp[h] != kNoTriangle) x = std::max(x, last[opp[h] / 3]);
+          near[t] = x;
+        }
+      });
+      host_trace("clean-up: fairing near stamps", nt);
+    }
     std::vector<std::vector<std::uint32_t>> out(chunks);
     std::vector<std::uint64_t> flipped(chunks, 0);
     std::atomic<std::size_t> next_chunk{0};
-    on_threads(serial ? 1 : chunk_count(chunks, 1), [&](std::size_t) {
+    on_threads(chunk_count(chunks, 1), [&](std::size_t) {
       Candidate f;
       for (std::size_t q; (q = next_chunk.fetch_add(1, std::memory_order_relaxed)) < chunks;) {
-        const std::uint32_t lo = std::uint32_t(q * size), hi = std::uint32_t(std::min(nt, (q + 1) * size));
-        for (std::size_t i = from[q]; i < from[q + 1]; ++i) {
-          // (The opposite of an item a few ahead, and its triangles: the
+        const std::uint32_t lo = std::uint32_t(q * chunk), hi = std::uint32_t(std::min(nt, (q + 1) * chunk));
+        // (The stamps of the round before are all in near: cleared here,
+        // by the chunk that alone writes them in this level.)
+        std::fill(last.begin() + lo, last.begin() + hi, 0u);
+        // (Counted and listed here, stored once: neighbouring chunks run at
+        // once, and their slots of flipped and out share cache lines.)
+        std::uint64_t made = 0;
+        std::vector<std::uint32_t> leave;
+        for (std::uint32_t h = 3 * lo; h < 3 * hi; ++h) {
+          // (The opposite a few half-edges ahead, and its triangle's: the
           // evaluation's chain of loads starts there.)
-          if (i + 8 < from[q + 1]) {
-            const std::uint32_t g = opp[items[i + 8]];
+          if (h + 24 < 3 * hi) {
+            const std::uint32_t g = opp[h + 24];
             if (g != kNoTriangle) {
               detail::prefetch(&opp[g]);
               detail::prefetch(&T[g]);
               detail::prefetch(&tn[g]);
             }
           }
-          if (i + 16 < from[q + 1]) detail::prefetch(&opp[items[i + 16]]);
-          const Outcome o = evaluate(items[i], lo, hi, f);
+          const std::uint32_t g = opp[h];
+          bool take = g != kNoTriangle && g / 3 > h / 3;
+          if (take && round > 0) {
+            const std::uint32_t at = seen[h] ? time_of(seen[h], h) : 0;
+            take = std::max(near[h / 3], near[g / 3]) > at;
+          }
+          seen[h] = 0;
+          if (!take) continue;
+          const Outcome o = evaluate(h, lo, hi, f, std::false_type());
           if (o == Outside) {
-            out[q].push_back(items[i]);
+            leave.push_back(h);
             continue;
           }
-          if (timed) seen[items[i]] = std::uint8_t(level);
+          if (timed) seen[h] = 1;
           if (o != Pass) continue;
           apply(f);
-          ++flipped[q];
-          const std::uint32_t stamp = timed ? time_of(level, items[i]) + 1 : 1;
-          last[f.t0] = last[f.t1] = stamp;
+          ++made;
+          last[f.t0] = last[f.t1] = timed ? time_of(1, h) + 1 : 1;
         }
+        flipped[q] = made;
+        out[q] = std::move(leave);
       }
     });
-    std::vector<std::uint32_t> left;
+    std::vector<std::uint32_t> pending;
     for (std::size_t q = 0; q < chunks; ++q) {
       res.flips += flipped[q];
-      left.insert(left.end(), out[q].begin(), out[q].end());
+      pending.insert(pending.end(), out[q].begin(), out[q].end());
     }
-    return left;
-  };
-  // The first round's edges: all, each from its lower triangle.
-  const std::size_t lists = chunk_count(nt, 65536);
-  std::vector<std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>>> parts(lists);
-  std::vector<std::uint32_t> work;
-  // (Without a branch per half-edge: each is written, and kept by
-  // advancing the count; want(h, g) must read nothing beyond g for g = h.)
-  auto gather = [&](const auto& want) {
-    for_chunks(nt, lists, [&](std::size_t q, std::size_t lo, std::size_t hi) {
-      auto& p = parts[q];
-      p.resize(3 * (hi - lo));
-      std::size_t n = 0;
-      for (std::uint32_t h = std::uint32_t(3 * lo); h < 3 * hi; ++h) {
-        const std::uint32_t g = opp[h];
-        const bool edge = g != kNoTriangle && g / 3 > h / 3;
-        p[n] = h;
-        n += std::size_t(edge & want(h, edge ? g : h));
+    host_trace("clean-up: fairing chunks", pending.size());
+    // Level 2: the same in chunks 16 times as large, from the list.
+    if (!pending.empty()) {
+      const std::size_t size = 16 * chunk, large = (nt + size - 1) / size;
+      std::vector<std::size_t> from(large + 1);
+      for (std::size_t q = 0; q <= large; ++q)
+        from[q] = std::size_t(
+            std::lower_bound(pending.begin(), pending.end(), std::uint32_t(3 * std::min(nt, q * size))) -
+            pending.begin());
+      std::vector<std::vector<std::uint32_t>> rest(large);
+      std::vector<std::uint64_t> made(large, 0);
+      next_chunk = 0;
+      on_threads(chunk_count(large, 1), [&](std::size_t) {
+        Candidate f;
+        for (std::size_t q; (q = next_chunk.fetch_add(1, std::memory_order_relaxed)) < large;) {
+          const std::uint32_t lo = std::uint32_t(q * size), hi = std::uint32_t(std::min(nt, (q + 1) * size));
+          std::uint64_t n = 0;
+          std::vector<std::uint32_t> leave;
+          for (std::size_t i = from[q]; i < from[q + 1]; ++i) {
+            const std::uint32_t h = pending[i];
+            const Outcome o = evaluate(h, lo, hi, f, std::false_type());
+            if (o == Outside) {
+              leave.push_back(h);
+              continue;
+            }
+            if (timed) seen[h] = 2;
+            if (o != Pass) continue;
+            apply(f);
+            ++n;
+            last[f.t0] = last[f.t1] = timed ? time_of(2, h) + 1 : 1;
+          }
+          made[q] = n;
+          rest[q] = std::move(leave);
+        }
+      });
+      pending.clear();
+      for (std::size_t q = 0; q < large; ++q) {
+        res.flips += made[q];
+        pending.insert(pending.end(), rest[q].begin(), rest[q].end());
       }
-      p.resize(n);
-    });
-    work.clear();
-    for (const auto& x : parts) work.insert(work.end(), x.begin(), x.end());
-  };
-  gather([](std::uint32_t, std::uint32_t) { return true; });
-  for (int round = 0; round < max_rounds && !work.empty(); ++round) {
-    const std::uint64_t flips0 = res.flips;
-    std::vector<std::uint32_t> left = run(work, chunk, 1);
-    host_trace("clean-up: fairing chunks", left.size());
-    if (!left.empty()) left = run(left, 16 * chunk, 2);
-    host_trace("clean-up: fairing large chunks", left.size());
-    if (!left.empty()) run(left, 0, 3);
-    host_trace("clean-up: fairing serial", res.flips - flips0);
+      host_trace("clean-up: fairing large chunks", pending.size());
+    }
+    // The conflict-free passes. (A pathological mesh that needs more than
+    // kMaxLevel - 2 of them keeps the rest of its edges for the round.)
+    std::vector<Found> items(pending.size());
+    for (std::size_t i = 0; i < pending.size(); ++i) items[i].h = pending[i], items[i].valid = false;
+    for (int level = 3; !items.empty() && level <= kMaxLevel; ++level) {
+      const std::uint64_t key_hi = ++pass << 32;
+      const std::size_t parts = chunk_count(items.size(), 1024);
+      std::vector<std::vector<Found>> again(parts);
+      std::vector<std::uint64_t> made(parts, 0);
+      auto take = [&](std::uint32_t v, std::uint64_t key) {
+        std::uint64_t c = claim[v].load(std::memory_order_relaxed);
+        while (c < key && !claim[v].compare_exchange_weak(c, key, std::memory_order_relaxed)) {
+        }
+      };
+      for_chunks(items.size(), parts, [&](std::size_t, std::size_t lo, std::size_t hi) {
+        for (std::size_t i = lo; i < hi; ++i) {
+          Found& x = items[i];
+          const Candidate& f = x.f;
+          // (Kept from the pass before when no flip there touched its
+          // quad's corners: what it read is unchanged.)
+          if (x.valid && (moved[f.a] == pass - 1 || moved[f.b] == pass - 1 || moved[f.c] == pass - 1 ||
+                          moved[f.d] == pass - 1))
+            x.valid = false;
+          if (!x.valid) x.valid = evaluate(x.h, 0, std::uint32_t(nt), x.f, std::true_type()) == Pass;
+          if (timed) seen[x.h] = std::uint8_t(level);
+          if (!x.valid) continue;
+          const std::uint64_t key = key_hi | detail::scramble(x.h);
+          take(f.a, key), take(f.b, key), take(f.c, key), take(f.d, key);
+        }
+      });
+      for_chunks(items.size(), parts, [&](std::size_t q, std::size_t lo, std::size_t hi) {
+        std::uint64_t n = 0;
+        std::vector<Found> lost;
+        for (std::size_t i = lo; i < hi; ++i) {
+          const Found& x = items[i];
+          if (!x.valid) continue;
+          const Candidate& f = x.f;
+          const std::uint64_t key = key_hi | detail::scramble(x.h);
+          auto held = [&](std::uint32_t v) { return claim[v].load(std::memory_order_relaxed) == key; };
+          if (!(held(f.a) && held(f.b) && held(f.c) && held(f.d))) {
+            lost.push_back(x);
+            continue;
+          }
+          apply(f);
+          ++n;
+          last[f.t0] = last[f.t1] = timed ? time_of(level, x.h) + 1 : 1;
+          moved[f.a] = moved[f.b] = moved[f.c] = moved[f.d] = std::uint32_t(pass);
+        }
+        made[q] = n;
+        again[q] = std::move(lost);
+      });
+      items.clear();
+      for (std::size_t q = 0; q < parts; ++q) {
+        res.flips += made[q];
+        items.insert(items.end(), again[q].begin(), again[q].end());
+      }
+    }
+    host_trace("clean-up: fairing conflict-free passes", res.flips - flips0);
     res.rounds = round + 1;
-    if (res.flips == flips0 || round + 1 == max_rounds) break;
-    // The next work list (each edge once, from its lower triangle): the
-    // edges whose triangles a flip rewrote after they were evaluated (or
-    // that were not evaluated: stamp 0), and the edges whose margin is no
-    // more than twice their neighbours' drift (each outer normal moves one
-    // bend before and one after; their margins, else, are kept, less that).
-    // Per triangle first: the drift of its three neighbours (an edge's
-    // quad: the sum of its two triangles' values, itself counted too: more
-    // than needed, never less). Then the stamps and drifts are cleared.
-    for_chunks(nt, lists, [&](std::size_t, std::size_t lo, std::size_t hi) {
-      for (std::size_t t = lo; t < hi; ++t) {
-        std::uint32_t x = last[t];
-        for (std::size_t h = 3 * t; h < 3 * t + 3; ++h)
-          if (opp[h] != kNoTriangle) x = std::max(x, last[opp[h] / 3]);
-        near[t] = x;
-      }
-    });
-    gather([&](std::uint32_t h, std::uint32_t g) {
-      const std::uint32_t x = std::max(near[h / 3], near[g / 3]);
-      const std::uint32_t at = seen[h] ? time_of(seen[h], h) : 0;
-      return x > at;
-    });
-    for_chunks(nt, lists, [&](std::size_t, std::size_t lo, std::size_t hi) {
-      std::fill(last.begin() + lo, last.begin() + hi, 0u);
-      std::fill(seen.begin() + 3 * lo, seen.begin() + 3 * hi, std::uint8_t(0));
-    });
-    host_trace("clean-up: fairing next edges", work.size());
+    if (res.flips == flips0) break;
   }
   return res;
 }
