@@ -7,6 +7,7 @@
 #include <Kokkos_Core.hpp>
 
 #include "core/trace.hpp"
+#include <type_traits>
 #include <utility>
 #include <memory>
 
@@ -75,6 +76,17 @@ struct ScopedRegion {
   ScopedRegion& operator=(const ScopedRegion&) = delete;
 };
 
+#if defined(KOKKOS_ENABLE_CUDA)
+// Device buffers come from a stream-ordered memory pool of nbmc's own
+// (pipeline_cuda.cpp), allocated and freed in the order of Kokkos' default
+// CUDA stream: a frame makes dozens of buffers, and cudaMalloc with
+// cudaFree (which also waits for the device) cost 70-110 us each on an
+// H100 machine (bench/alloc_micro.cu). NBMC_DEVICE_POOL=0 in the
+// environment (read once) allocates with cudaMalloc instead.
+void* device_pool_allocate(std::size_t bytes, const std::string& what, bool zero);
+void device_pool_free(void* p) noexcept;
+#endif
+
 // A labelled, tracked 1-D allocation in a memory space.
 template <class T, class MemSpace>
 class Buffer {
@@ -85,6 +97,17 @@ class Buffer {
       : tracker_(&tracker) {
     const std::uint64_t bytes = std::uint64_t(n) * sizeof(T);
     tracker.require(bytes, "nbmc::" + label);
+#if defined(KOKKOS_ENABLE_CUDA)
+    if constexpr (std::is_same<MemSpace, Kokkos::CudaSpace>::value) {
+      if (n > 0) {
+        pooled_ = device_pool_allocate(bytes, "nbmc::" + label, zero);
+        view_ = view_type(static_cast<T*>(pooled_), n);  // (unmanaged: the Buffer owns it)
+      }
+      bytes_ = bytes;
+      tracker.add(bytes_);
+      return;
+    }
+#endif
     if (zero)
       view_ = view_type("nbmc::" + label, n);
     else
@@ -104,6 +127,10 @@ class Buffer {
     if (tracker_ && bytes_) tracker_->sub(bytes_);
     view_ = view_type();
     bytes_ = 0;
+#if defined(KOKKOS_ENABLE_CUDA)
+    if (pooled_) device_pool_free(pooled_);
+#endif
+    pooled_ = nullptr;
   }
   const view_type& view() const { return view_; }
   std::size_t size() const { return view_.extent(0); }
@@ -114,10 +141,12 @@ class Buffer {
     std::swap(view_, o.view_);
     std::swap(tracker_, o.tracker_);
     std::swap(bytes_, o.bytes_);
+    std::swap(pooled_, o.pooled_);
   }
   view_type view_;
   MemoryTracker* tracker_ = nullptr;
   std::uint64_t bytes_ = 0;
+  void* pooled_ = nullptr;  // (CUDA: the pool's allocation that view_ shows)
 };
 
 // ------------------------------------------------------------ Morton keys

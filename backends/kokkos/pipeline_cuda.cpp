@@ -72,9 +72,77 @@ Staging& staging() {
   return *s;
 }
 
+// The device buffers' pool (device_pool_allocate): a pool of nbmc's own, so
+// that its release threshold leaves the application's default pool alone.
+// It keeps what a frame freed for the frame's later buffers; the end of each
+// reconstruction gives the memory back to the driver (trim_device_pool), so
+// that nothing stays reserved between calls.
+cudaMemPool_t device_pool() {
+  static const cudaMemPool_t pool = [] {
+    const char* e = std::getenv("NBMC_DEVICE_POOL");
+    if (e != nullptr && e[0] == '0' && e[1] == '\0') return cudaMemPool_t(nullptr);
+    int dev = 0, supported = 0;
+    if (cudaGetDevice(&dev) != cudaSuccess ||
+        cudaDeviceGetAttribute(&supported, cudaDevAttrMemoryPoolsSupported, dev) != cudaSuccess || !supported) {
+      cudaGetLastError();
+      return cudaMemPool_t(nullptr);
+    }
+    cudaMemPoolProps props = {};
+    props.allocType = cudaMemAllocationTypePinned;
+    props.handleTypes = cudaMemHandleTypeNone;
+    props.location.type = cudaMemLocationTypeDevice;
+    props.location.id = dev;
+    cudaMemPool_t p = nullptr;
+    if (cudaMemPoolCreate(&p, &props) != cudaSuccess) {
+      cudaGetLastError();
+      return cudaMemPool_t(nullptr);
+    }
+    std::uint64_t keep = std::numeric_limits<std::uint64_t>::max();  // (until trim_device_pool)
+    cudaMemPoolSetAttribute(p, cudaMemPoolAttrReleaseThreshold, &keep);
+    cudaGetLastError();
+    return p;
+  }();
+  return pool;
+}
+
+void trim_device_pool() {
+  const cudaMemPool_t pool = device_pool();
+  if (pool == nullptr) return;
+  if (cudaStreamSynchronize(Kokkos::Cuda().cuda_stream()) != cudaSuccess || cudaMemPoolTrimTo(pool, 0) != cudaSuccess)
+    cudaGetLastError();
+}
+
 }  // namespace
 
 namespace Details {
+
+void* device_pool_allocate(std::size_t bytes, const std::string& what, bool zero) {
+  const cudaStream_t stream = Kokkos::Cuda().cuda_stream();
+  const cudaMemPool_t pool = device_pool();
+  void* p = nullptr;
+  const cudaError_t e = pool ? cudaMallocFromPoolAsync(&p, bytes, pool, stream) : cudaMalloc(&p, bytes);
+  if (e != cudaSuccess) {
+    cudaGetLastError();
+    std::ostringstream s;
+    s << "could not allocate " << bytes / 1048576.0 << " MiB of device memory for " << what << " ("
+      << cudaGetErrorString(e) << ")";
+    throw Error(e == cudaErrorMemoryAllocation ? 6 : 9, s.str());
+  }
+  if (zero) {
+    const cudaError_t z = pool ? cudaMemsetAsync(p, 0, bytes, stream) : cudaMemset(p, 0, bytes);
+    if (z != cudaSuccess) {
+      device_pool_free(p);
+      cuda_fail(z, what);
+    }
+  }
+  return p;
+}
+
+void device_pool_free(void* p) noexcept {
+  if (p == nullptr) return;
+  const cudaError_t e = device_pool() ? cudaFreeAsync(p, Kokkos::Cuda().cuda_stream()) : cudaFree(p);
+  if (e != cudaSuccess) cudaGetLastError();
+}
 
 // A pageable copy from the device runs at about a sixth of a pinned one
 // (40 MB of mesh: 5.5 ms on an H100 machine, with the first touch of the
@@ -208,6 +276,9 @@ void reconstruct_cuda(const ParticleInput& in, const Params& p, MemoryTracker& t
                       bool mesh_on_device, HostMesh& m, RunStats& st, int device) {
 #if defined(KOKKOS_ENABLE_CUDA)
   (void)device;  // Kokkos 3.4 binds one device at initialisation
+  struct Trim {
+    ~Trim() { trim_device_pool(); }
+  } trim;  // (after the pipeline's buffers are freed, on every exit)
   Details::reconstruct(Kokkos::Cuda(), in, p, t, pr, mesh_on_device, m, st);
 #else
   (void)in; (void)p; (void)t; (void)pr; (void)mesh_on_device; (void)m; (void)st; (void)device;
@@ -217,6 +288,9 @@ void reconstruct_cuda(const ParticleInput& in, const Params& p, MemoryTracker& t
 
 bool interpolate_attributes_cuda(const AttributeJob& job, MemoryTracker& t) {
 #if defined(KOKKOS_ENABLE_CUDA)
+  struct Trim {
+    ~Trim() { trim_device_pool(); }
+  } trim;
   return Details::interpolate_attributes(Kokkos::Cuda(), t, job);
 #else
   (void)job; (void)t;
