@@ -34,6 +34,14 @@ void cuda_check(cudaError_t e, const std::string& what) {
   if (e != cudaSuccess) cuda_fail(e, what);
 }
 
+[[noreturn]] void allocation_failed(cudaError_t e, std::size_t bytes, const std::string& what) {
+  cudaGetLastError();
+  std::ostringstream s;
+  s << "could not allocate " << bytes / 1048576.0 << " MiB of device memory for " << what << " ("
+    << cudaGetErrorString(e) << ")";
+  throw Error(e == cudaErrorMemoryAllocation ? 6 : 9, s.str());
+}
+
 // A device pointer the caller gave us: device or managed memory of the
 // current device, or a clear error.
 void check_device_pointer(const void* p, const char* fn, const char* what = "xyz",
@@ -121,13 +129,7 @@ void* device_pool_allocate(std::size_t bytes, const std::string& what, bool zero
   const cudaMemPool_t pool = device_pool();
   void* p = nullptr;
   const cudaError_t e = pool ? cudaMallocFromPoolAsync(&p, bytes, pool, stream) : cudaMalloc(&p, bytes);
-  if (e != cudaSuccess) {
-    cudaGetLastError();
-    std::ostringstream s;
-    s << "could not allocate " << bytes / 1048576.0 << " MiB of device memory for " << what << " ("
-      << cudaGetErrorString(e) << ")";
-    throw Error(e == cudaErrorMemoryAllocation ? 6 : 9, s.str());
-  }
+  if (e != cudaSuccess) allocation_failed(e, bytes, what);
   if (zero) {
     const cudaError_t z = pool ? cudaMemsetAsync(p, 0, bytes, stream) : cudaMemset(p, 0, bytes);
     if (z != cudaSuccess) {
@@ -247,13 +249,7 @@ std::shared_ptr<void> cuda_allocate(std::size_t bytes, const char* what) {
   if (bytes == 0) return std::shared_ptr<void>();
   void* p = nullptr;
   const cudaError_t e = cudaMalloc(&p, bytes);
-  if (e != cudaSuccess) {
-    cudaGetLastError();
-    std::ostringstream s;
-    s << "could not allocate " << bytes / 1048576.0 << " MiB of device memory for " << what << " ("
-      << cudaGetErrorString(e) << ")";
-    throw Error(e == cudaErrorMemoryAllocation ? 6 : 9, s.str());
-  }
+  if (e != cudaSuccess) allocation_failed(e, bytes, what);
   return std::shared_ptr<void>(p, [](void* q) { cudaFree(q); });
 }
 
