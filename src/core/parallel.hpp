@@ -46,6 +46,19 @@
 
 namespace nbmc {
 
+// Sets this thread's Slot() to a value for the life of the object.
+template <class T, T& (*Slot)()>
+class ScopedSetting {
+ public:
+  explicit ScopedSetting(T value) : old_(Slot()) { Slot() = value; }
+  ~ScopedSetting() { Slot() = old_; }
+  ScopedSetting(const ScopedSetting&) = delete;
+  ScopedSetting& operator=(const ScopedSetting&) = delete;
+
+ private:
+  T old_;
+};
+
 // The most threads the loops below start on this thread (0: one per
 // hardware thread). The C API sets it from the context's thread count for
 // the duration of a call (ScopedHostThreads), so that a context asked for N
@@ -54,16 +67,7 @@ inline std::size_t& host_thread_limit() {
   static thread_local std::size_t limit = 0;
   return limit;
 }
-class ScopedHostThreads {
- public:
-  explicit ScopedHostThreads(std::size_t limit) : old_(host_thread_limit()) { host_thread_limit() = limit; }
-  ~ScopedHostThreads() { host_thread_limit() = old_; }
-  ScopedHostThreads(const ScopedHostThreads&) = delete;
-  ScopedHostThreads& operator=(const ScopedHostThreads&) = delete;
-
- private:
-  std::size_t old_;
-};
+using ScopedHostThreads = ScopedSetting<std::size_t, host_thread_limit>;
 
 // Another way to run a loop's tasks on this thread: run(n, task, ctx) runs
 // task(ctx, t) for every t in [0, n), each on a thread of its own at the
@@ -78,16 +82,7 @@ inline HostExecutor& host_executor() {
   static thread_local HostExecutor executor = nullptr;
   return executor;
 }
-class ScopedHostExecutor {
- public:
-  explicit ScopedHostExecutor(HostExecutor e) : old_(host_executor()) { host_executor() = e; }
-  ~ScopedHostExecutor() { host_executor() = old_; }
-  ScopedHostExecutor(const ScopedHostExecutor&) = delete;
-  ScopedHostExecutor& operator=(const ScopedHostExecutor&) = delete;
-
- private:
-  HostExecutor old_;
-};
+using ScopedHostExecutor = ScopedSetting<HostExecutor, host_executor>;
 
 // Chunks for `count` items: one per hardware thread (at most the limit
 // above), each at least `min_items` long (at least one chunk).
