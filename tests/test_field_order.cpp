@@ -266,8 +266,12 @@ struct Outcome {
 };
 
 // radii: one per particle for the radii variants (p.radius_ref set), else empty.
+// shrink: the grid is made for the particles' bounding box less this much on
+// every side, so that the particles beyond it land in the boundary cells (as
+// with a clipping box).
 template <class Method, class Exec>
-Outcome run(const Exec& space, const Points& xyz, const Params& p, bool dense, const std::vector<double>& radii) {
+Outcome run(const Exec& space, const Points& xyz, const Params& p, bool dense, const std::vector<double>& radii,
+            double shrink = 0) {
   Outcome out;
   MemoryTracker tracker;
   const std::size_t n = xyz.size() / 3;
@@ -278,6 +282,10 @@ Outcome run(const Exec& space, const Points& xyz, const Params& p, bool dense, c
       lo[a] = std::min(lo[a], xyz[3 * i + a]);
       hi[a] = std::max(hi[a], xyz[3 * i + a]);
     }
+  for (int a = 0; a < 3; ++a) {
+    lo[a] += shrink;
+    hi[a] -= shrink;
+  }
   const Grid g = make_grid(lo, hi, p);
   Neighbourhood<Host> nbh;
   build_neighbourhood(space, tracker, xyz.data(), n, {}, g, nbh, Method::radii ? radii.data() : nullptr);
@@ -398,7 +406,7 @@ Outcome run(const Exec& space, const Points& xyz, const Params& p, bool dense, c
 // takes them; the parameters are scaled for them as the C API does.
 template <class Method>
 void check(const char* name, const Points& xyz, double r, double cell, bool dense = false,
-           std::size_t min_surface = 1, const std::vector<double>& radii = {}) {
+           std::size_t min_surface = 1, const std::vector<double>& radii = {}, double shrink = 0) {
   const std::string m = Method::name;
   Params p = make_params(r, cell,
                          m == "zb05"   ? NBMC_METHOD_ZB05
@@ -411,11 +419,11 @@ void check(const char* name, const Points& xyz, double r, double cell, bool dens
     ASSERT_GT(p.radius_ref, 0);
   }
   for (int backend = 0; backend < 2; ++backend) {
-    const Outcome o = backend == 0 ? run<Method>(Kokkos::Serial(), xyz, p, dense, radii)
+    const Outcome o = backend == 0 ? run<Method>(Kokkos::Serial(), xyz, p, dense, radii, shrink)
 #if defined(KOKKOS_ENABLE_OPENMP)
-                                   : run<Method>(Kokkos::OpenMP(), xyz, p, dense, radii);
+                                   : run<Method>(Kokkos::OpenMP(), xyz, p, dense, radii, shrink);
 #else
-                                   : run<Method>(Kokkos::Serial(), xyz, p, dense, radii);
+                                   : run<Method>(Kokkos::Serial(), xyz, p, dense, radii, shrink);
 #endif
     const std::string what = std::string(name) + " (" + Method::name + (Method::radii ? " with radii" : "") +
                              ", cell " + std::to_string(cell) + "r, " + (backend == 0 ? "Serial" : "OpenMP") + ")";
@@ -495,6 +503,20 @@ TEST(FieldOrder, CoarseCells) {
   check<FieldZB05>("coarse cells", p, kR, 6.0);
   check<FieldSPH>("coarse cells", p, kR, 6.0);
   check<FieldYT10>("coarse cells", p, kR, 6.0);
+}
+
+TEST(FieldOrder, ParticlesBeyondTheGrid) {
+  // A grid smaller than the particles' box by 3 r on every side (as with a
+  // clipping box): the particles beyond it lie in the boundary cells, outside
+  // those cells' boxes. Every gather must still sum them as the serial
+  // reference does (any pruning or trimming by cell boxes must allow for
+  // them; a row trimming by the cells' y and z gaps, tried in session 25,
+  // was checked with this test).
+  const Points p = random_cloud(kR, 6000, 5);
+  for (double cell : {1.0, 0.5}) {
+    check<FieldSSP07>("particles beyond the grid", p, kR, cell, false, 1, {}, 3 * kR);
+    check<FieldSPH>("particles beyond the grid", p, kR, cell, false, 1, {}, 3 * kR);
+  }
 }
 
 TEST(FieldOrder, RealFrame) {
