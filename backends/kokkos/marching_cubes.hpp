@@ -191,7 +191,8 @@ void for_each_band_vertex_by_block_host(const ExecSpace& space, const char* labe
 // f (which does the full test) sees every cell that matters: same results.
 // complete: the word's cells whose eight corners have their band bits set.
 // cw: the words of the cell's corners (corners_from_words).
-// GPU backends keep for_each_band_vertex (not instantiated for them).
+// GPU backends use the same filter with one thread per word (pass A here,
+// the round-0 leak detection in band_growth.hpp).
 template <class ExecSpace>
 Buffer<std::uint64_t, typename ExecSpace::memory_space> inside_masks(
     const ExecSpace& space, MemoryTracker& tracker, const BandView<typename ExecSpace::memory_space>& band,
@@ -259,6 +260,60 @@ KOKKOS_FORCEINLINE_FUNCTION bool cell_in_grid(const BandView<MemSpace>& band, st
   return i + 1 < band.dims[0] && j + 1 < band.dims[1] && k + 1 < band.dims[2];
 }
 
+// The blocks that the corner words of word s (0..7) of block b lie in:
+// nb[o] for the block o = dx | dy << 1 | dz << 2 steps beyond b, looked up
+// for the nonzero o within s (a step beyond the block only where the word
+// lies at its upper face; s = 7: all seven), ~0u where that block is not in
+// the band; nb[0] = b. The others are left as they are.
+template <class MemSpace>
+KOKKOS_INLINE_FUNCTION void corner_blocks(const BandView<MemSpace>& band, std::size_t b, int s, std::uint32_t nb[8]) {
+  nb[0] = std::uint32_t(b);
+  if (!s) return;
+  const std::uint64_t key = band.block_keys(b);
+  const std::uint32_t bx = std::uint32_t(compact3(key)), by = std::uint32_t(compact3(key >> 1)),
+                      bz = std::uint32_t(compact3(key >> 2));
+  for (int o = 1; o < 8; ++o)
+    if (!(o & ~s))
+      nb[o] = band.blocks.find(
+          morton3(bx + std::uint32_t(o & 1), by + std::uint32_t((o >> 1) & 1), bz + std::uint32_t(o >> 2)));
+}
+
+// The corner words of word s of a block with corner blocks nb
+// (corner_blocks): cw[d] is the word one step along the axes set in d (d =
+// dx | dy << 1 | dz << 2), ~0 where its block is not in the band.
+KOKKOS_INLINE_FUNCTION void corner_words(const std::uint32_t nb[8], int s, std::size_t cw[8]) {
+  for (int d = 0; d < 8; ++d) {
+    const int o = s & d, t = s ^ d;  // block offset (carry), word in that block
+    cw[d] = nb[o] == ~0u ? ~std::size_t(0) : std::size_t(nb[o]) * 8 + std::size_t(t);
+  }
+}
+
+// The cells of word w = 8 b + s whose eight corners have their band bits
+// set and mixed signs (bits of the word), from the band and sign masks of
+// the word and its corner words (in the blocks nb of corner_blocks), ANDed
+// in their eight corner-shifted copies. complete: the word's cells with all
+// corners' band bits set; cw: the corner words (corners_from_words).
+template <class MemSpace>
+KOKKOS_INLINE_FUNCTION std::uint64_t mixed_cells(const BandView<MemSpace>& band,
+                                                 const Kokkos::View<const std::uint64_t*, MemSpace>& inside,
+                                                 const std::uint32_t nb[8], int s, std::uint64_t& complete,
+                                                 std::size_t cw[8]) {
+  std::uint64_t qb[8], qi[8], qo[8];
+  corner_words(nb, s, cw);
+  for (int d = 0; d < 8; ++d) {
+    if (cw[d] == ~std::size_t(0)) {
+      qb[d] = qi[d] = qo[d] = 0;
+      continue;
+    }
+    qb[d] = band.words(cw[d]);
+    qi[d] = inside(cw[d]);
+    qo[d] = qb[d] & ~qi[d];
+  }
+  complete = all_corners(qb);
+  if (!complete) return 0;
+  return complete & ~all_corners(qi) & ~all_corners(qo);
+}
+
 template <class ExecSpace, class F>
 void for_each_mixed_cell_host(const ExecSpace& space, const char* label,
                               const BandView<typename ExecSpace::memory_space>& band, std::size_t n_words,
@@ -269,9 +324,6 @@ void for_each_mixed_cell_host(const ExecSpace& space, const char* label,
       // A host lambda (host backends only): f may be one too, and nvcc
       // refuses a host lambda's type inside a KOKKOS_LAMBDA.
       [=](const std::size_t b) {
-        const std::uint64_t key = band.block_keys(b);
-        const std::uint32_t bx = std::uint32_t(compact3(key)), by = std::uint32_t(compact3(key >> 1)),
-                            bz = std::uint32_t(compact3(key >> 2));
         std::uint32_t nb[8];
         nb[0] = std::uint32_t(b);
         bool looked = false;
@@ -280,30 +332,12 @@ void for_each_mixed_cell_host(const ExecSpace& space, const char* label,
           const std::uint64_t word = band.words(w);
           if (!word) continue;
           if (!looked && s) {  // word 0 needs no neighbouring block
-            for (int o = 1; o < 8; ++o)
-              nb[o] = band.blocks.find(morton3(bx + std::uint32_t(o & 1), by + std::uint32_t((o >> 1) & 1),
-                                               bz + std::uint32_t(o >> 2)));
+            corner_blocks(band, b, 7, nb);
             looked = true;
           }
-          std::uint64_t qb[8], qi[8], qo[8];
+          std::uint64_t complete;
           std::size_t cw[8];  // the words themselves (CellWords)
-          for (int d = 0; d < 8; ++d) {
-            const int o = s & d, t = s ^ d;  // block offset (carry), word in that block
-            const std::uint32_t nbo = nb[o];
-            if (nbo == ~0u) {
-              qb[d] = qi[d] = qo[d] = 0;
-              cw[d] = ~std::size_t(0);
-              continue;
-            }
-            const std::size_t nw = std::size_t(nbo) * 8 + std::size_t(t);
-            cw[d] = nw;
-            qb[d] = band.words(nw);
-            qi[d] = inside(nw);
-            qo[d] = qb[d] & ~qi[d];
-          }
-          const std::uint64_t complete = all_corners(qb);
-          if (!complete) continue;
-          std::uint64_t cand = complete & ~all_corners(qi) & ~all_corners(qo);
+          std::uint64_t cand = mixed_cells(band, inside, nb, s, complete, cw);
           const std::int64_t base = std::int64_t(band.word_offset(w));
           while (cand) {
             const int bit = ctz64(cand);
@@ -358,15 +392,33 @@ McResult classify_cells(const ExecSpace& space, MemoryTracker& tracker,
           corners_from_words(band, cw, bit, idx);  // cell_corners's values, without block lookups
           classify(self, idx);
         });
-  else
-    for_each_band_vertex(
-        space, "nbmc::marching_cubes::cases", band, n_words,
-        KOKKOS_LAMBDA(const std::size_t w, const int bit, const std::int64_t self) {
-          std::int64_t i, j, k, idx[8];
-          band.vertex(w, bit, i, j, k);
-          if (!band.owns_cell(i, j, k) || !cell_corners(band, i, j, k, self, idx, std::uint32_t(w >> 3))) return;
-          classify(self, idx);
+  else {
+    // The same filter, one thread per word (instead of one per vertex slot,
+    // each looking up its cell's corners).
+    const auto in_view = inside_masks(space, tracker, band, n_words, phi);
+    const Kokkos::View<const std::uint64_t*, typename ExecSpace::memory_space> inside = in_view.view();
+    Kokkos::parallel_for(
+        "nbmc::marching_cubes::cases", Kokkos::RangePolicy<ExecSpace>(space, 0, n_words),
+        KOKKOS_LAMBDA(const std::size_t w) {
+          const std::uint64_t word = band.words(w);
+          if (!word) return;
+          std::uint32_t nb[8];
+          corner_blocks(band, w >> 3, int(w & 7), nb);
+          std::uint64_t complete;
+          std::size_t cw[8];
+          std::uint64_t cand = mixed_cells(band, inside, nb, int(w & 7), complete, cw);
+          const std::int64_t base = std::int64_t(band.word_offset(w));
+          while (cand) {
+            const int bit = ctz64(cand);
+            cand &= cand - 1;
+            std::int64_t i, j, k, idx[8];
+            band.vertex(w, bit, i, j, k);
+            if (!band.owns_cell(i, j, k) || !cell_in_grid(band, i, j, k)) continue;
+            corners_from_words(band, cw, bit, idx);
+            classify(base + std::int64_t(popcount64(word & ((std::uint64_t(1) << bit) - 1))), idx);
+          }
         });
+  }
   space.fence();
   std::uint64_t cells = 0;
   Kokkos::parallel_reduce(
