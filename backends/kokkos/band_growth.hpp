@@ -371,7 +371,8 @@ void grow_band(const ExecSpace& space, MemoryTracker& tracker, const Grid& g,
                     std::int64_t(bv.word_offset(w) + popcount64(word & ((std::uint64_t(1) << bit) - 1)));
                 std::int64_t i, j, k, out[18];
                 bv.vertex(w, bit, i, j, k);
-                const int n = leaks_at(bv, cur_phi, i, j, k, self, out, std::uint32_t(w >> 3), bit, mx(2 * w + 1), cw);
+                const int n =
+                    leaks_at(bv, cur_phi, i, j, k, self, out, std::uint32_t(w >> 3), bit, mx(2 * w + 1), cw, mx.data() + 1);
                 if (n) rec.add_leaks(bv, out, n);
               });
         }

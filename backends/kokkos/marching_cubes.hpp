@@ -448,11 +448,15 @@ McResult classify_cells(const ExecSpace& space, MemoryTracker& tracker,
 // in the same word is then known to be entirely in the band when its bit of
 // `complete` is set (its corners' band bits are set, and the grid check
 // below holds), without the 8 look-ups (bit < 0: always the look-ups).
+// word_complete (the GPU's scan: the complete masks of all words, at
+// word_complete[2 w]) extends that to a neighbour whose minimum corner lies
+// in the next or the previous word along the face's axis.
 template <class MemSpace>
 KOKKOS_INLINE_FUNCTION int leaks_at(const BandView<MemSpace>& band, const Kokkos::View<const float*, MemSpace>& phi,
                                     std::int64_t i, std::int64_t j, std::int64_t k, std::int64_t self,
                                     std::int64_t out[18], std::uint32_t block = ~0u, int bit = -1,
-                                    std::uint64_t complete = 0, const std::size_t* cw = nullptr) {
+                                    std::uint64_t complete = 0, const std::size_t* cw = nullptr,
+                                    const std::uint64_t* word_complete = nullptr) {
   std::int64_t idx[8];
   if (!band.owns_cell(i, j, k)) return 0;
   if (cw) {  // the host scan's complete cell: its corners from its words
@@ -478,6 +482,30 @@ KOKKOS_INLINE_FUNCTION int leaks_at(const BandView<MemSpace>& band, const Kokkos
     if (bit >= 0) {
       const int nl = ((bit >> (2 * a)) & 3) + (side ? 1 : -1);
       if (nl >= 0 && nl < 4 && ((complete >> (bit + (side ? 1 : -1) * (1 << (2 * a)))) & 1)) continue;
+      if ((nl < 0 || nl > 3) && word_complete) {
+        // The neighbour's minimum corner in the next word along a (a
+        // corner word), or in the previous one (in this block, or in the
+        // block before it along a, looked up), at the other end of the axis.
+        std::size_t nw = ~std::size_t(0);
+        const std::size_t w = cw[0];
+        const int s = int(w & 7);
+        if (side) {
+          nw = cw[1 << a];
+        } else if ((s >> a) & 1) {
+          nw = w - (std::size_t(1) << a);
+        } else {
+          const std::uint64_t key = band.block_keys(w >> 3);
+          std::uint32_t bc[3] = {std::uint32_t(compact3(key)), std::uint32_t(compact3(key >> 1)),
+                                 std::uint32_t(compact3(key >> 2))};
+          if (bc[a] > 0) {
+            bc[a] -= 1;
+            const std::uint32_t nb = band.blocks.find(morton3(bc[0], bc[1], bc[2]));
+            if (nb != ~0u) nw = std::size_t(nb) * 8 + std::size_t(s | (1 << a));
+          }
+        }
+        const int nbit = (bit & ~(3 << (2 * a))) | ((nl & 3) << (2 * a));
+        if (nw != ~std::size_t(0) && ((word_complete[2 * nw] >> nbit) & 1)) continue;
+      }
     }
     std::int64_t nidx[8];
     if (band.cell_indices(ni, nj, nk, 0, nidx)) continue;  // entirely in the band
