@@ -276,7 +276,8 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
   if (p.field == FieldKind::NarrowBand) {
     Buffer<std::uint8_t, MemSpace> flags(tracker, "surface_particles::flags", nbh.n);
     st.surface_particles = mark_surface_particles(
-        space, nb, Kokkos::View<const std::uint64_t*, MemSpace>(nbh.cell_keys.view()), nbh.n_cells, p, g, flags.view());
+        space, nb, Kokkos::View<const std::uint64_t*, MemSpace>(nbh.cell_keys.view()), nbh.n_cells, p, g, flags.view(),
+        &tracker);
     if (region_in) {
       // A subdomain counts the surface particles in its own cells only, so
       // that the counts of all subdomains add up to the frame's.

@@ -31,6 +31,7 @@
 #include "scalar_field.hpp"  // host_simd_lanes, NBMC_HOST_AVX2 / NBMC_HOST_AVX512
 
 #include <cmath>
+#include <cstdlib>
 
 namespace nbmc {
 namespace Details {
@@ -257,12 +258,105 @@ KOKKOS_INLINE_FUNCTION std::size_t surface_particles_of_cell(const NeighbourView
   return surface;
 }
 
+// GPU, without radii: the flags of surface_particles_of_cell, one thread per
+// particle instead of one per cell (a cell's particles are neighbouring
+// threads with the same 27 cells to walk, where the per-cell threads were
+// few, about a wave of the GPU, each looping over its particles). Each
+// particle's sums are those of surface_particles_of_cell, in its order;
+// then, per cell, the safety net (no surface particle and an empty face
+// neighbour: all surface). Crowded cells are all surface, as there.
+template <class ExecSpace>
+std::size_t mark_surface_particles_device(const ExecSpace& space, MemoryTracker& tracker,
+                                          const NeighbourView<typename ExecSpace::memory_space>& nb,
+                                          const Kokkos::View<const std::uint64_t*, typename ExecSpace::memory_space>& keys,
+                                          std::size_t n_cells, float h, float scale, float threshold,
+                                          int min_neighbours,
+                                          const Kokkos::View<std::uint8_t*, typename ExecSpace::memory_space>& flags) {
+  using MemSpace = typename ExecSpace::memory_space;
+  using Range = Kokkos::RangePolicy<ExecSpace>;
+  const std::size_t n = nb.n;
+  if (n == 0 || n_cells == 0) return 0;
+  Buffer<std::uint32_t, MemSpace> cell_of_buf(tracker, "surface_particles::cell_of", n);
+  const Kokkos::View<std::uint32_t*, MemSpace> cell_of = cell_of_buf.view();
+  const auto start = nb.cell_start;
+  Kokkos::parallel_for(
+      "nbmc::surface_particles::cell_of", Range(space, 0, n_cells), KOKKOS_LAMBDA(const std::size_t c) {
+        for (std::uint32_t i = start(c); i < start(c + 1); ++i) cell_of(i) = std::uint32_t(c);
+      });
+  const float h2 = h * h;
+  Kokkos::parallel_for(
+      "nbmc::surface_particles::particles", Range(space, 0, n), KOKKOS_LAMBDA(const std::size_t pi) {
+        const std::uint32_t i = std::uint32_t(pi);
+        const std::uint32_t c = cell_of(i);
+        if (start(c + 1) - start(c) > kCrowdedCell) {
+          flags(i) = 1;
+          return;
+        }
+        std::int64_t cx, cy, cz;
+        neighbour_cell_of_key(keys(c), nb.nb_dims, cx, cy, cz);
+        const float* X = nb.pos.data();
+        const float* Y = X + nb.n;
+        const float* Z = Y + nb.n;
+        const float xi = X[i], yi = Y[i], zi = Z[i];
+        float gx = 0, gy = 0, gz = 0;
+        int count = 0;
+        for (std::int64_t z = cz - 1; z <= cz + 1; ++z)
+          for (std::int64_t y = cy - 1; y <= cy + 1; ++y)
+            for (std::int64_t x = cx - 1; x <= cx + 1; ++x) {
+              if (x < 0 || y < 0 || z < 0 || x >= nb.nb_dims[0] || y >= nb.nb_dims[1] || z >= nb.nb_dims[2]) continue;
+              std::uint32_t b, e;
+              if (!nb.cell_range(x, y, z, b, e)) continue;
+              for (std::uint32_t j = b; j < e; ++j) {
+                const float dx = xi - X[j], dy = yi - Y[j], dz = zi - Z[j];
+                const float d2 = dx * dx + dy * dy + dz * dz;
+                const float q = d2 < h2 ? h2 - d2 : 0.f;
+                const float w = q * q;  // grad W ~ (h^2 - d^2)^2 (x_i - x_j); 0 for i itself
+                gx += w * dx;
+                gy += w * dy;
+                gz += w * dz;
+                count += d2 < h2 ? 1 : 0;
+              }
+            }
+        const int neighbours = count - 1;  // i itself is counted
+        const float grad_h = Kokkos::Experimental::sqrt(gx * gx + gy * gy + gz * gz) * scale;
+        flags(i) = neighbours < min_neighbours || grad_h > threshold ? 1 : 0;
+      });
+  // The safety net, per cell (surface_particles_of_cell's).
+  Kokkos::parallel_for(
+      "nbmc::surface_particles::safety_net", Range(space, 0, n_cells), KOKKOS_LAMBDA(const std::size_t c) {
+        const std::uint32_t first = start(c), last = start(c + 1);
+        if (last - first > kCrowdedCell) return;
+        for (std::uint32_t i = first; i < last; ++i)
+          if (flags(i)) return;
+        std::int64_t cx, cy, cz;
+        neighbour_cell_of_key(keys(c), nb.nb_dims, cx, cy, cz);
+        bool face_empty =
+            cx == 0 || cy == 0 || cz == 0 || cx + 1 >= nb.nb_dims[0] || cy + 1 >= nb.nb_dims[1] || cz + 1 >= nb.nb_dims[2];
+        for (int f = 0; f < 6 && !face_empty; ++f) {
+          const std::int64_t d = (f & 1) ? 1 : -1;
+          const std::int64_t x = cx + (f / 2 == 0 ? d : 0), y = cy + (f / 2 == 1 ? d : 0), z = cz + (f / 2 == 2 ? d : 0);
+          std::uint32_t b, e;
+          if (!nb.cell_range(x, y, z, b, e)) face_empty = true;
+        }
+        if (!face_empty) return;
+        for (std::uint32_t i = first; i < last; ++i) flags(i) = 1;
+      });
+  std::size_t count = 0;
+  Kokkos::parallel_reduce(
+      "nbmc::surface_particles::count", Range(space, 0, n),
+      KOKKOS_LAMBDA(const std::size_t i, std::size_t& acc) { acc += flags(i) ? 1 : 0; }, count);
+  space.fence();
+  return count;
+}
+
 // flags(i) = 1 for surface particles (sorted order); returns their count.
+// tracker: for the GPU's per-particle pass (without it, per cell there too).
 template <class ExecSpace>
 std::size_t mark_surface_particles(const ExecSpace& space, const NeighbourView<typename ExecSpace::memory_space>& nb,
                                    const Kokkos::View<const std::uint64_t*, typename ExecSpace::memory_space>& keys,
                                    std::size_t n_cells, const Params& p, const Grid& g,
-                                   const Kokkos::View<std::uint8_t*, typename ExecSpace::memory_space>& flags) {
+                                   const Kokkos::View<std::uint8_t*, typename ExecSpace::memory_space>& flags,
+                                   MemoryTracker* tracker = nullptr) {
   ScopedRegion region("nbmc::surface_particles");
   const float h = float(p.surface_radius);
   const int range = int(std::ceil(p.surface_radius / g.nb_cell));
@@ -288,6 +382,11 @@ std::size_t mark_surface_particles(const ExecSpace& space, const NeighbourView<t
         count);
     space.fence();
     return count;
+  }
+  if constexpr (!Kokkos::SpaceAccessibility<Kokkos::HostSpace, typename ExecSpace::memory_space>::accessible) {
+    if (tracker && !std::getenv("NBMC_SURFACE_PER_CELL"))
+      return mark_surface_particles_device(space, *tracker, nb, keys, n_cells, h, scale, threshold, min_neighbours,
+                                           flags);
   }
   Kokkos::parallel_reduce(
       "nbmc::surface_particles",
