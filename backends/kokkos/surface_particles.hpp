@@ -132,6 +132,34 @@ inline int surface_sums_host(const float* X, const float* Y, const float* Z, con
 }
 #endif
 
+// Adds the colour-gradient terms of particles [b, e) at particle i (xi, yi,
+// zi) to gx, gy, gz and counts those within h (h2 = h^2), one after the
+// other: the GPU's order (the host's lanes use the same operations).
+KOKKOS_INLINE_FUNCTION void add_surface_pairs(const float* X, const float* Y, const float* Z, std::uint32_t b,
+                                              std::uint32_t e, float xi, float yi, float zi, float h2, float& gx,
+                                              float& gy, float& gz, int& count) {
+  for (std::uint32_t j = b; j < e; ++j) {
+    const float dx = xi - X[j], dy = yi - Y[j], dz = zi - Z[j];
+    const float d2 = dx * dx + dy * dy + dz * dz;
+    const float q = d2 < h2 ? h2 - d2 : 0.f;
+    const float w = q * q;  // grad W ~ (h^2 - d^2)^2 (x_i - x_j); 0 for i itself
+    gx += w * dx;
+    gy += w * dy;
+    gz += w * dz;
+    count += d2 < h2 ? 1 : 0;
+  }
+}
+
+// Whether a particle with these sums (count includes itself) is a surface
+// particle: fewer neighbours than min_neighbours, or |grad c| h above the
+// threshold (scale: the kernel's constant for this particle).
+KOKKOS_INLINE_FUNCTION bool surface_test(float gx, float gy, float gz, int count, float scale, float threshold,
+                                         int min_neighbours) {
+  const int neighbours = count - 1;  // the particle itself is counted
+  const float grad_h = Kokkos::Experimental::sqrt(gx * gx + gy * gy + gz * gz) * scale;
+  return neighbours < min_neighbours || grad_h > threshold;
+}
+
 // Marks the particles of occupied neighbour cell `cell`: the 27 neighbour
 // cells around it (range 1) are looked up once for all particles of the cell. Each
 // particle's colour gradient is summed in one order on every backend: the
@@ -184,9 +212,7 @@ KOKKOS_INLINE_FUNCTION std::size_t surface_particles_of_cell(const NeighbourView
   const float h2 = h * h;
   std::size_t surface = 0;
   auto mark = [&](std::uint32_t i, float gx, float gy, float gz, int count, float scale_i) {
-    const int neighbours = count - 1;  // i itself is counted
-    const float grad_h = Kokkos::Experimental::sqrt(gx * gx + gy * gy + gz * gz) * scale_i;
-    const bool is_surface = neighbours < min_neighbours || grad_h > threshold;
+    const bool is_surface = surface_test(gx, gy, gz, count, scale_i, threshold, min_neighbours);
     flags(i) = is_surface ? 1 : 0;
     surface += is_surface ? 1 : 0;
   };
@@ -219,17 +245,7 @@ KOKKOS_INLINE_FUNCTION std::size_t surface_particles_of_cell(const NeighbourView
     const float xi = X[i], yi = Y[i], zi = Z[i];
     float gx = 0, gy = 0, gz = 0;
     int count = 0;
-    for (int c = 0; c < n_cells; ++c)
-      for (std::uint32_t j = begin[c]; j < end[c]; ++j) {
-        const float dx = xi - X[j], dy = yi - Y[j], dz = zi - Z[j];
-        const float d2 = dx * dx + dy * dy + dz * dz;
-        const float q = d2 < h2 ? h2 - d2 : 0.f;
-        const float w = q * q;  // grad W ~ (h^2 - d^2)^2 (x_i - x_j); 0 for i itself
-        gx += w * dx;
-        gy += w * dy;
-        gz += w * dz;
-        count += d2 < h2 ? 1 : 0;
-      }
+    for (int c = 0; c < n_cells; ++c) add_surface_pairs(X, Y, Z, begin[c], end[c], xi, yi, zi, h2, gx, gy, gz, count);
     mark(i, gx, gy, gz, count, scale);
   }
 #else
@@ -305,21 +321,9 @@ std::size_t mark_surface_particles_device(const ExecSpace& space, MemoryTracker&
             for (std::int64_t x = cx - 1; x <= cx + 1; ++x) {
               if (x < 0 || y < 0 || z < 0 || x >= nb.nb_dims[0] || y >= nb.nb_dims[1] || z >= nb.nb_dims[2]) continue;
               std::uint32_t b, e;
-              if (!nb.cell_range(x, y, z, b, e)) continue;
-              for (std::uint32_t j = b; j < e; ++j) {
-                const float dx = xi - X[j], dy = yi - Y[j], dz = zi - Z[j];
-                const float d2 = dx * dx + dy * dy + dz * dz;
-                const float q = d2 < h2 ? h2 - d2 : 0.f;
-                const float w = q * q;  // grad W ~ (h^2 - d^2)^2 (x_i - x_j); 0 for i itself
-                gx += w * dx;
-                gy += w * dy;
-                gz += w * dz;
-                count += d2 < h2 ? 1 : 0;
-              }
+              if (nb.cell_range(x, y, z, b, e)) add_surface_pairs(X, Y, Z, b, e, xi, yi, zi, h2, gx, gy, gz, count);
             }
-        const int neighbours = count - 1;  // i itself is counted
-        const float grad_h = Kokkos::Experimental::sqrt(gx * gx + gy * gy + gz * gz) * scale;
-        flags(i) = neighbours < min_neighbours || grad_h > threshold ? 1 : 0;
+        flags(i) = surface_test(gx, gy, gz, count, scale, threshold, min_neighbours) ? 1 : 0;
       });
   // The safety net, per cell (surface_particles_of_cell's).
   Kokkos::parallel_for(
