@@ -530,13 +530,8 @@ void grow_band(const ExecSpace& space, MemoryTracker& tracker, const Grid& g,
       grown.word_offset = reuse_or_allocate(tracker, spare.word_offset, n_new * 8, "band::word_offset");
       {
         const auto words = Kokkos::View<const std::uint64_t*, MemSpace>(grown.words.view());
-        const auto offs = grown.word_offset.view();
-        Kokkos::parallel_scan(
-            "nbmc::band_growth::prefix", Range(space, 0, n_new * 8),
-            KOKKOS_LAMBDA(const std::size_t w, std::uint64_t& update, const bool final) {
-              if (final) offs(w) = update;
-              update += std::uint64_t(popcount64(words(w)));
-            });
+        prefix_counts(space, tracker, "nbmc::band_growth::prefix", n_new * 8, grown.word_offset.view(),
+                      KOKKOS_LAMBDA(const std::size_t w) { return std::uint64_t(popcount64(words(w))); }, false);
       }
       grown.n_vertices = band.n_vertices + hc[kFreshCount];
       trace("growth: extend (device)", n_new);

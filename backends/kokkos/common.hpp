@@ -215,9 +215,10 @@ struct HashMap {
   }
   // Whether the key is in the map while other threads may be inserting: a
   // key seen is there for good, a false may be stale (the caller then
-  // inserts). Host passes call it before insert, whose compare-and-swap
-  // takes the slot's cache line exclusively even for a key already there
-  // (most of their inserts), which contends between threads.
+  // inserts). Passes whose inserts mostly find their key call it first:
+  // insert's compare-and-swap takes the slot exclusively even for a key
+  // already there (host: its cache line, contended between threads; GPU:
+  // atomics on one address serialise).
   KOKKOS_INLINE_FUNCTION bool seen(std::uint64_t key) const {
     std::uint64_t slot = hash64(key) & mask;
     while (true) {
@@ -269,6 +270,15 @@ void device_sort_pairs(const Kokkos::Cuda& space, MemoryTracker& tracker, std::u
                        std::uint64_t* keys_out, std::uint32_t* vals_in, std::uint32_t* vals_out, std::size_t n,
                        int end_bit);
 
+// In-place exclusive prefix sum of n values on the GPU (CUB's single-pass
+// scan, pipeline_cuda.cpp; queued on `space`, not fenced). Kokkos 3.4's
+// parallel_scan runs two passes over its functor: about 160 µs for the
+// 6.8 M band vertices of the 1.65 M frame at r/2 (ncu, H100), several times
+// this one. uint32 sums wrap modulo 2^32 as the truncated uint64 prefix of
+// the Kokkos path does.
+void device_exclusive_sum(const Kokkos::Cuda& space, MemoryTracker& tracker, std::uint32_t* data, std::size_t n);
+void device_exclusive_sum(const Kokkos::Cuda& space, MemoryTracker& tracker, std::uint64_t* data, std::size_t n);
+
 // One device array to copy into host memory.
 struct DownloadSegment {
   void* host;
@@ -282,22 +292,64 @@ struct DownloadSegment {
 void download_segments(const Kokkos::Cuda& space, const DownloadSegment* segments, std::size_t n);
 #endif
 
-// Exclusive scan of counts into offsets (which may be the same view); returns the total.
-template <class ExecSpace, class CountView, class OffsetView>
-std::uint64_t exclusive_scan(const ExecSpace& space, const std::string& label, const CountView& counts,
-                             const OffsetView& offsets) {
-  std::uint64_t total = 0;
+// Exclusive prefix sums of count(i), i < n, into offsets (a view of uint32 or
+// uint64): offsets(i) = count(0) + ... + count(i - 1), truncated to the
+// view's type; returns the total, exact in 64 bits (also where 32-bit
+// offsets wrap). `count` may read offsets(i) itself (it is read before that
+// is written). Host: one Kokkos scan. GPU: one pass writes the counts and
+// sums them, then device_exclusive_sum scans them in place. With
+// need_total false: returns 0, and on the GPU nothing waits for the device.
+template <class ExecSpace, class OffsetView, class Count>
+std::uint64_t prefix_counts(const ExecSpace& space, MemoryTracker& tracker, const std::string& label, std::size_t n,
+                            const OffsetView& offsets, const Count& count, bool need_total = true) {
   using value_t = typename OffsetView::value_type;
-  Kokkos::parallel_scan(
-      label, Kokkos::RangePolicy<ExecSpace>(space, 0, counts.extent(0)),
-      KOKKOS_LAMBDA(const std::size_t i, std::uint64_t& update, const bool final) {
-        const std::uint64_t c = counts(i);  // read first: counts and offsets may alias
-        if (final) offsets(i) = value_t(update);
-        update += c;
-      },
-      total);
+  static_assert(std::is_same<value_t, std::uint32_t>::value || std::is_same<value_t, std::uint64_t>::value,
+                "offsets of uint32 or uint64");
+  std::uint64_t total = 0;
+  if (n == 0) return 0;
+#if defined(KOKKOS_ENABLE_CUDA)
+  if constexpr (std::is_same<ExecSpace, Kokkos::Cuda>::value) {
+    if (!need_total) {
+      Kokkos::parallel_for(
+          label, Kokkos::RangePolicy<ExecSpace>(space, 0, n),
+          KOKKOS_LAMBDA(const std::size_t i) { offsets(i) = value_t(count(i)); });
+      device_exclusive_sum(space, tracker, offsets.data(), n);
+      return 0;
+    }
+    Kokkos::parallel_reduce(
+        label, Kokkos::RangePolicy<ExecSpace>(space, 0, n),
+        KOKKOS_LAMBDA(const std::size_t i, std::uint64_t& acc) {
+          const std::uint64_t c = std::uint64_t(count(i));
+          offsets(i) = value_t(c);
+          acc += c;
+        },
+        total);
+    device_exclusive_sum(space, tracker, offsets.data(), n);
+    space.fence();
+    return total;
+  }
+#endif
+  (void)tracker;
+  const auto scan = KOKKOS_LAMBDA(const std::size_t i, std::uint64_t& update, const bool final) {
+    const std::uint64_t c = std::uint64_t(count(i));  // read first: count may read offsets(i)
+    if (final) offsets(i) = value_t(update);
+    update += c;
+  };
+  if (!need_total) {
+    Kokkos::parallel_scan(label, Kokkos::RangePolicy<ExecSpace>(space, 0, n), scan);
+    return 0;
+  }
+  Kokkos::parallel_scan(label, Kokkos::RangePolicy<ExecSpace>(space, 0, n), scan, total);
   space.fence();
   return total;
+}
+
+// Exclusive scan of counts into offsets (which may be the same view); returns the total.
+template <class ExecSpace, class CountView, class OffsetView>
+std::uint64_t exclusive_scan(const ExecSpace& space, MemoryTracker& tracker, const std::string& label,
+                             const CountView& counts, const OffsetView& offsets) {
+  return prefix_counts(space, tracker, label, counts.extent(0), offsets,
+                       KOKKOS_LAMBDA(const std::size_t i) { return counts(i); });
 }
 
 }  // namespace Details

@@ -425,17 +425,11 @@ McResult classify_cells(const ExecSpace& space, MemoryTracker& tracker,
       "nbmc::marching_cubes::count_cells", Kokkos::RangePolicy<ExecSpace>(space, 0, nb),
       KOKKOS_LAMBDA(const std::size_t v, std::uint64_t& acc) { acc += tri_offset(v) ? 1 : 0; }, cells);
   r.cells = cells;
-  std::uint64_t nverts = 0;
-  Kokkos::parallel_scan(
-      "nbmc::marching_cubes::number_vertices", Kokkos::RangePolicy<ExecSpace>(space, 0, nb),
-      KOKKOS_LAMBDA(const std::size_t v, std::uint64_t& update, const bool final) {
-        if (final) vert_offset(v) = std::uint32_t(update);
-        update += popcount64((info(v) >> 8) & 7u);
-      },
-      nverts);
-  space.fence();
+  const std::uint64_t nverts =
+      prefix_counts(space, tracker, "nbmc::marching_cubes::number_vertices", nb, vert_offset,
+                    KOKKOS_LAMBDA(const std::size_t v) { return std::uint32_t(popcount64((info(v) >> 8) & 7u)); });
   r.vertices = nverts;
-  r.triangles = exclusive_scan(space, "nbmc::marching_cubes::number_triangles", tri_offset, tri_offset);
+  r.triangles = exclusive_scan(space, tracker, "nbmc::marching_cubes::number_triangles", tri_offset, tri_offset);
   return r;
 }
 

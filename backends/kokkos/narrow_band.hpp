@@ -176,17 +176,8 @@ void finish_band(const ExecSpace& space, MemoryTracker& tracker, Band<typename E
   using MemSpace = typename ExecSpace::memory_space;
   band.word_offset = Buffer<std::uint64_t, MemSpace>(tracker, "band::word_offset", band.n_blocks * 8);
   auto words = band.words.view();
-  auto offs = band.word_offset.view();
-  std::uint64_t total = 0;
-  Kokkos::parallel_scan(
-      "nbmc::band::prefix", Kokkos::RangePolicy<ExecSpace>(space, 0, band.n_blocks * 8),
-      KOKKOS_LAMBDA(const std::size_t w, std::uint64_t& update, const bool final) {
-        if (final) offs(w) = update;
-        update += popcount64(words(w));
-      },
-      total);
-  space.fence();
-  band.n_vertices = total;
+  band.n_vertices = prefix_counts(space, tracker, "nbmc::band::prefix", band.n_blocks * 8, band.word_offset.view(),
+                                  KOKKOS_LAMBDA(const std::size_t w) { return popcount64(words(w)); });
 }
 
 // Sorted unique keys from a hash map's key array (host sort: few keys).
@@ -302,10 +293,13 @@ void build_narrow_band(const ExecSpace& space, MemoryTracker& tracker, const Gri
           for (std::int64_t by = lo[1] >> 3; by <= (hi[1] >> 3); ++by)
             for (std::int64_t bx = lo[0] >> 3; bx <= (hi[0] >> 3); ++bx) {
               const std::uint64_t key = morton3(std::uint32_t(bx), std::uint32_t(by), std::uint32_t(bz));
-              // Host: most keys are in already (HashMap::seen). A plain if
-              // (constant, folded): nvcc rejects a lambda whose first use of
-              // a captured variable is inside an if constexpr.
-              if (HostMemory::accessible && map.seen(key)) continue;
+              // Most keys are in already (HashMap::seen): neighbouring
+              // surface particles' boxes overlap. A read skips the
+              // compare-and-swap, which takes the slot exclusively (host:
+              // the cache line; GPU: same-address atomics serialise; ncu,
+              // H100, 1.65 M frame at r/2: this kernel and the count before
+              // it 683 -> 447 µs).
+              if (map.seen(key)) continue;
               if (map.insert(key)) ++acc;
             }
       },
@@ -350,7 +344,11 @@ void build_narrow_band(const ExecSpace& space, MemoryTracker& tracker, const Gri
               // Host: neighbouring surface particles' boxes overlap, so most
               // of these bits are set already; a read (bits once set stay
               // set) skips the atomic, which takes the line exclusively and
-              // contends between threads. The same words either way.
+              // contends between threads. The same words either way. Not on
+              // the GPU: the read made the kernel slower (ncu, H100: 245 ->
+              // 359 µs on the 1.65 M frame at r/2; bench/RESULTS.md, session
+              // 26). A plain if (constant, folded): nvcc rejects a lambda
+              // whose first use of a captured variable is in an if constexpr.
               if (HostMemory::accessible && (Kokkos::volatile_load(&words(w)) & mask) == mask) continue;
               Kokkos::atomic_fetch_or(&words(w), mask);
             }

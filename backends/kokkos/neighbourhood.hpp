@@ -205,7 +205,7 @@ void build_dense_cells(const ExecSpace& space, MemoryTracker& tracker, const Gri
   Kokkos::parallel_for(
       "nbmc::neighbourhood::dense_cells", Kokkos::RangePolicy<ExecSpace>(space, 0, out.n_cells),
       KOKKOS_LAMBDA(const std::size_t c) { start(std::size_t(keys(c))) = cs(c + 1) - cs(c); });
-  exclusive_scan(space, "nbmc::neighbourhood::dense_starts", start, start);
+  exclusive_scan(space, tracker, "nbmc::neighbourhood::dense_starts", start, start);
 }
 
 // The cell lookups of a built neighbourhood: the dense table where it is

@@ -8,6 +8,7 @@
 
 #if defined(KOKKOS_ENABLE_CUDA)
 #include <cub/device/device_radix_sort.cuh>
+#include <cub/device/device_scan.cuh>
 #include <cuda_runtime.h>
 #endif
 
@@ -241,6 +242,26 @@ void device_sort_pairs(const Kokkos::Cuda& space, MemoryTracker& tracker, std::u
                                              0, end_bit, stream),
              "radix sort");
   space.fence();
+}
+
+namespace {
+template <class T>
+void exclusive_sum_in_place(const Kokkos::Cuda& space, MemoryTracker& tracker, T* data, std::size_t n) {
+  if (n == 0) return;
+  const cudaStream_t stream = space.cuda_stream();
+  std::size_t temp_bytes = 0;
+  cuda_check(cub::DeviceScan::ExclusiveSum(nullptr, temp_bytes, data, n, stream), "prefix sum (size query)");
+  Buffer<unsigned char, Kokkos::CudaSpace> temp(tracker, "scan_temp", temp_bytes);
+  cuda_check(cub::DeviceScan::ExclusiveSum(temp.data(), temp_bytes, data, n, stream), "prefix sum");
+}
+}  // namespace
+
+void device_exclusive_sum(const Kokkos::Cuda& space, MemoryTracker& tracker, std::uint32_t* data, std::size_t n) {
+  exclusive_sum_in_place(space, tracker, data, n);
+}
+
+void device_exclusive_sum(const Kokkos::Cuda& space, MemoryTracker& tracker, std::uint64_t* data, std::size_t n) {
+  exclusive_sum_in_place(space, tracker, data, n);
 }
 
 }  // namespace Details
