@@ -359,6 +359,14 @@ KOKKOS_INLINE_FUNCTION std::uint64_t positive_double_bits(double d) {
   return b.u;
 }
 
+// Longest run of equal (cell key, x) that the one-sort path orders by one
+// thread; NBMC_SORT_PASSES=1 takes the four sort passes always (tests).
+constexpr std::size_t kMaxTieRun = 64;
+inline bool one_sort_allowed() {
+  const char* e = std::getenv("NBMC_SORT_PASSES");
+  return !(e && std::string(e) == "1");
+}
+
 // The same neighbourhood, built on the device from device positions (absolute,
 // double, 3 per particle; `keep`, if not empty, selects the particles, in
 // increasing order). The handlers are sorted by four stable radix sorts, least
@@ -411,7 +419,59 @@ void build_neighbourhood_device(const ExecSpace& space, MemoryTracker& tracker,
   std::uint64_t* keys_in = ka.data();
   std::uint64_t* keys_out = kb.data();
   const bool by_radius = radii.extent(0) > 0;
-  for (int pass = by_radius ? -1 : 0; pass < 4; ++pass) {  // (radius,) z, y, x, cell key
+  // The sorted keys are the cell keys shifted left by key_shift bits.
+  int key_shift = 0;
+  if (!by_radius && key_bits <= 32 && one_sort_allowed()) {
+    // One sort by (cell key, x), then the runs of equal (cell key, x) put in
+    // (y, z) order by one thread each: the same order as the four passes
+    // below, since the sort is stable (equal y and z stay in index order).
+    // Such runs are rare (equal float x in one cell: duplicates, lattices);
+    // one longer than kMaxTieRun sends the whole sort to the four passes.
+    Kokkos::parallel_for(
+        "nbmc::neighbourhood::cell_x_keys", Range(space, 0, n), KOKKOS_LAMBDA(const std::size_t i) {
+          keys_in[i] = (cellv(i) << 32) | float_order_bits(relv(i));
+        });
+    device_sort_pairs(space, tracker, keys_in, keys_out, order, other, n, 32 + key_bits);
+    const std::uint64_t* const sk = keys_out;
+    std::uint32_t* const sorted = other;
+    std::uint64_t too_long = 0;
+    Kokkos::parallel_reduce(
+        "nbmc::neighbourhood::tied_x", Range(space, 0, n),
+        KOKKOS_LAMBDA(const std::size_t i, std::uint64_t& bad) {
+          if (i + 1 >= n || sk[i + 1] != sk[i] || (i > 0 && sk[i - 1] == sk[i])) return;
+          std::size_t e = i + 2;
+          while (e < n && sk[e] == sk[i] && e - i <= kMaxTieRun) ++e;
+          if (e - i > kMaxTieRun) {
+            bad += 1;
+            return;
+          }
+          auto yz = [&](const std::uint32_t j) {
+            return (float_order_bits(relv(n + j)) << 32) | float_order_bits(relv(2 * n + j));
+          };
+          for (std::size_t a = i + 1; a < e; ++a) {  // insertion sort, stable
+            const std::uint32_t v = sorted[a];
+            const std::uint64_t kv = yz(v);
+            std::size_t b = a;
+            while (b > i && yz(sorted[b - 1]) > kv) {
+              sorted[b] = sorted[b - 1];
+              --b;
+            }
+            sorted[b] = v;
+          }
+        },
+        too_long);
+    if (too_long == 0) {
+      std::swap(order, other);
+      key_shift = 32;
+    } else {
+      trace("neighbourhood: long tied runs, four sort passes", too_long);
+      const auto ord = va.view();
+      Kokkos::parallel_for(
+          "nbmc::neighbourhood::identity", Range(space, 0, n),
+          KOKKOS_LAMBDA(const std::size_t i) { ord(i) = std::uint32_t(i); });
+    }
+  }
+  for (int pass = by_radius ? -1 : 0; key_shift == 0 && pass < 4; ++pass) {  // (radius,) z, y, x, cell key
     const int axis = 2 - pass;                              // 3: the radius
     std::uint32_t* const cur = order;
     Kokkos::parallel_for(
@@ -443,10 +503,24 @@ void build_neighbourhood_device(const ExecSpace& space, MemoryTracker& tracker,
   }
   // Cells: the runs of equal keys in the sorted sequence.
   const std::uint64_t* const sk = keys_out;
+  const int shift = key_shift;
+  // On the GPU the run starts are numbered by device_exclusive_sum in the
+  // sort's spare order array (`other`, free after the scatter).
+  constexpr bool cuda =
+#if defined(KOKKOS_ENABLE_CUDA)
+      std::is_same<ExecSpace, Kokkos::Cuda>::value;
+#else
+      false;
+#endif
+  std::uint32_t* const first_no = cuda ? other : nullptr;
   std::uint64_t n_cells = 0;
   Kokkos::parallel_reduce(
       "nbmc::neighbourhood::count_cells", Range(space, 0, n),
-      KOKKOS_LAMBDA(const std::size_t i, std::uint64_t& c) { c += (i == 0 || sk[i] != sk[i - 1]) ? 1 : 0; },
+      KOKKOS_LAMBDA(const std::size_t i, std::uint64_t& c) {
+        const bool first = i == 0 || (sk[i] >> shift) != (sk[i - 1] >> shift);
+        if (first_no) first_no[i] = first ? 1u : 0u;
+        c += first ? 1 : 0;
+      },
       n_cells);
   out.n_cells = std::size_t(n_cells);
   out.cell_keys = Buffer<std::uint64_t, MemSpace>(tracker, "neighbourhood::cell_keys", out.n_cells);
@@ -454,16 +528,30 @@ void build_neighbourhood_device(const ExecSpace& space, MemoryTracker& tracker,
   {
     const auto ck = out.cell_keys.view();
     const auto cs = out.cell_start.view();
-    Kokkos::parallel_scan(
-        "nbmc::neighbourhood::cell_starts", Range(space, 0, n),
-        KOKKOS_LAMBDA(const std::size_t i, std::uint64_t& c, const bool final) {
-          const bool first = i == 0 || sk[i] != sk[i - 1];
-          if (final && first) {
-            ck(c) = sk[i];
-            cs(c) = std::uint32_t(i);
-          }
-          c += first ? 1 : 0;
-        });
+#if defined(KOKKOS_ENABLE_CUDA)
+    if constexpr (cuda) {
+      device_exclusive_sum(space, tracker, first_no, n);
+      Kokkos::parallel_for(
+          "nbmc::neighbourhood::cell_starts", Range(space, 0, n), KOKKOS_LAMBDA(const std::size_t i) {
+            if (i == 0 || (sk[i] >> shift) != (sk[i - 1] >> shift)) {
+              ck(first_no[i]) = sk[i] >> shift;
+              cs(first_no[i]) = std::uint32_t(i);
+            }
+          });
+    } else
+#endif
+    {
+      Kokkos::parallel_scan(
+          "nbmc::neighbourhood::cell_starts", Range(space, 0, n),
+          KOKKOS_LAMBDA(const std::size_t i, std::uint64_t& c, const bool final) {
+            const bool first = i == 0 || (sk[i] >> shift) != (sk[i - 1] >> shift);
+            if (final && first) {
+              ck(c) = sk[i] >> shift;
+              cs(c) = std::uint32_t(i);
+            }
+            c += first ? 1 : 0;
+          });
+    }
     Kokkos::deep_copy(space, Kokkos::subview(cs, out.n_cells), std::uint32_t(n));
   }
   space.fence();

@@ -102,6 +102,15 @@ int main(int argc, char** argv) {
     compare("yt10 one-particle sheet", box(slo, one_layer, r), r, cell, NBMC_METHOD_YT10, 4);
     compare("yt10 two touching spheres", concat(sphere(-0.6, 0, 0, 0.6, r), sphere(0.6, 0, 0, 0.6, r)), r, cell,
             NBMC_METHOD_YT10, 3);
+    // The device sort's ties (neighbourhood.hpp): a lattice has runs of
+    // equal x in a neighbour cell (4 at R = 4 r); at R = 20 r they are 100
+    // long (> kMaxTieRun: the four sort passes), as are 100 coincident
+    // particles. SPH and YT10 must match bit for bit, so the order must.
+    compare("sph box, long tied runs", box(lo, hi, r), r, cell, NBMC_METHOD_SPH, 20);
+    Points dup = sphere(0, 0, 0, 0.6, r);
+    for (int i = 0; i < 100; ++i) dup.insert(dup.end(), {0.05, 0.05, 0.05});
+    compare("sph sphere, 100 coincident", dup, r, cell, NBMC_METHOD_SPH, 4);
+    compare("yt10 box", box(lo, hi, r), r, cell, NBMC_METHOD_YT10, 4);
   }
   const std::string dir = argc > 1 ? argv[1] : "../shared/data";
   const struct {
