@@ -316,13 +316,23 @@ std::size_t mark_surface_particles_device(const ExecSpace& space, MemoryTracker&
         const float xi = X[i], yi = Y[i], zi = Z[i];
         float gx = 0, gy = 0, gz = 0;
         int count = 0;
+        // With the dense cell table, a row's three cells are one range of
+        // the sorted particles: one look-up instead of three, the same
+        // particles in the same order.
+        const bool rows = nb.dense_start.extent(0) != 0;
+        const std::int64_t x0 = cx > 0 ? cx - 1 : 0, x1 = cx + 1 < nb.nb_dims[0] ? cx + 1 : cx;
         for (std::int64_t z = cz - 1; z <= cz + 1; ++z)
-          for (std::int64_t y = cy - 1; y <= cy + 1; ++y)
-            for (std::int64_t x = cx - 1; x <= cx + 1; ++x) {
-              if (x < 0 || y < 0 || z < 0 || x >= nb.nb_dims[0] || y >= nb.nb_dims[1] || z >= nb.nb_dims[2]) continue;
-              std::uint32_t b, e;
-              if (nb.cell_range(x, y, z, b, e)) add_surface_pairs(X, Y, Z, b, e, xi, yi, zi, h2, gx, gy, gz, count);
+          for (std::int64_t y = cy - 1; y <= cy + 1; ++y) {
+            if (y < 0 || z < 0 || y >= nb.nb_dims[1] || z >= nb.nb_dims[2]) continue;
+            std::uint32_t b, e;
+            if (rows) {
+              nb.row_range(x0, x1, y, z, b, e);
+              add_surface_pairs(X, Y, Z, b, e, xi, yi, zi, h2, gx, gy, gz, count);
+              continue;
             }
+            for (std::int64_t x = x0; x <= x1; ++x)
+              if (nb.cell_range(x, y, z, b, e)) add_surface_pairs(X, Y, Z, b, e, xi, yi, zi, h2, gx, gy, gz, count);
+          }
         flags(i) = surface_test(gx, gy, gz, count, scale, threshold, min_neighbours) ? 1 : 0;
       });
   // The safety net, per cell (surface_particles_of_cell's).
