@@ -116,6 +116,29 @@ struct ExtendedBox {
   }
 };
 
+// Bounds of positions (3 per particle) in one reduction: value v[0..2] the
+// minima, v[3..5] the negated maxima (so that every entry is a minimum).
+template <class MemSpace>
+struct BoundsReduce {
+  Kokkos::View<const double*, MemSpace> xyz;
+  using value_type = double[];
+  static constexpr unsigned value_count = 6;
+  KOKKOS_INLINE_FUNCTION void init(double* v) const {
+    for (int a = 0; a < 6; ++a) v[a] = Kokkos::Experimental::infinity<double>::value;
+  }
+  KOKKOS_INLINE_FUNCTION void join(volatile double* v, const volatile double* w) const {
+    for (int a = 0; a < 6; ++a)
+      if (w[a] < v[a]) v[a] = w[a];
+  }
+  KOKKOS_INLINE_FUNCTION void operator()(const std::size_t i, double* v) const {
+    for (int a = 0; a < 3; ++a) {
+      const double x = xyz(3 * i + a);
+      if (x < v[a]) v[a] = x;
+      if (-x < v[3 + a]) v[3 + a] = -x;
+    }
+  }
+};
+
 template <class ExecSpace>
 void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& p, MemoryTracker& tracker,
                  const Progress& progress, bool mesh_on_device, HostMesh& mesh, RunStats& st) {
@@ -186,18 +209,14 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
             });
       }
     } else if (need_bounds) {
+      // One pass for the three axes (three MinMax reductions took 112 µs
+      // for the 1.65 M frame on an H100). Minima and maxima are exact in
+      // any order.
+      double b[6];
+      Kokkos::parallel_reduce("nbmc::upload::bounds", Range(space, 0, count), BoundsReduce<MemSpace>{dx}, b);
       for (int a = 0; a < 3; ++a) {
-        Kokkos::MinMaxScalar<double> mm;
-        Kokkos::parallel_reduce(
-            "nbmc::upload::bounds", Range(space, 0, count),
-            KOKKOS_LAMBDA(const std::size_t i, Kokkos::MinMaxScalar<double>& v) {
-              const double x = dx(3 * i + a);
-              if (x < v.min_val) v.min_val = x;
-              if (x > v.max_val) v.max_val = x;
-            },
-            Kokkos::MinMax<double>(mm));
-        lo[a] = mm.min_val;
-        hi[a] = mm.max_val;
+        lo[a] = b[a];
+        hi[a] = -b[3 + a];
       }
     }
   } else if (p.use_bbox) {
@@ -397,7 +416,7 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
   const McTables<MemSpace> tables = make_mc_tables(space);
   Buffer<std::uint32_t, MemSpace> info(tracker, "marching_cubes::info", band.n_vertices, true);
   Buffer<std::uint32_t, MemSpace> vert_offset(tracker, "marching_cubes::vertex_offsets", band.n_vertices);
-  Buffer<std::uint32_t, MemSpace> tri_offset(tracker, "marching_cubes::triangle_offsets", band.n_vertices);
+  Buffer<std::uint32_t, MemSpace> tri_offset(tracker, "marching_cubes::triangle_offsets", band.n_vertices, true);
   const Kokkos::View<const float*, MemSpace> cphi = phi.view();
   const McResult r = classify_cells(space, tracker, bv, n_words, cphi, tables, info.view(), vert_offset.view(),
                                     tri_offset.view());
