@@ -17,7 +17,11 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <type_traits>
 #include <vector>
+#if defined(_OPENMP)
+#include <parallel/algorithm>
+#endif
 
 namespace nbmc {
 namespace Details {
@@ -215,12 +219,39 @@ void collect_sorted_keys(const ExecSpace& space, MemoryTracker& tracker,
     return;
   }
 #endif
+  // On the host: the occupied slots compacted by a count and a scan, then
+  // sorted, on the host threads (a serial pass and std::sort took 3-4 ms of
+  // the 1.65 M frame at r/2 on 16 threads: bench/RESULTS.md, session 25).
   auto hkeys = Kokkos::create_mirror_view_and_copy(Kokkos::HostSpace(), band.blocks.keys.view());
-  std::vector<std::uint64_t> keys;
-  keys.reserve(band.n_blocks);
-  for (std::size_t s = 0; s < hkeys.extent(0); ++s)
-    if (hkeys(s) != kEmptyKey) keys.push_back(hkeys(s));
+  using HostExec = std::conditional_t<Kokkos::SpaceAccessibility<ExecSpace, Kokkos::HostSpace>::accessible, ExecSpace,
+                                      Kokkos::DefaultHostExecutionSpace>;
+  const HostExec host = [&] {
+    if constexpr (std::is_same<HostExec, ExecSpace>::value) return space;
+    else return HostExec();
+  }();
+  using HostRange = Kokkos::RangePolicy<HostExec>;
+  std::uint64_t used = 0;
+  Kokkos::parallel_reduce(
+      "nbmc::band::count_blocks_host", HostRange(host, 0, hkeys.extent(0)),
+      [=](const std::size_t s, std::uint64_t& c) { c += hkeys(s) != kEmptyKey ? 1 : 0; }, used);
+  std::vector<std::uint64_t> keys(used);
+  std::uint64_t* const kd = keys.data();
+  Kokkos::parallel_scan(
+      "nbmc::band::compact_blocks_host", HostRange(host, 0, hkeys.extent(0)),
+      [=](const std::size_t s, std::uint64_t& c, const bool final) {
+        const bool in = hkeys(s) != kEmptyKey;
+        if (final && in) kd[c] = hkeys(s);
+        c += in ? 1 : 0;
+      });
+  host.fence();
+#if defined(_OPENMP)
+  if (std::is_same<HostExec, Kokkos::Serial>::value)
+    std::sort(keys.begin(), keys.end());
+  else
+    __gnu_parallel::sort(keys.begin(), keys.end());
+#else
   std::sort(keys.begin(), keys.end());
+#endif
   band.n_blocks = keys.size();
   band.block_keys = Buffer<std::uint64_t, MemSpace>(tracker, "band::block_keys", keys.size());
   Kokkos::View<const std::uint64_t*, Kokkos::HostSpace, Kokkos::MemoryTraits<Kokkos::Unmanaged>> hk(keys.data(),
