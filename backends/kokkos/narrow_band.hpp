@@ -194,24 +194,21 @@ void collect_sorted_keys(const ExecSpace& space, MemoryTracker& tracker,
     // On the GPU: compact the occupied slots (prefix sum), radix-sort them.
     using Range = Kokkos::RangePolicy<ExecSpace>;
     const auto slots = band.blocks.keys.view();
-    std::uint64_t n = 0;
-    Kokkos::parallel_reduce(
-        "nbmc::band::count_blocks", Range(space, 0, slots.extent(0)),
-        KOKKOS_LAMBDA(const std::size_t s, std::uint64_t& c) { c += slots(s) != ~std::uint64_t(0) ? 1 : 0; }, n);
+    const auto used = KOKKOS_LAMBDA(const std::size_t s) { return slots(s) != ~std::uint64_t(0) ? 1u : 0u; };
+    Buffer<std::uint32_t, MemSpace> numbers(tracker, "band::slot_numbers", slots.extent(0));
+    const auto no = numbers.view();
+    const std::uint64_t n = prefix_counts(space, tracker, "nbmc::band::count_blocks", slots.extent(0), no, used);
     Buffer<std::uint64_t, MemSpace> unsorted(tracker, "band::unsorted_block_keys", n);
     Buffer<std::uint32_t, MemSpace> va(tracker, "band::sort_values", n), vb(tracker, "band::sort_values", n);
     const auto uk = unsorted.view();
     const auto v = va.view();
-    Kokkos::parallel_scan(
-        "nbmc::band::compact_blocks", Range(space, 0, slots.extent(0)),
-        KOKKOS_LAMBDA(const std::size_t s, std::uint64_t& c, const bool final) {
-          const bool used = slots(s) != ~std::uint64_t(0);
-          if (final && used) {
-            uk(c) = slots(s);
-            v(c) = std::uint32_t(c);
-          }
-          c += used ? 1 : 0;
+    Kokkos::parallel_for(
+        "nbmc::band::compact_blocks", Range(space, 0, slots.extent(0)), KOKKOS_LAMBDA(const std::size_t s) {
+          if (!used(s)) return;
+          uk(no(s)) = slots(s);
+          v(no(s)) = no(s);
         });
+    numbers.release();
     band.n_blocks = std::size_t(n);
     band.block_keys = Buffer<std::uint64_t, MemSpace>(tracker, "band::block_keys", band.n_blocks);
     if (n) device_sort_pairs(space, tracker, unsorted.data(), band.block_keys.data(), va.data(), vb.data(), n, 63);

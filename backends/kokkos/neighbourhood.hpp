@@ -369,11 +369,12 @@ inline bool one_sort_allowed() {
 
 // The same neighbourhood, built on the device from device positions (absolute,
 // double, 3 per particle; `keep`, if not empty, selects the particles, in
-// increasing order). The handlers are sorted by four stable radix sorts, least
-// significant criterion first (z, y, x, then the cell key), which gives
-// exactly the host's order: key, x, y, z, then index. With per-particle radii
-// (`radii`, device memory, uploaded order; empty without), a first pass by
-// radius gives the host's order_by_radius too.
+// increasing order). The handlers get exactly the host's order: key, x, y,
+// z, then index. Usually by one radix sort by (key, x) and the runs of equal
+// (key, x) ordered by (y, z) (below); else by four stable radix sorts, least
+// significant criterion first (z, y, x, then the cell key). With
+// per-particle radii (`radii`, device memory, uploaded order; empty
+// without), a first pass by radius gives the host's order_by_radius too.
 template <class ExecSpace>
 void build_neighbourhood_device(const ExecSpace& space, MemoryTracker& tracker,
                                 const Kokkos::View<const double*, typename ExecSpace::memory_space>& xyz,
@@ -501,57 +502,26 @@ void build_neighbourhood_device(const ExecSpace& space, MemoryTracker& tracker,
           perm(i) = has_keep ? keep(j) : j;
         });
   }
-  // Cells: the runs of equal keys in the sorted sequence.
+  // Cells: the runs of equal keys in the sorted sequence, numbered in the
+  // sort's spare order array (`other`, free after the scatter).
   const std::uint64_t* const sk = keys_out;
   const int shift = key_shift;
-  // On the GPU the run starts are numbered by device_exclusive_sum in the
-  // sort's spare order array (`other`, free after the scatter).
-  constexpr bool cuda =
-#if defined(KOKKOS_ENABLE_CUDA)
-      std::is_same<ExecSpace, Kokkos::Cuda>::value;
-#else
-      false;
-#endif
-  std::uint32_t* const first_no = cuda ? other : nullptr;
-  std::uint64_t n_cells = 0;
-  Kokkos::parallel_reduce(
-      "nbmc::neighbourhood::count_cells", Range(space, 0, n),
-      KOKKOS_LAMBDA(const std::size_t i, std::uint64_t& c) {
-        const bool first = i == 0 || (sk[i] >> shift) != (sk[i - 1] >> shift);
-        if (first_no) first_no[i] = first ? 1u : 0u;
-        c += first ? 1 : 0;
-      },
-      n_cells);
-  out.n_cells = std::size_t(n_cells);
+  const auto first = KOKKOS_LAMBDA(const std::size_t i) {
+    return (i == 0 || (sk[i] >> shift) != (sk[i - 1] >> shift)) ? 1u : 0u;
+  };
+  const Kokkos::View<std::uint32_t*, MemSpace, Kokkos::MemoryTraits<Kokkos::Unmanaged>> cell_no(other, n);
+  out.n_cells = std::size_t(prefix_counts(space, tracker, "nbmc::neighbourhood::count_cells", n, cell_no, first));
   out.cell_keys = Buffer<std::uint64_t, MemSpace>(tracker, "neighbourhood::cell_keys", out.n_cells);
   out.cell_start = Buffer<std::uint32_t, MemSpace>(tracker, "neighbourhood::cell_start", out.n_cells + 1);
   {
     const auto ck = out.cell_keys.view();
     const auto cs = out.cell_start.view();
-#if defined(KOKKOS_ENABLE_CUDA)
-    if constexpr (cuda) {
-      device_exclusive_sum(space, tracker, first_no, n);
-      Kokkos::parallel_for(
-          "nbmc::neighbourhood::cell_starts", Range(space, 0, n), KOKKOS_LAMBDA(const std::size_t i) {
-            if (i == 0 || (sk[i] >> shift) != (sk[i - 1] >> shift)) {
-              ck(first_no[i]) = sk[i] >> shift;
-              cs(first_no[i]) = std::uint32_t(i);
-            }
-          });
-    } else
-#endif
-    {
-      Kokkos::parallel_scan(
-          "nbmc::neighbourhood::cell_starts", Range(space, 0, n),
-          KOKKOS_LAMBDA(const std::size_t i, std::uint64_t& c, const bool final) {
-            const bool first = i == 0 || (sk[i] >> shift) != (sk[i - 1] >> shift);
-            if (final && first) {
-              ck(c) = sk[i] >> shift;
-              cs(c) = std::uint32_t(i);
-            }
-            c += first ? 1 : 0;
-          });
-    }
+    Kokkos::parallel_for(
+        "nbmc::neighbourhood::cell_starts", Range(space, 0, n), KOKKOS_LAMBDA(const std::size_t i) {
+          if (!first(i)) return;
+          ck(cell_no(i)) = sk[i] >> shift;
+          cs(cell_no(i)) = std::uint32_t(i);
+        });
     Kokkos::deep_copy(space, Kokkos::subview(cs, out.n_cells), std::uint32_t(n));
   }
   space.fence();
