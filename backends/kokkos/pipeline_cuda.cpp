@@ -13,6 +13,8 @@
 #endif
 
 #include <algorithm>
+#include <chrono>
+#include <cstdio>
 #include <cstring>
 #include <limits>
 #include <mutex>
@@ -212,9 +214,16 @@ void download_segments(const Kokkos::Cuda& space, const DownloadSegment* segment
                "mesh download");
     cuda_check(cudaEventRecord(st.copied[i % kStagingSlots], stream), "mesh download");
   };
+  // NBMC_TRACE=1: how long the host waited for the GPU's copies and how
+  // long its own copies took (which side bounds the download).
+  using clock = std::chrono::steady_clock;
+  const bool timed = host_trace_on();
+  double waited = 0, copied = 0;
   for (std::size_t i = 0; i < std::min<std::size_t>(kStagingSlots, chunks.size()); ++i) issue(i);
   for (std::size_t i = 0; i < chunks.size(); ++i) {
+    const clock::time_point t0 = timed ? clock::now() : clock::time_point();
     cuda_check(cudaEventSynchronize(st.copied[i % kStagingSlots]), "mesh download");
+    const clock::time_point t1 = timed ? clock::now() : clock::time_point();
     const char* slot = st.buffer + (i % kStagingSlots) * kStagingChunk;
     const Chunk c = chunks[i];
     constexpr std::size_t part = std::size_t(256) << 10;
@@ -222,9 +231,16 @@ void download_segments(const Kokkos::Cuda& space, const DownloadSegment* segment
         "nbmc::mesh::download", Kokkos::RangePolicy<HostExec>(0, (c.bytes + part - 1) / part),
         [=](const std::size_t q) { std::memcpy(c.host + q * part, slot + q * part, std::min(part, c.bytes - q * part)); });
     HostExec().fence();
+    if (timed) {
+      waited += std::chrono::duration<double, std::milli>(t1 - t0).count();
+      copied += std::chrono::duration<double, std::milli>(clock::now() - t1).count();
+    }
     if (i + kStagingSlots < chunks.size()) issue(i + kStagingSlots);
   }
   drain.done = true;
+  if (timed)
+    std::fprintf(stderr, "[nbmc trace] download: %zu chunks of %zu MiB, waited for the GPU %.3f ms, host copies %.3f ms\n",
+                 chunks.size(), kStagingChunk >> 20, waited, copied);
 }
 
 void device_sort_pairs(const Kokkos::Cuda& space, MemoryTracker& tracker, std::uint64_t* keys_in,
