@@ -5,6 +5,7 @@
 #pragma once
 
 #include "nbmc.h"
+#include "host_cache.hpp"
 
 #include <cstdint>
 #include <cstdio>
@@ -29,6 +30,8 @@ struct Error : std::runtime_error {
 // A std::allocator that leaves new elements uninitialised, for large arrays
 // whose every element is written right after (particle uploads, meshes): no
 // zeroing pass, and the pages are first touched where they are filled.
+// Blocks of 16 MiB or more come from HostBlockCache (host_cache.hpp), which
+// keeps freed ones, already faulted in, for the next frame.
 template <class T>
 struct NoInitAllocator : std::allocator<T> {
   template <class U>
@@ -38,6 +41,17 @@ struct NoInitAllocator : std::allocator<T> {
   NoInitAllocator() = default;
   template <class U>
   NoInitAllocator(const NoInitAllocator<U>&) noexcept {}
+  static bool cached(std::size_t n) {
+    return n >= HostBlockCache::kMinBytes / sizeof(T) && HostBlockCache::enabled();
+  }
+  T* allocate(std::size_t n) {
+    if (cached(n)) return static_cast<T*>(HostBlockCache::instance().allocate(n * sizeof(T)));
+    return std::allocator<T>::allocate(n);
+  }
+  void deallocate(T* p, std::size_t n) noexcept {
+    if (cached(n)) HostBlockCache::instance().deallocate(p);
+    else std::allocator<T>::deallocate(p, n);
+  }
   template <class U>
   void construct(U* p) noexcept {
     ::new (static_cast<void*>(p)) U;
