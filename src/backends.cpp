@@ -249,7 +249,9 @@ void runtime_acquire(nbmc_context& ctx) {
 
 void runtime_release(nbmc_context&) {
   std::lock_guard<std::mutex> lock(g_runtime_mutex);
-  --g_contexts;
+  // The last context gone: the host blocks kept for a next frame go too
+  // (core/host_cache.hpp; blocks of meshes still alive stay theirs).
+  if (--g_contexts == 0) HostBlockCache::instance().release();
 }
 
 bool runtime_finalize() {
