@@ -90,5 +90,27 @@ first)
   } > $O/first.txt 2>&1
   grep -A1 "^# " $O/first.txt | grep -o "^# .*\|total=[0-9.]*\| t[0-6]=[0-9.]*\|wall.*" | paste -sd' ' | sed 's/# /\n/g'
   echo "first done at $(( $(date +%s) - t0 )) s" ;;
+dltrace)
+  # The mesh download: waiting for the GPU's copies vs the host's copies.
+  {
+  for args in "--no-cleanup --repeat 3" "--no-cleanup --tile 2 --repeat 2"; do for round in 1 2; do
+    echo "# new $args r$round"; NBMC_TRACE=1 $N/bench/nbmc_bench $BIG --spacing 0.00484 --backend cuda $args 2>&1 | grep "download:\|RESULT" | sed 's/RESULT.*total=/total=/'
+  done; done
+  } > $O/dltrace.txt 2>&1
+  cat $O/dltrace.txt | cut -c1-160
+  echo "dltrace done at $(( $(date +%s) - t0 )) s" ;;
+cache)
+  # The host block cache: same binary, NBMC_HOST_CACHE=0 (off) vs default, alternated.
+  {
+  for round in 1 2 3; do for v in off on; do
+    E=""; [ $v = off ] && E="NBMC_HOST_CACHE=0"
+    for args in "--no-cleanup --repeat 5" "--repeat 3" "--no-cleanup --tile 2 --repeat 3"; do
+      echo "# $v r$round $args"; env $E NBMC_TRACE=1 $N/bench/nbmc_bench $BIG --spacing 0.00484 --backend cuda $args 2>&1 | grep "download:\|RESULT" | tail -2 | sed 's/RESULT.*total=/total=/'
+    done
+    echo "# $v r$round cpu16"; env $E $N/bench/nbmc_bench $BIG --spacing 0.00484 --backend openmp --threads 16 --repeat 3 2>&1 | grep RESULT | sed 's/RESULT.*total=/total=/'
+  done; done
+  } > $O/cache.txt 2>&1
+  grep -v "download:" $O/cache.txt | cut -c1-200
+  echo "cache done at $(( $(date +%s) - t0 )) s" ;;
 esac; done
 echo "total $(( $(date +%s) - t0 )) s"
