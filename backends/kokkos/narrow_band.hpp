@@ -184,20 +184,25 @@ void finish_band(const ExecSpace& space, MemoryTracker& tracker, Band<typename E
                                   KOKKOS_LAMBDA(const std::size_t w) { return popcount64(words(w)); });
 }
 
-// Sorted unique keys from a hash map's key array (host sort: few keys).
+// Sorted unique keys from a hash map's key array: the occupied slots
+// numbered by prefix_counts and compacted, then sorted (GPU: a radix sort;
+// host: a parallel sort on the host threads, where a serial pass and
+// std::sort took 3-4 ms of the 1.65 M frame at r/2 on 16 threads:
+// bench/RESULTS.md, sessions 25 and 26).
 template <class ExecSpace>
 void collect_sorted_keys(const ExecSpace& space, MemoryTracker& tracker,
                          Band<typename ExecSpace::memory_space>& band) {
   using MemSpace = typename ExecSpace::memory_space;
+  using Range = Kokkos::RangePolicy<ExecSpace>;
+  const auto slots = band.blocks.keys.view();
+  const auto used = KOKKOS_LAMBDA(const std::size_t s) { return slots(s) != ~std::uint64_t(0) ? 1u : 0u; };
+  Buffer<std::uint32_t, MemSpace> numbers(tracker, "band::slot_numbers", slots.extent(0));
+  const auto no = numbers.view();
+  const std::uint64_t n = prefix_counts(space, tracker, "nbmc::band::count_blocks", slots.extent(0), no, used);
+  band.n_blocks = std::size_t(n);
+  band.block_keys = Buffer<std::uint64_t, MemSpace>(tracker, "band::block_keys", band.n_blocks);
 #if defined(KOKKOS_ENABLE_CUDA)
   if constexpr (std::is_same<ExecSpace, Kokkos::Cuda>::value) {
-    // On the GPU: compact the occupied slots (prefix sum), radix-sort them.
-    using Range = Kokkos::RangePolicy<ExecSpace>;
-    const auto slots = band.blocks.keys.view();
-    const auto used = KOKKOS_LAMBDA(const std::size_t s) { return slots(s) != ~std::uint64_t(0) ? 1u : 0u; };
-    Buffer<std::uint32_t, MemSpace> numbers(tracker, "band::slot_numbers", slots.extent(0));
-    const auto no = numbers.view();
-    const std::uint64_t n = prefix_counts(space, tracker, "nbmc::band::count_blocks", slots.extent(0), no, used);
     Buffer<std::uint64_t, MemSpace> unsorted(tracker, "band::unsorted_block_keys", n);
     Buffer<std::uint32_t, MemSpace> va(tracker, "band::sort_values", n), vb(tracker, "band::sort_values", n);
     const auto uk = unsorted.view();
@@ -209,52 +214,26 @@ void collect_sorted_keys(const ExecSpace& space, MemoryTracker& tracker,
           v(no(s)) = no(s);
         });
     numbers.release();
-    band.n_blocks = std::size_t(n);
-    band.block_keys = Buffer<std::uint64_t, MemSpace>(tracker, "band::block_keys", band.n_blocks);
     if (n) device_sort_pairs(space, tracker, unsorted.data(), band.block_keys.data(), va.data(), vb.data(), n, 63);
     space.fence();
     return;
   }
 #endif
-  // On the host: the occupied slots compacted by a count and a scan, then
-  // sorted, on the host threads (a serial pass and std::sort took 3-4 ms of
-  // the 1.65 M frame at r/2 on 16 threads: bench/RESULTS.md, session 25).
-  auto hkeys = Kokkos::create_mirror_view_and_copy(Kokkos::HostSpace(), band.blocks.keys.view());
-  using HostExec = std::conditional_t<Kokkos::SpaceAccessibility<ExecSpace, Kokkos::HostSpace>::accessible, ExecSpace,
-                                      Kokkos::DefaultHostExecutionSpace>;
-  const HostExec host = [&] {
-    if constexpr (std::is_same<HostExec, ExecSpace>::value) return space;
-    else return HostExec();
-  }();
-  using HostRange = Kokkos::RangePolicy<HostExec>;
-  std::uint64_t used = 0;
-  Kokkos::parallel_reduce(
-      "nbmc::band::count_blocks_host", HostRange(host, 0, hkeys.extent(0)),
-      [=](const std::size_t s, std::uint64_t& c) { c += hkeys(s) != kEmptyKey ? 1 : 0; }, used);
-  std::vector<std::uint64_t> keys(used);
-  std::uint64_t* const kd = keys.data();
-  Kokkos::parallel_scan(
-      "nbmc::band::compact_blocks_host", HostRange(host, 0, hkeys.extent(0)),
-      [=](const std::size_t s, std::uint64_t& c, const bool final) {
-        const bool in = hkeys(s) != kEmptyKey;
-        if (final && in) kd[c] = hkeys(s);
-        c += in ? 1 : 0;
+  const auto bk = band.block_keys.view();
+  Kokkos::parallel_for(
+      "nbmc::band::compact_blocks", Range(space, 0, slots.extent(0)), KOKKOS_LAMBDA(const std::size_t s) {
+        if (used(s)) bk(no(s)) = slots(s);
       });
-  host.fence();
-#if defined(_OPENMP)
-  if (std::is_same<HostExec, Kokkos::Serial>::value)
-    std::sort(keys.begin(), keys.end());
-  else
-    __gnu_parallel::sort(keys.begin(), keys.end());
-#else
-  std::sort(keys.begin(), keys.end());
-#endif
-  band.n_blocks = keys.size();
-  band.block_keys = Buffer<std::uint64_t, MemSpace>(tracker, "band::block_keys", keys.size());
-  Kokkos::View<const std::uint64_t*, Kokkos::HostSpace, Kokkos::MemoryTraits<Kokkos::Unmanaged>> hk(keys.data(),
-                                                                                                   keys.size());
-  Kokkos::deep_copy(space, band.block_keys.view(), hk);
   space.fence();
+  std::uint64_t* const k = band.block_keys.data();
+#if defined(_OPENMP)
+  if (std::is_same<ExecSpace, Kokkos::Serial>::value)
+    std::sort(k, k + n);
+  else
+    __gnu_parallel::sort(k, k + n);
+#else
+  std::sort(k, k + n);
+#endif
 }
 
 // Narrow band around the surface particles (flags(i) != 0, sorted order).
