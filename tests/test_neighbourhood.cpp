@@ -154,6 +154,69 @@ TEST(Neighbourhood, ScatteredParticlesKeepTheHashMapAlone) {
   EXPECT_EQ(found, b.nbh.n);
 }
 
+// The sub-cell table (dense_sub): for every occupied cell, byte q - 1 is the
+// number of the cell's particles with x below the cell's q-th quarter point,
+// or the whole word is all ones (a cell of more than 254 particles); and a
+// sub_range is the cells' particles cut at those points.
+TEST(Neighbourhood, SubCellsSplitEveryCellAtItsQuarterPoints) {
+  const double r = 0.05;
+  Points p = ball(r, 7, 8);
+  // A crowded cell: 400 particles within 0.2 r (one cell is 2 r wide); and
+  // a clump of 254 within 0.1 r (one cell of 254 or more particles, or two).
+  std::mt19937 rng(9);
+  std::uniform_real_distribution<double> u(-0.1 * r, 0.1 * r);
+  for (int i = 0; i < 400; ++i) p.insert(p.end(), {u(rng), u(rng), u(rng)});
+  for (int i = 0; i < 254; ++i) p.insert(p.end(), {5 * r + 0.5 * u(rng), 5 * r + 0.5 * u(rng), 0.5 * u(rng)});
+  Built b;
+  build(p, params(r), b);
+  ASSERT_GT(b.nbh.dense_sub.size(), 0u);
+  const NeighbourView<Host> v = view_of(b.nbh, b.g);
+  const float* X = b.nbh.pos.data();
+  std::size_t crowded = 0, checked = 0;
+  for (std::size_t c = 0; c < b.nbh.n_cells; ++c) {
+    const std::uint64_t key = b.nbh.cell_keys.view()(c);
+    std::int64_t x, y, z;
+    neighbour_cell_of_key(key, b.g.nb_dims, x, y, z);
+    std::uint32_t cb, ce;
+    ASSERT_TRUE(v.cell_range(x, y, z, cb, ce));
+    const std::uint32_t word = v.dense_sub(std::size_t(key));
+    if (ce - cb > 254) {
+      EXPECT_EQ(word, ~std::uint32_t(0));
+      ++crowded;
+    } else {
+      for (int q = 1; q <= 3; ++q) {
+        std::uint32_t below = 0;
+        for (std::uint32_t j = cb; j < ce; ++j) below += X[j] < v.sub_edge(4 * x + q) ? 1u : 0u;
+        EXPECT_EQ((word >> (8 * (q - 1))) & 255u, below) << "cell " << x << " " << y << " " << z << ", q " << q;
+      }
+    }
+    // sub_range over this cell's sub-cells m0..m1: its particles with
+    // sub_edge(m0) <= x < sub_edge(m1 + 1) (all of them where unknown).
+    for (int q0 = 0; q0 < 4; ++q0)
+      for (int q1 = q0; q1 < 4; ++q1) {
+        std::uint32_t sb, se;
+        v.sub_range(4 * x + q0, 4 * x + q1, y, z, sb, se);
+        ASSERT_LE(cb, sb);
+        ASSERT_LE(se, ce);
+        ASSERT_LE(sb, se);
+        for (std::uint32_t j = cb; j < ce; ++j) {
+          const bool inside = !(X[j] < v.sub_edge(4 * x + q0)) && X[j] < v.sub_edge(4 * x + q1 + 1);
+          if (inside) EXPECT_TRUE(j >= sb && j < se) << "particle " << j << " left out";
+          else if (ce - cb <= 254) EXPECT_FALSE(j >= sb && j < se) << "particle " << j << " kept";
+        }
+        ++checked;
+      }
+  }
+  EXPECT_GE(crowded, 1u) << "the cell of 400 particles";
+  EXPECT_GT(checked, 0u);
+  setenv("NBMC_SUB_CELLS", "0", 1);
+  Built off;
+  build(p, params(r), off);
+  unsetenv("NBMC_SUB_CELLS");
+  EXPECT_EQ(off.nbh.dense_sub.size(), 0u);
+  EXPECT_GT(off.nbh.dense_start.size(), 0u);
+}
+
 TEST(Neighbourhood, DenseTableCanBeTurnedOff) {
   const double r = 0.05;
   setenv("NBMC_DENSE_CELLS", "0", 1);

@@ -11,9 +11,11 @@
 //                                                 // k = max(0, 1 - |d|^2/R_j^2) (0: no contribution),
 //                                                 // pd = particle j's P floats (nullptr if P = 0),
 //                                                 // q = 1/R_j^2 (radii methods; else 1, unused)
-//   static uint32_t accumulate(a, X, Y, Z, PD, Q, b, e, x0, x1, x2, inv_R2)
+//   static uint32_t accumulate(a, pos, PD, Q, b, e, x0, x1, x2, inv_R2)
 //                                                 // the same for particles [b, e), in order
-//                                                 // (PD: the data, P floats per particle, nullptr if P = 0;
+//                                                 // (pos(j, x, y, z): particle j's position,
+//                                                 // SoaPositions or Aos4Positions below;
+//                                                 // PD: the data, P floats per particle, nullptr if P = 0;
 //                                                 // Q: the 1/R_j^2, nullptr if not radii)
 //   static float value(const float* a, const FieldConstants&)  // phi(x); negative inside
 // so the gather (narrow band, dense) and the scatter drivers are written once.
@@ -230,10 +232,40 @@ __attribute__((target("avx512f"))) inline HostSimd<16>::F fmadd<HostSimd<16>::F>
 #endif
 #endif
 
+// Particle positions for accumulate(): three arrays (the neighbourhood's
+// layout, and the team gather's staging), or one float4 per particle (x, y,
+// z, unused; Neighbourhood::pos4, the device gathers: one 16-byte load
+// instead of three). The same floats either way.
+struct SoaPositions {
+  const float* X;
+  const float* Y;
+  const float* Z;
+  KOKKOS_INLINE_FUNCTION void operator()(std::size_t j, float& x, float& y, float& z) const {
+    x = X[j];
+    y = Y[j];
+    z = Z[j];
+  }
+};
+struct Aos4Positions {
+  const float* P;  // 16-byte aligned
+  KOKKOS_INLINE_FUNCTION void operator()(std::size_t j, float& x, float& y, float& z) const {
+#if defined(__CUDA_ARCH__)
+    const float4 p = reinterpret_cast<const float4*>(P)[j];
+    x = p.x;
+    y = p.y;
+    z = p.z;
+#else
+    x = P[4 * j];
+    y = P[4 * j + 1];
+    z = P[4 * j + 2];
+#endif
+  }
+};
+
 // 1/R_j^2 of particle j in accumulate(): its own (Q[j]) for the radii
 // variants, the frame's inv_R2 otherwise.
 template <bool Radii>
-KOKKOS_INLINE_FUNCTION float inv_support2(const float* Q, std::uint32_t j, float inv_R2) {
+KOKKOS_INLINE_FUNCTION float inv_support2(const float* Q, std::size_t j, float inv_R2) {
   if constexpr (Radii) {
     (void)inv_R2;
     return Q[j];
@@ -273,7 +305,11 @@ struct FieldConstants {
 // contribute (k = 0) leaves k_max (never below +0) as it is, as every sum.
 template <class T>
 KOKKOS_INLINE_FUNCTION T lane_max(T a, T b) {
-#if defined(__GNUC__) && !defined(__clang__)
+#if defined(__CUDA_ARCH__)
+  // One FMNMX instead of a compare and a select: the same value where
+  // neither is NaN (k_max starts at +0 and takes only k > 0).
+  return fmaxf(a, b);
+#elif defined(__GNUC__) && !defined(__clang__)
   return b > a ? b : a;  // vectors too: GCC's vector ?: (one maxps)
 #else
   if constexpr (std::is_same<T, float>::value) {

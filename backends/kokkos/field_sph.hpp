@@ -153,14 +153,17 @@ struct FieldSPHT {
   // Adds particles [b, e) (SoA coordinates, weights W) at vertex x, one after
   // the other (see field_common.hpp); returns how many contribute. Same
   // operations as add().
-  KOKKOS_INLINE_FUNCTION static std::uint32_t accumulate(float* a, const float* X, const float* Y, const float* Z,
+  template <class Pos>
+  KOKKOS_INLINE_FUNCTION static std::uint32_t accumulate(float* a, const Pos& P,
                                                          const float* W, const float* Q, std::uint32_t b,
                                                          std::uint32_t e, float x0, float x1, float x2,
                                                          float inv_R2) {
     float a0 = a[0], km = a[KM];
     std::uint32_t count = 0;
-    for (std::uint32_t j = b; j < e; ++j) {
-      const float dx = X[j] - x0, dy = Y[j] - x1, dz = Z[j] - x2;
+    for (std::size_t j = b; j < e; ++j) {
+      float px, py, pz;
+      P(j, px, py, pz);
+      const float dx = px - x0, dy = py - x1, dz = pz - x2;
       const float q = inv_support2<Radii>(Q, j, inv_R2);
       const float s2 = (dx * dx + dy * dy + dz * dz) * q;
       if (!(s2 < 1.f)) continue;  // it would add exactly +0 (field_common.hpp)
@@ -191,14 +194,17 @@ struct SphDensityT {
   KOKKOS_INLINE_FUNCTION static void add(T* a, T, T, T, T k, const float*, T) {
     a[0] += sph_kernel(k);
   }
-  KOKKOS_INLINE_FUNCTION static std::uint32_t accumulate(float* a, const float* X, const float* Y, const float* Z,
+  template <class Pos>
+  KOKKOS_INLINE_FUNCTION static std::uint32_t accumulate(float* a, const Pos& P,
                                                          const float*, const float* Q, std::uint32_t b,
                                                          std::uint32_t e, float x0, float x1, float x2,
                                                          float inv_R2) {
     float a0 = a[0];
     std::uint32_t count = 0;
-    for (std::uint32_t j = b; j < e; ++j) {
-      const float dx = X[j] - x0, dy = Y[j] - x1, dz = Z[j] - x2;
+    for (std::size_t j = b; j < e; ++j) {
+      float px, py, pz;
+      P(j, px, py, pz);
+      const float dx = px - x0, dy = py - x1, dz = pz - x2;
       const float q = inv_support2<Radii>(Q, j, inv_R2);
       const float s2 = (dx * dx + dy * dy + dz * dz) * q;
       if (!(s2 < 1.f)) continue;  // it would add exactly +0 (field_common.hpp)

@@ -137,13 +137,16 @@ struct FieldYT10 {
   // Adds particles [b, e) (SoA coordinates, kernels PD) at vertex x, one after
   // the other (see field_common.hpp); returns how many lie within R. The
   // operations of add(), which it calls.
-  KOKKOS_INLINE_FUNCTION static std::uint32_t accumulate(float* a, const float* X, const float* Y, const float* Z,
+  template <class Pos>
+  KOKKOS_INLINE_FUNCTION static std::uint32_t accumulate(float* a, const Pos& P,
                                                          const float* PD, const float* /*Q: uniform*/, std::uint32_t b,
                                                          std::uint32_t e, float x0, float x1, float x2, float inv_R2) {
     float acc[1] = {a[0]};
     std::uint32_t count = 0;
-    for (std::uint32_t j = b; j < e; ++j) {
-      const float dx = X[j] - x0, dy = Y[j] - x1, dz = Z[j] - x2;
+    for (std::size_t j = b; j < e; ++j) {
+      float px, py, pz;
+      P(j, px, py, pz);
+      const float dx = px - x0, dy = py - x1, dz = pz - x2;
       const float s2 = (dx * dx + dy * dy + dz * dz) * inv_R2;
       if (!(s2 < 1.f)) continue;  // it would add exactly +0 (field_common.hpp)
       const float k = s2 < 1.f ? 1.f - s2 : 0.f;
@@ -190,14 +193,17 @@ struct Yt10Moments {
     a[9] = fmadd(wz, dz, a[9]);
   }
   // The same for particles [b, e), one after the other (add's operations).
-  KOKKOS_INLINE_FUNCTION static std::uint32_t accumulate(float* a, const float* X, const float* Y, const float* Z,
+  template <class Pos>
+  KOKKOS_INLINE_FUNCTION static std::uint32_t accumulate(float* a, const Pos& P,
                                                          const float*, const float*, std::uint32_t b, std::uint32_t e,
                                                          float x0, float x1, float x2, float inv_R2) {
     float acc[N];
     for (int q = 0; q < N; ++q) acc[q] = a[q];
     std::uint32_t count = 0;
-    for (std::uint32_t j = b; j < e; ++j) {
-      const float dx = X[j] - x0, dy = Y[j] - x1, dz = Z[j] - x2;
+    for (std::size_t j = b; j < e; ++j) {
+      float px, py, pz;
+      P(j, px, py, pz);
+      const float dx = px - x0, dy = py - x1, dz = pz - x2;
       const float s2 = (dx * dx + dy * dy + dz * dz) * inv_R2;
       if (!(s2 < 1.f)) continue;  // it would add exactly +0 (field_common.hpp)
       const float k = s2 < 1.f ? 1.f - s2 : 0.f;

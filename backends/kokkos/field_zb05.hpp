@@ -36,7 +36,8 @@ struct FieldZB05T {
   // Adds particles [b, e) (SoA coordinates) at vertex x, one after the other (the
   // order of the sums is part of the result: see field_common.hpp); returns how
   // many contribute. Same operations as add().
-  KOKKOS_INLINE_FUNCTION static std::uint32_t accumulate(float* a, const float* X, const float* Y, const float* Z,
+  template <class Pos>
+  KOKKOS_INLINE_FUNCTION static std::uint32_t accumulate(float* a, const Pos& P,
                                                          const float* Rj, const float* Q, std::uint32_t b,
                                                          std::uint32_t e, float x0, float x1, float x2,
                                                          float inv_R2) {
@@ -44,8 +45,10 @@ struct FieldZB05T {
     float rs = Radii ? a[RS] : 0.f;
     float km = a[KM];
     std::uint32_t count = 0;
-    for (std::uint32_t j = b; j < e; ++j) {
-      const float dx = X[j] - x0, dy = Y[j] - x1, dz = Z[j] - x2;
+    for (std::size_t j = b; j < e; ++j) {
+      float px, py, pz;
+      P(j, px, py, pz);
+      const float dx = px - x0, dy = py - x1, dz = pz - x2;
       const float q = inv_support2<Radii>(Q, j, inv_R2);
       const float s2 = (dx * dx + dy * dy + dz * dz) * q;
       if (!(s2 < 1.f)) continue;  // it would add exactly +0 (field_common.hpp)

@@ -39,6 +39,17 @@ struct Neighbourhood {
   // one range. Empty otherwise, and then the hash map, which is built only
   // then, serves. Both give the same ranges.
   Buffer<std::uint32_t, MemSpace> dense_start;
+  // With dense_start: where each cell's particles cross the quarter points
+  // of the cell in x (sub_cell_edge, four sub-cells per cell): for q = 1, 2,
+  // 3, byte q - 1 of dense_sub(d) is how many of cell d's particles have
+  // x < sub_cell_edge(4 x_d + q); all bits set where the cell holds more than
+  // 254 particles (unknown: use the whole cell). A gather then cuts a row to
+  // the sub-cells that a vertex's ball can reach without walking particles.
+  Buffer<std::uint32_t, MemSpace> dense_sub;
+  // On a device: the positions once more, one float4 (x, y, z, 0) per
+  // particle, for the gathers' 16-byte loads (Aos4Positions; 16 bytes per
+  // particle). Empty on the host, and with NBMC_GPU_POS4=0.
+  Buffer<float, MemSpace> pos4;
   // Per-particle data of a field method with a pass over the particles (P
   // floats per particle, sorted order: SPH's weight, YT10's kernel; with
   // per-particle radii, SSP07's and ZB05's radius r_j, radii.hpp); empty
@@ -79,6 +90,12 @@ struct NeighbourView {
   Kokkos::View<const float*, MemSpace> scale, support;
   // Neighbourhood::dense_start (empty: look cells up in the hash map).
   Kokkos::View<const std::uint32_t*, MemSpace> dense_start;
+  // Neighbourhood::dense_sub (empty with the hash map) and the sub-cells'
+  // width (sub_cell_width).
+  Kokkos::View<const std::uint32_t*, MemSpace> dense_sub;
+  float sub_width = 0;
+  // Neighbourhood::pos4 (empty: read pos).
+  Kokkos::View<const float*, MemSpace> pos4;
 
   KOKKOS_INLINE_FUNCTION std::uint64_t key(std::int64_t x, std::int64_t y, std::int64_t z) const {
     return neighbour_cell_key(x, y, z, nb_dims);
@@ -107,7 +124,35 @@ struct NeighbourView {
     b = dense_start(d + std::size_t(x0));
     e = dense_start(d + std::size_t(x1) + 1);
   }
+  // The x at which sub-cell m of a row starts (sub_cell_edge).
+  KOKKOS_INLINE_FUNCTION float sub_edge(int m) const { return float(m) * sub_width; }
+  // With dense_sub: one range of row (y, z)'s particles, in sorted order,
+  // for sub-cells m0..m1 (0 <= m0 <= m1 < 4 nb_dims[0]): the particles of
+  // cells m0 / 4 .. m1 / 4, less those of the first cell with
+  // x < sub_edge(m0) and those of the last with x >= sub_edge(m1 + 1)
+  // (none left out of a cell whose splits are unknown).
+  KOKKOS_INLINE_FUNCTION void sub_range(int m0, int m1, int y, int z, std::uint32_t& b, std::uint32_t& e) const {
+    const std::size_t d = std::size_t(key(0, y, z));
+    const std::size_t c0 = d + std::size_t(m0 >> 2), c1 = d + std::size_t(m1 >> 2);
+    const int q0 = m0 & 3, q1 = m1 & 3;
+    b = dense_start(c0);
+    if (q0 != 0) {
+      const std::uint32_t k = (dense_sub(c0) >> (8 * (q0 - 1))) & 255u;
+      if (k != 255u) b += k;
+    }
+    if (q1 == 3) {
+      e = dense_start(c1 + 1);
+    } else {
+      const std::uint32_t k = (dense_sub(c1) >> (8 * q1)) & 255u;
+      e = k != 255u ? dense_start(c1) + k : dense_start(c1 + 1);
+    }
+  }
 };
+
+// The width of the sub-cells of Neighbourhood::dense_sub: a quarter of the
+// neighbour cell (the same float on every backend, for the builder and the
+// gathers).
+inline float sub_cell_width(const Grid& g) { return float(g.nb_cell) * 0.25f; }
 
 template <class MemSpace>
 NeighbourView<MemSpace> view_of(const Neighbourhood<MemSpace>& nb, const Grid& g) {
@@ -122,6 +167,9 @@ NeighbourView<MemSpace> view_of(const Neighbourhood<MemSpace>& nb, const Grid& g
   v.scale = nb.scale.view();
   v.support = nb.support.view();
   v.dense_start = nb.dense_start.view();
+  v.dense_sub = nb.dense_sub.view();
+  v.sub_width = sub_cell_width(g);
+  v.pos4 = nb.pos4.view();
   return v;
 }
 
@@ -195,6 +243,7 @@ void build_dense_cells(const ExecSpace& space, MemoryTracker& tracker, const Gri
       std::uint64_t(g.nb_dims[0]) * std::uint64_t(g.nb_dims[1]) * std::uint64_t(g.nb_dims[2]);
   if (!dense_cells_allowed(n_dense, out.n)) {
     out.dense_start = Buffer<std::uint32_t, MemSpace>();
+    out.dense_sub = Buffer<std::uint32_t, MemSpace>();
     return;
   }
   out.dense_start = Buffer<std::uint32_t, MemSpace>(tracker, "neighbourhood::dense_cells", std::size_t(n_dense) + 1);
@@ -206,6 +255,65 @@ void build_dense_cells(const ExecSpace& space, MemoryTracker& tracker, const Gri
       "nbmc::neighbourhood::dense_cells", Kokkos::RangePolicy<ExecSpace>(space, 0, out.n_cells),
       KOKKOS_LAMBDA(const std::size_t c) { start(std::size_t(keys(c))) = cs(c + 1) - cs(c); });
   exclusive_scan(space, tracker, "nbmc::neighbourhood::dense_starts", start, start);
+  // The sub-cell splits of every occupied cell (empty cells keep 0).
+  // NBMC_SUB_CELLS=0 leaves them out (the gathers then trim rows by walking
+  // their particles; the same results).
+  // Sub-cell and cell coordinates must fit 32 bits (NeighbourView::sub_range).
+  const char* e = std::getenv("NBMC_SUB_CELLS");
+  if ((e && std::string(e) == "0") || g.nb_dims[0] > (std::int64_t(1) << 28) ||
+      g.nb_dims[1] > (std::int64_t(1) << 30) || g.nb_dims[2] > (std::int64_t(1) << 30)) {
+    out.dense_sub = Buffer<std::uint32_t, MemSpace>();
+    return;
+  }
+  out.dense_sub = Buffer<std::uint32_t, MemSpace>(tracker, "neighbourhood::dense_sub_cells", std::size_t(n_dense), true);
+  const auto sub = out.dense_sub.view();
+  const auto X = out.pos.view();
+  const std::uint64_t nx = std::uint64_t(g.nb_dims[0]);
+  const float w = sub_cell_width(g);
+  Kokkos::parallel_for(
+      "nbmc::neighbourhood::dense_sub_cells", Kokkos::RangePolicy<ExecSpace>(space, 0, out.n_cells),
+      KOKKOS_LAMBDA(const std::size_t c) {
+        const std::uint64_t key = keys(c);
+        const std::uint32_t b = cs(c), e = cs(c + 1);
+        if (e - b > 254u) {
+          sub(std::size_t(key)) = ~std::uint32_t(0);
+          return;
+        }
+        const int m = 4 * int(key % nx);
+        std::uint32_t packed = 0, j = b;
+        for (int q = 1; q <= 3; ++q) {
+          const float edge = float(m + q) * w;  // NeighbourView::sub_edge
+          while (j < e && X(j) < edge) ++j;
+          packed |= (j - b) << (8 * (q - 1));
+        }
+        sub(std::size_t(key)) = packed;
+      });
+}
+
+// Neighbourhood::pos4 from pos, on a device (the host's gathers read pos).
+template <class ExecSpace>
+void build_pos4(const ExecSpace& space, MemoryTracker& tracker, Neighbourhood<typename ExecSpace::memory_space>& out) {
+  using MemSpace = typename ExecSpace::memory_space;
+  out.pos4 = Buffer<float, MemSpace>();
+  if constexpr (!Kokkos::SpaceAccessibility<Kokkos::HostSpace, MemSpace>::accessible) {
+    const char* e = std::getenv("NBMC_GPU_POS4");
+    if ((e && std::string(e) == "0") || out.n == 0) return;
+    out.pos4 = Buffer<float, MemSpace>(tracker, "neighbourhood::positions4", 4 * out.n);
+    const auto p4 = out.pos4.view();
+    const auto pos = out.pos.view();
+    const std::size_t n = out.n;
+    Kokkos::parallel_for(
+        "nbmc::neighbourhood::positions4", Kokkos::RangePolicy<ExecSpace>(space, 0, n),
+        KOKKOS_LAMBDA(const std::size_t j) {
+          p4(4 * j) = pos(j);
+          p4(4 * j + 1) = pos(n + j);
+          p4(4 * j + 2) = pos(2 * n + j);
+          p4(4 * j + 3) = 0.f;
+        });
+  } else {
+    (void)space;
+    (void)tracker;
+  }
 }
 
 // The cell lookups of a built neighbourhood: the dense table where it is
@@ -216,6 +324,7 @@ void index_cells(const ExecSpace& space, MemoryTracker& tracker, const Grid& g,
   build_dense_cells(space, tracker, g, out);
   if (out.dense_start.size() == 0) insert_cells(space, tracker, out);
   else out.cells = HashMapStorage<typename ExecSpace::memory_space>();
+  build_pos4(space, tracker, out);
 }
 
 // Per-particle radii (host, uploaded order): the runs of handlers at one

@@ -407,6 +407,11 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
     st.evaluations += totals.evaluations;
   }
   lap(4);
+  // The gathers' extra copies (float4 positions, sub-cell splits) are not
+  // needed past the field: give their memory back before the triangulation,
+  // the stage of the peak (nb and nbf are not used from here on).
+  nbh.pos4.release();
+  nbh.dense_sub.release();
   const BandView<MemSpace> bv = view_of(band, g);
   const std::size_t n_words = band.n_blocks * 8;
   st.band_vertices = band.n_vertices;

@@ -356,7 +356,13 @@ KOKKOS_INLINE_FUNCTION bool eval_tile_host(const NeighbourView<MemSpace>& nb, co
 // visiting the neighbour cells directly, in the order every backend uses:
 // cells in z, y, x order, skipping those whose box is R or farther, their
 // particles in sorted order. Returns how many particles contribute.
-template <class Method, class MemSpace>
+// Path: which way the rows are cut, decided at run time (0: the sub-cells
+// where the neighbourhood has them) or fixed by the caller (1: the
+// sub-cells, which must exist; 2: walking the rows' ends), so that a GPU
+// kernel holds one of them only (with both in one kernel the walking one
+// ran about 50 % slower on an H100: bench/RESULTS.md, session 27).
+constexpr int kRowsAuto = 0, kRowsSubCells = 1, kRowsWalk = 2;
+template <class Method, int Path = kRowsAuto, class MemSpace>
 KOKKOS_INLINE_FUNCTION std::uint32_t sum_vertex_direct(const NeighbourView<MemSpace>& nb, const float x[3], float S,
                                                        const FieldConstants& fc, float* acc) {
   for (int q = 0; q < Method::N; ++q) acc[q] = 0.f;
@@ -365,20 +371,89 @@ KOKKOS_INLINE_FUNCTION std::uint32_t sum_vertex_direct(const NeighbourView<MemSp
   cell_span(nb, x, x, fc.R, lo, hi);
   const float* X = nb.pos.data();
   const float inv_R2 = fc.inv_R2, R2 = fc.R * fc.R;
-  auto beyond = [&](float d) { return (d * d) * inv_R2 >= 1.f; };
+  const bool rows = nb.dense_start.extent(0) != 0;
+  if constexpr (Path != kRowsWalk) if (Path == kRowsSubCells || (rows && nb.dense_sub.extent(0) != 0)) {
+    // Each row is cut to the chord of the ball at the row's distance in y
+    // and z, to the sub-cell, from the table (NeighbourView::sub_range): no
+    // walk over particles, and fewer particles visited than the whole row
+    // within R in x. The cut is conservative: what it leaves out of the
+    // row's cells within R (the same cells as below) lies farther than R
+    // with margins far above float rounding, so it would add k = 0 (exactly
+    // +0) with s2 = ((dx^2 + dy^2) + dz^2) * q_j, q_j >= inv_R2. The same
+    // particles in the same order contribute as in the walk below. Cell and
+    // sub-cell coordinates fit 32 bits here (build_dense_cells).
+    const float ax = x[0] < 0 ? -x[0] : x[0], ay = x[1] < 0 ? -x[1] : x[1], az = x[2] < 0 ? -x[2] : x[2];
+    const float tol = ((ax + ay) + (az + fc.R)) * 0x1p-18f;
+    const float R2m = R2 * (1.f + 0x1p-14f);
+    const float inv_w = 1.f / nb.sub_width;
+    // The gap from coordinate v to cell cc's box on one axis: box_distance2's term.
+    auto gap = [&](int cc, float v) {
+      const float clo = float(cc) * S;
+      const float below = clo - v, above = v - (clo + S);
+      return below > 0 ? below : (above > 0 ? above : 0.f);
+    };
+    const int lo0 = int(lo[0]), hi0 = int(hi[0]);
+    for (int z = int(lo[2]); z <= int(hi[2]); ++z) {
+      const float gz = gap(z, x[2]), gzz = gz * gz;
+      const float gzt = gz - tol > 0 ? gz - tol : 0.f;
+      const float c2z = R2m - gzt * gzt;
+      if (!(c2z > 0)) continue;
+      for (int y = int(lo[1]); y <= int(hi[1]); ++y) {
+        const float gy = gap(y, x[1]), gyy = gy * gy;
+        const float gyt = gy - tol > 0 ? gy - tol : 0.f;
+        const float c2 = c2z - gyt * gyt;
+        if (!(c2 > 0)) continue;
+        const float c = Kokkos::Experimental::sqrt(c2) + tol;
+        // Sub-cells m0..m1 hold every particle of the row with |x - x0| <= c:
+        // sub_edge(m0) <= x0 - c and sub_edge(m1 + 1) > x0 + c.
+        const float xa = x[0] - c, xb = x[0] + c;
+        int m0 = int(Kokkos::Experimental::floor(xa * inv_w));
+        int m1 = int(Kokkos::Experimental::floor(xb * inv_w));
+        if (nb.sub_edge(m0) > xa) --m0;
+        if (!(nb.sub_edge(m1 + 1) > xb)) ++m1;
+        if (m0 < 4 * lo0) m0 = 4 * lo0;
+        if (m1 > 4 * hi0 + 3) m1 = 4 * hi0 + 3;
+        if (m0 > m1) continue;
+        // ... within the row's cells within R (box_distance2 < R^2, as
+        // below: the same float operations).
+        int x0 = m0 >> 2, x1 = m1 >> 2;
+        auto near = [&](int xx) {
+          const float gx = gap(xx, x[0]);
+          return (gx * gx + gyy) + gzz < R2;
+        };
+        while (x0 <= x1 && !near(x0)) ++x0;
+        while (x1 >= x0 && !near(x1)) --x1;
+        if (x0 > x1) continue;
+        if (m0 < 4 * x0) m0 = 4 * x0;
+        if (m1 > 4 * x1 + 3) m1 = 4 * x1 + 3;
+        std::uint32_t b, e;
+        nb.sub_range(m0, m1, y, z, b, e);
+        if (b >= e) continue;
+        const float* pd = Method::P ? nb.pdata.data() : nullptr;
+        const float* q = Method::radii ? nb.support.data() : nullptr;
+        if (nb.pos4.extent(0) != 0)
+          evals += Method::accumulate(acc, Aos4Positions{nb.pos4.data()}, pd, q, b, e, x[0], x[1], x[2], fc.inv_R2);
+        else
+          evals += Method::accumulate(acc, SoaPositions{X, X + nb.n, X + 2 * nb.n}, pd, q, b, e, x[0], x[1], x[2],
+                                      fc.inv_R2);
+      }
+    }
+    return evals;
+  }
+  if constexpr (Path == kRowsSubCells) return evals;
   // A cell's (or a row's) particles are sorted by x: the runs before the
   // first and after the last that can reach x are skipped. They would add
   // k = 0 (exactly +0 to every sum): a skipped particle has
   // ((X - x0)^2) * inv_R2 >= 1 with the float operations of s2, and
   // s2 = ((dx^2 + dy^2) + dz^2) * q_j is at least that (rounding is
   // monotone; q_j >= inv_R2 with radii).
+  auto beyond = [&](float d) { return (d * d) * inv_R2 >= 1.f; };
   auto add = [&](std::uint32_t b, std::uint32_t e) {
     while (b < e && X[b] < x[0] && beyond(X[b] - x[0])) ++b;
     while (e > b && X[e - 1] > x[0] && beyond(X[e - 1] - x[0])) --e;
-    evals += Method::accumulate(acc, X, X + nb.n, X + 2 * nb.n, Method::P ? nb.pdata.data() : nullptr,
+    evals += Method::accumulate(acc, SoaPositions{X, X + nb.n, X + 2 * nb.n}, Method::P ? nb.pdata.data() : nullptr,
                                 Method::radii ? nb.support.data() : nullptr, b, e, x[0], x[1], x[2], fc.inv_R2);
   };
-  const bool rows = nb.dense_start.extent(0) != 0;
   for (std::int64_t z = lo[2]; z <= hi[2]; ++z)
     for (std::int64_t y = lo[1]; y <= hi[1]; ++y) {
       // The distance first: a cell that is too far needs no lookup. The
@@ -413,11 +488,11 @@ KOKKOS_INLINE_FUNCTION std::uint32_t sum_vertex_direct(const NeighbourView<MemSp
 // Field value at x visiting the neighbour cells directly (no cell list):
 // the device gather, and the host's fallback for cells so coarse that a
 // tile's cell list would not fit.
-template <class Method, class MemSpace>
+template <class Method, int Path = kRowsAuto, class MemSpace>
 KOKKOS_INLINE_FUNCTION float eval_vertex_direct(const NeighbourView<MemSpace>& nb, const float x[3], float S,
                                                 const FieldConstants& fc, std::uint64_t& evals) {
   float acc[Method::N];
-  evals += sum_vertex_direct<Method>(nb, x, S, fc, acc);
+  evals += sum_vertex_direct<Method, Path>(nb, x, S, fc, acc);
   return Method::value(acc, fc);
 }
 
@@ -622,7 +697,7 @@ std::uint64_t gather_words_team(const ExecSpace& space, const NeighbourView<type
           });
           team.team_barrier();
           if (mine)
-            evals += Method::accumulate(acc, px.data(), px.data() + kTeamChunk, px.data() + 2 * kTeamChunk,
+            evals += Method::accumulate(acc, SoaPositions{px.data(), px.data() + kTeamChunk, px.data() + 2 * kTeamChunk},
                                         Method::P ? px.data() + 3 * kTeamChunk : nullptr,
                                         Method::radii ? px.data() + kSupport * kTeamChunk : nullptr, 0, m, x[0],
                                         x[1], x[2], fc.inv_R2);
@@ -642,7 +717,7 @@ std::uint64_t gather_words_team(const ExecSpace& space, const NeighbourView<type
 // Device gather, simplest form: one thread per band vertex walking its
 // neighbour cells itself (pruned by distance); particles and the cell map are
 // small enough to stay in the GPU's L2 cache.
-template <class Method, class ExecSpace>
+template <class Method, int Path, class ExecSpace>
 std::uint64_t gather_words_direct(const ExecSpace& space, const NeighbourView<typename ExecSpace::memory_space>& nb,
                                   const BandView<typename ExecSpace::memory_space>& band, std::size_t w0,
                                   std::size_t w1, const Grid& g, const FieldConstants& fc,
@@ -677,7 +752,7 @@ std::uint64_t gather_words_direct(const ExecSpace& space, const NeighbourView<ty
         const std::size_t out = band.word_offset(w) + popcount64(full & ((std::uint64_t(1) << bit) - 1));
         const float x[3] = {float(i) * c, float(j) * c, float(k) * c};
         std::uint64_t e = 0;
-        phi(out) = eval_vertex_direct<Method>(nb, x, S, fc, e);
+        phi(out) = eval_vertex_direct<Method, Path>(nb, x, S, fc, e);
         if (e) Kokkos::atomic_add(&target((q - base) & mask), static_cast<unsigned long long>(e));
       });
   if (to_sink) return 0;
@@ -724,7 +799,7 @@ KOKKOS_INLINE_FUNCTION void word_and_bit_of(const BandView<MemSpace>& band, std:
 // neighbouring words (one thread per vertex slot leaves the lanes of the
 // slots outside the band idle: most of a word's 64 on a thin band). Each
 // vertex's value is eval_vertex_direct's, as in gather_words_direct.
-template <class Method, class ExecSpace>
+template <class Method, int Path, class ExecSpace>
 std::uint64_t gather_vertices_direct(const ExecSpace& space, const NeighbourView<typename ExecSpace::memory_space>& nb,
                                      const BandView<typename ExecSpace::memory_space>& band, std::size_t n_words,
                                      std::size_t o0, std::size_t o1, const Grid& g, const FieldConstants& fc,
@@ -744,7 +819,7 @@ std::uint64_t gather_vertices_direct(const ExecSpace& space, const NeighbourView
         band.vertex(w, bit, i, j, k);
         const float x[3] = {float(i) * c, float(j) * c, float(k) * c};
         std::uint64_t e = 0;
-        phi(o) = eval_vertex_direct<Method>(nb, x, S, fc, e);
+        phi(o) = eval_vertex_direct<Method, Path>(nb, x, S, fc, e);
         if (e) Kokkos::atomic_add(&counts((o - o0) >> 6), static_cast<unsigned long long>(e));
       });
   std::uint64_t evals = 0;
@@ -774,6 +849,7 @@ std::uint64_t gather_field(const ExecSpace& space, const NeighbourView<typename 
   // Chunks bound the time to react to cancellation. On a GPU, launches of
   // 4096 words filled half a wave of an H100 (ncu), so chunks are larger there.
   constexpr bool host = Kokkos::SpaceAccessibility<Kokkos::HostSpace, MemSpace>::accessible;
+  const bool sub_cells = nb.dense_start.extent(0) != 0 && nb.dense_sub.extent(0) != 0;
   if constexpr (!host) {
     if (!list.listed() && device_gather_kind() == 2) {
       // One thread per band vertex (phi holds the band's values), in chunks.
@@ -782,7 +858,8 @@ std::uint64_t gather_field(const ExecSpace& space, const NeighbourView<typename 
       const std::size_t vchunk = std::max<std::size_t>(std::size_t(1) << 22, n / 8);
       for (std::size_t o0 = 0; o0 < n; o0 += vchunk) {
         const std::size_t o1 = std::min(n, o0 + vchunk);
-        total_evals += gather_vertices_direct<Method>(space, nb, band, n_words, o0, o1, g, fc, phi);
+        total_evals += sub_cells ? gather_vertices_direct<Method, kRowsSubCells>(space, nb, band, n_words, o0, o1, g, fc, phi)
+                                 : gather_vertices_direct<Method, kRowsWalk>(space, nb, band, n_words, o0, o1, g, fc, phi);
         trace("gather chunk", o1 - o0);
         progress(4 /*NBMC_STAGE_FIELD*/, double(o1) / double(n));
       }
@@ -795,7 +872,8 @@ std::uint64_t gather_field(const ExecSpace& space, const NeighbourView<typename 
     if constexpr (host)
       total_evals += gather_words_host<Method>(space, nb, band, w0, w1, g, fc, phi, list);
     else if (device_gather_kind() != 0)
-      total_evals += gather_words_direct<Method>(space, nb, band, w0, w1, g, fc, phi, list, sink);
+      total_evals += sub_cells ? gather_words_direct<Method, kRowsSubCells>(space, nb, band, w0, w1, g, fc, phi, list, sink)
+                               : gather_words_direct<Method, kRowsWalk>(space, nb, band, w0, w1, g, fc, phi, list, sink);
     else
       total_evals += gather_words_team<Method>(space, nb, band, w0, w1, g, fc, phi, list);
     trace("gather chunk", w1 - w0);

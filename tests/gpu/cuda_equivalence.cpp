@@ -110,6 +110,12 @@ int main(int argc, char** argv) {
     Points dup = sphere(0, 0, 0, 0.6, r);
     for (int i = 0; i < 100; ++i) dup.insert(dup.end(), {0.05, 0.05, 0.05});
     compare("sph sphere, 100 coincident", dup, r, cell, NBMC_METHOD_SPH, 4);
+    // A neighbour cell of more than 254 particles: its sub-cell splits are
+    // unknown (neighbourhood.hpp, dense_sub), the gathers take it whole.
+    Points crowd = sphere(0, 0, 0, 0.6, r);
+    for (int i = 0; i < 300; ++i)
+      crowd.insert(crowd.end(), {0.05 + 0.001 * (i % 7), 0.05 + 0.001 * (i % 11), 0.05 + 0.001 * (i % 13)});
+    compare("sph sphere, a crowded cell", crowd, r, cell, NBMC_METHOD_SPH, 4);
     compare("yt10 box", box(lo, hi, r), r, cell, NBMC_METHOD_YT10, 4);
   }
   const std::string dir = argc > 1 ? argv[1] : "../shared/data";
