@@ -48,7 +48,7 @@ bench)
   [ -n "${OLDPID:-}" ] && wait $OLDPID
   {
   for round in 1 2; do
-    for v in old new sub0 p40; do
+    for v in ${VARIANTS:-old new sub0 p40}; do
       B=$N; [ $v = old ] && B=$OB; E=""; [ $v = sub0 ] && E="NBMC_SUB_CELLS=0"; [ $v = p40 ] && E="NBMC_GPU_POS4=0"
       ARGS=("--no-cleanup --repeat 5" "--no-cleanup --device-resident --repeat 5" "--repeat 3" "--no-cleanup --tile 2 --repeat 3" "--cell-size 1 --no-cleanup --repeat 5" "--no-cleanup --method zb05 --repeat 5" "--no-cleanup --method sph --repeat 3" "--no-cleanup --method yt10 --repeat 3")
       case $v in sub0|p40) ARGS=("--no-cleanup --repeat 5" "--no-cleanup --device-resident --repeat 5" "--no-cleanup --tile 2 --repeat 3");; esac
