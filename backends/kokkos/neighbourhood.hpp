@@ -40,7 +40,7 @@ struct Neighbourhood {
   // then, serves. Both give the same ranges.
   Buffer<std::uint32_t, MemSpace> dense_start;
   // With dense_start: where each cell's particles cross the quarter points
-  // of the cell in x (sub_cell_edge, four sub-cells per cell): for q = 1, 2,
+  // of the cell in x (sub_cell_edge: four sub-cells per cell): for q = 1, 2,
   // 3, byte q - 1 of dense_sub(d) is how many of cell d's particles have
   // x < sub_cell_edge(4 x_d + q); all bits set where the cell holds more than
   // 254 particles (unknown: use the whole cell). A gather then cuts a row to
@@ -59,6 +59,11 @@ struct Neighbourhood {
   Buffer<float, MemSpace> scale;    // t_j = r_j / r_max, in (0, 1]
   Buffer<float, MemSpace> support;  // 1 / R_j^2, R_j = R t_j
 };
+
+// Where sub-cell m of a row starts in x, for sub-cells of width w
+// (sub_cell_width): the one expression for the table's builder and the
+// gathers' cuts (NeighbourView::sub_edge), which must agree bit for bit.
+KOKKOS_INLINE_FUNCTION float sub_cell_edge(int m, float w) { return float(m) * w; }
 
 // The key of neighbour cell (x, y, z): its row-major index in the grid.
 KOKKOS_INLINE_FUNCTION std::uint64_t neighbour_cell_key(std::int64_t x, std::int64_t y, std::int64_t z,
@@ -125,7 +130,7 @@ struct NeighbourView {
     e = dense_start(d + std::size_t(x1) + 1);
   }
   // The x at which sub-cell m of a row starts (sub_cell_edge).
-  KOKKOS_INLINE_FUNCTION float sub_edge(int m) const { return float(m) * sub_width; }
+  KOKKOS_INLINE_FUNCTION float sub_edge(int m) const { return sub_cell_edge(m, sub_width); }
   // With dense_sub: one range of row (y, z)'s particles, in sorted order,
   // for sub-cells m0..m1 (0 <= m0 <= m1 < 4 nb_dims[0]): the particles of
   // cells m0 / 4 .. m1 / 4, less those of the first cell with
@@ -282,7 +287,7 @@ void build_dense_cells(const ExecSpace& space, MemoryTracker& tracker, const Gri
         const int m = 4 * int(key % nx);
         std::uint32_t packed = 0, j = b;
         for (int q = 1; q <= 3; ++q) {
-          const float edge = float(m + q) * w;  // NeighbourView::sub_edge
+          const float edge = sub_cell_edge(m + q, w);
           while (j < e && X(j) < edge) ++j;
           packed |= (j - b) << (8 * (q - 1));
         }

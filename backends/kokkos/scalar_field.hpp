@@ -59,12 +59,19 @@ KOKKOS_INLINE_FUNCTION void cell_span(const NeighbourView<MemSpace>& nb, const f
   }
 }
 
+// Distance from coordinate v to the interval [lo, lo + S] (0 inside): one
+// axis of box_distance2, and of the gathers' row cuts, which must test
+// cells with the same float operations.
+KOKKOS_INLINE_FUNCTION float box_gap(float lo, float S, float v) {
+  const float below = lo - v, above = v - (lo + S);
+  return below > 0 ? below : (above > 0 ? above : 0.f);
+}
+
 // Squared distance from point x to the box [lo, lo + S]^3.
 KOKKOS_INLINE_FUNCTION float box_distance2(const float lo[3], float S, const float x[3]) {
   float dist2 = 0;
   for (int a = 0; a < 3; ++a) {
-    const float below = lo[a] - x[a], above = x[a] - (lo[a] + S);
-    const float d = below > 0 ? below : (above > 0 ? above : 0.f);
+    const float d = box_gap(lo[a], S, x[a]);
     dist2 += d * d;
   }
   return dist2;
@@ -191,9 +198,7 @@ inline bool eval_points_host_lanes(const NeighbourView<MemSpace>& nb, const std:
           const std::int64_t cc = lo[a] + o;
           float d2 = inf;
           if (l < m && cc >= vlo[a] && cc <= vhi[a]) {
-            const float clo = float(cc) * S;  // as in eval_vertex_direct and box_distance2
-            const float below = clo - x[a], above = x[a] - (clo + S);
-            const float d = below > 0 ? below : (above > 0 ? above : 0.f);
+            const float d = box_gap(float(cc) * S, S, x[a]);  // as in eval_vertex_direct
             d2 = d * d;
           }
           t.gap2[base[a] + o][l] = d2;
@@ -387,11 +392,7 @@ KOKKOS_INLINE_FUNCTION std::uint32_t sum_vertex_direct(const NeighbourView<MemSp
     const float R2m = R2 * (1.f + 0x1p-14f);
     const float inv_w = 1.f / nb.sub_width;
     // The gap from coordinate v to cell cc's box on one axis: box_distance2's term.
-    auto gap = [&](int cc, float v) {
-      const float clo = float(cc) * S;
-      const float below = clo - v, above = v - (clo + S);
-      return below > 0 ? below : (above > 0 ? above : 0.f);
-    };
+    auto gap = [&](int cc, float v) { return box_gap(float(cc) * S, S, v); };
     const int lo0 = int(lo[0]), hi0 = int(hi[0]);
     for (int z = int(lo[2]); z <= int(hi[2]); ++z) {
       const float gz = gap(z, x[2]), gzz = gz * gz;
