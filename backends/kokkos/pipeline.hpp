@@ -164,6 +164,7 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
   };
 
   // ---------------------------------------------------------------- upload
+  trace("upload: start");
   progress(0, 0.0);
   std::vector<std::uint32_t> keep;
   double lo[3] = {std::numeric_limits<double>::max(), std::numeric_limits<double>::max(),
@@ -182,9 +183,11 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
       dxyz = Kokkos::View<const double*, MemSpace, Kokkos::MemoryTraits<Kokkos::Unmanaged>>(xyz, 3 * count);
     } else {
       staged = Buffer<double, MemSpace>(tracker, "particles::device_copy", 3 * count);
+      trace("upload: allocate", count);
       Kokkos::deep_copy(space, staged.view(),
                         Kokkos::View<const double*, Kokkos::HostSpace, Kokkos::MemoryTraits<Kokkos::Unmanaged>>(
                             xyz, 3 * count));
+      trace("upload: copy", count);
       dxyz = staged.view();
     }
     const Kokkos::View<const double*, MemSpace> dx = dxyz;
@@ -214,6 +217,7 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
       // any order.
       double b[6];
       Kokkos::parallel_reduce("nbmc::upload::bounds", Range(space, 0, count), BoundsReduce<MemSpace>{dx}, b);
+      trace("upload: bounds", count);
       for (int a = 0; a < 3; ++a) {
         lo[a] = b[a];
         hi[a] = -b[3 + a];
