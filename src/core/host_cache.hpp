@@ -14,11 +14,14 @@
 // What it keeps: freed blocks of at least kMinBytes, at most kCapacity bytes
 // in all (the oldest go first); a request takes the smallest kept block
 // that holds it and is at most a quarter larger. Blocks come from
-// std::malloc and go back with std::free, so a block freed through another
-// copy of this header (another shared object) is simply freed. Off under
+// std::malloc (advised for huge pages: huge_pages.hpp) and go back with
+// std::free, so a block freed through another copy of this header (another
+// shared object) is simply freed. Off under
 // AddressSanitizer (kept blocks would hide use-after-free) and with
 // NBMC_HOST_CACHE=0.
 #pragma once
+
+#include "huge_pages.hpp"
 
 #include <cstddef>
 #include <cstdlib>
@@ -74,6 +77,7 @@ class HostBlockCache {
     }
     void* p = std::malloc(bytes);
     if (!p) throw std::bad_alloc();
+    advise_huge_pages(p, bytes);
     std::lock_guard<std::mutex> lock(m_);
     live_[p] = bytes;
     return p;

@@ -5,6 +5,7 @@
 // partio writes by default) are detected by their magic bytes.
 #include "io/codec.hpp"
 #include "io/readers.hpp"
+#include "core/huge_pages.hpp"
 
 #include <algorithm>
 #include <cstring>
@@ -113,7 +114,7 @@ Particles Bgeo::run() {
     fail(name(), "header says " + std::to_string(n) + " points of " + std::to_string(record) +
                      " bytes but only " + std::to_string(in_.remaining()) + " bytes follow");
   Particles out;
-  out.xyz.resize(static_cast<std::size_t>(3 * n));
+  resize_for_filling(out.xyz, static_cast<std::size_t>(3 * n));
   std::vector<std::size_t> slot(defs.size(), SIZE_MAX);
   for (std::size_t a = 0; a < defs.size(); ++a) {
     if (!defs[a].keep) continue;

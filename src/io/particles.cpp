@@ -1,5 +1,6 @@
 // SPDX-License-Identifier: MIT
 #include "io/particles.hpp"
+#include "core/huge_pages.hpp"
 
 #include "io/detail.hpp"
 #include "io/readers.hpp"
@@ -39,7 +40,7 @@ Particles read_xyz(ByteReader& in) {
                         " bytes is not a multiple of 12 (a raw .xyz file holds float32 x, y, z triples)");
   const std::uint64_t n = size / 12;
   Particles p;
-  p.xyz.resize(static_cast<std::size_t>(3 * n));
+  resize_for_filling(p.xyz, static_cast<std::size_t>(3 * n));
   const bool swap = !host_is_little_endian();
   constexpr std::size_t kChunk = 1 << 16; // particles per read
   std::vector<unsigned char> buf(static_cast<std::size_t>(std::min<std::uint64_t>(n, kChunk)) * 12);
@@ -179,7 +180,7 @@ Particles read_ply(ByteReader& in, const ReadOptions& opt) {
   }
   const std::uint64_t available = in.remaining() / record;
   if (count > available) ends_after(available);
-  out.xyz.resize(static_cast<std::size_t>(3 * count));
+  resize_for_filling(out.xyz, static_cast<std::size_t>(3 * count));
   for (Attribute& at : out.attributes) at.values.resize(static_cast<std::size_t>(count));
   const bool swap = (h.format == PlyFormat::binary_big_endian) == host_is_little_endian();
   std::vector<std::size_t> used; // properties read
