@@ -414,6 +414,12 @@ FrameInput read_frame(const Options& o, const nbmc::cli::Frame& f) {
 MeshPtr reconstruct_frame(const Options& o, nbmc_context* ctx, FrameInput& in, nbmc::cli::FrameResult& r,
                           bool& cancelled_run) {
   using namespace nbmc;
+  const auto t0 = Clock::now();
+  struct Lap {  // r.reconstruct_seconds on every way out
+    nbmc::cli::FrameResult& r;
+    Clock::time_point t0;
+    ~Lap() { r.reconstruct_seconds = seconds_since(t0); }
+  } lap{r, t0};
   try {
     const io::Particles& particles = in.particles;
     r.particles = particles.count();
@@ -448,6 +454,12 @@ MeshPtr reconstruct_frame(const Options& o, nbmc_context* ctx, FrameInput& in, n
 void write_frame(const Options& o, const nbmc::cli::Frame& f, const nbmc_mesh* mesh, nbmc::cli::FrameResult& r,
                  bool& cancelled_run) {
   using namespace nbmc;
+  const auto t0 = Clock::now();
+  struct Lap {  // r.write_seconds on every way out
+    nbmc::cli::FrameResult& r;
+    Clock::time_point t0;
+    ~Lap() { r.write_seconds = seconds_since(t0); }
+  } lap{r, t0};
   try {
     io::MeshView view = mesh_view(mesh);
     const std::vector<io::Attribute> attrs = mesh_attributes(mesh);
@@ -482,6 +494,7 @@ nbmc::cli::FrameResult run_frame(const Options& o, nbmc_context* ctx, const nbmc
   cli::FrameResult r = frame_result(f);
   const auto t0 = Clock::now();
   FrameInput in = read_frame(o, f);
+  r.read_seconds = in.seconds;
   if (in.cancelled) {
     cancelled_run = true;
     return r;
@@ -508,6 +521,12 @@ bool sequence_uses_hdf5(const Options& o, const std::vector<nbmc::cli::Frame>& f
   return false;
 }
 
+// Whether a sequence reads the next frame and writes the previous one on
+// two more threads while a frame is reconstructed.
+bool overlapped_io(const Options& o, const std::vector<nbmc::cli::Frame>& frames) {
+  return !o.sequential_io && frames.size() > 1 && !sequence_uses_hdf5(o, frames);
+}
+
 // ------------------------------------------------------------ a sequence
 int reconstruct_sequence(Options& o, const std::vector<nbmc::cli::Frame>& frames) {
   using namespace nbmc;
@@ -528,6 +547,16 @@ int reconstruct_sequence(Options& o, const std::vector<nbmc::cli::Frame>& frames
     nbmc_context_set_progress(raw, &cli::Progress::callback, &bar);  // (Ctrl-C only: no bar is drawn)
     return NBMC_OK;
   };
+  // While a frame is reconstructed, the next one is read and the previous
+  // one written on two other threads (not with HDF5 files, nor with
+  // --sequential-io); the meshes are the same either way. The first frame
+  // is read while the contexts are set up.
+  const bool overlap = overlapped_io(o, frames);
+  auto read_ahead = [&](std::size_t i) {
+    return std::async(std::launch::async, [&o, &f = frames[i]] { return read_frame(o, f); });
+  };
+  std::future<FrameInput> next;
+  if (overlap) next = read_ahead(0);
   std::int32_t st = add_context();
   if (st != NBMC_OK) return library_error(st, nbmc_context_last_error(nullptr));
   std::int32_t backend = o.desc.backend;
@@ -553,10 +582,6 @@ int reconstruct_sequence(Options& o, const std::vector<nbmc::cli::Frame>& frames
     if (show) std::fputs(cli::progress_line(results.size() + 1, frames.size(), r, meter).c_str(), stderr);
     results.push_back(std::move(r));
   };
-  // While a frame is reconstructed, the next one is read and the previous
-  // one written on two other threads (not with HDF5 files, nor with
-  // --sequential-io); the meshes are the same either way.
-  const bool overlap = !o.sequential_io && frames.size() > 1 && !sequence_uses_hdf5(o, frames);
   // With CUDA, two contexts take turns: frame i's stages on the GPU run while
   // frame i-1 is post-processed (clean-up) on the host threads, which is
   // most of a GPU frame's time. Reconstructions on one backend are
@@ -569,9 +594,6 @@ int reconstruct_sequence(Options& o, const std::vector<nbmc::cli::Frame>& frames
     st = add_context();
     if (st != NBMC_OK) return library_error(st, nbmc_context_last_error(nullptr));
   }
-  auto read_ahead = [&](std::size_t i) {
-    return std::async(std::launch::async, [&o, &f = frames[i]] { return read_frame(o, f); });
-  };
   struct Writing {
     std::future<void> done;
     cli::FrameResult r;
@@ -624,8 +646,6 @@ int reconstruct_sequence(Options& o, const std::vector<nbmc::cli::Frame>& frames
     }
   };
   std::unique_ptr<Reconstruction> pending;  // the previous frame's, still running (two contexts)
-  std::future<FrameInput> next;
-  if (overlap) next = read_ahead(0);
   for (std::size_t i = 0; i < frames.size() && !cancelled_run; ++i) {
     const cli::Frame& f = frames[i];
     if (cli::interrupted()) {
@@ -643,6 +663,7 @@ int reconstruct_sequence(Options& o, const std::vector<nbmc::cli::Frame>& frames
     c->r = frame_result(f);
     c->in = std::move(in);
     c->r.seconds = c->in.seconds;
+    c->r.read_seconds = c->in.seconds;
     if (c->in.skipped) {
       c->r.status = "skipped";
     } else if (!c->in.error.empty()) {
@@ -702,29 +723,64 @@ int reconstruct(Options& o) {
   report.input_path = o.input;
   report.output_path = o.output;
 
-  // Read the particles (and check the output name first, to fail early).
-  io::Particles particles;
+  // Check the file names first, to fail early.
+  io::ReadOptions ro = read_options(o);
+  ro.frame = o.step;
   try {
     report.output_format = io::mesh_format(o.output);
     report.input_format = io::particle_format(o.input, o.input_format);
-    const auto t0 = Clock::now();
-    io::ReadOptions ro = read_options(o);
-    ro.frame = o.step;
-    particles = io::read_particles(o.input, ro);
-    report.read_seconds = seconds_since(t0);
-    check_attributes(o.input, particles, ro.only, ro);
   } catch (const io::Error& e) {
     std::fprintf(stderr, "nbmc: error: %s\n", e.what());
     return 1;
   }
-  report.particle_count = particles.count();
-  if (cli::interrupted()) return cancelled(progress);
-
-  // Context, upload, reconstruction.
+  // The particles are read on a thread of their own while this one sets up
+  // the context (with CUDA: the driver, the device and its memory pools, a
+  // large part of a single run's time). Errors are reported in the order of
+  // a sequential run: the file's first.
+  struct Read {
+    io::Particles particles;
+    double seconds = 0;
+    std::string error;  // an io::Error's message
+  };
+  std::future<Read> reading = std::async(std::launch::async, [&o, &ro] {
+    Read r;
+    const auto t0 = Clock::now();
+    try {
+      r.particles = io::read_particles(o.input, ro);
+    } catch (const io::Error& e) {
+      r.error = e.what();
+    }
+    r.seconds = seconds_since(t0);
+    return r;
+  });
+  const auto t_setup = Clock::now();
   nbmc_context* raw = nullptr;
   std::int32_t st = nbmc_context_create(&o.desc, &raw);
-  if (st != NBMC_OK) return library_error(st, nbmc_context_last_error(nullptr));
+  const std::string setup_error = st == NBMC_OK ? std::string() : nbmc_context_last_error(nullptr);
   ContextPtr ctx(raw);
+  report.setup_seconds = seconds_since(t_setup);
+  report.has_setup = true;
+
+  io::Particles particles;
+  {
+    Read r = reading.get();
+    report.read_seconds = r.seconds;
+    try {
+      if (r.error.empty()) check_attributes(o.input, r.particles, ro.only, ro);
+    } catch (const io::Error& e) {
+      r.error = e.what();
+    }
+    if (!r.error.empty()) {
+      std::fprintf(stderr, "nbmc: error: %s\n", r.error.c_str());
+      return 1;
+    }
+    particles = std::move(r.particles);
+  }
+  report.particle_count = particles.count();
+  if (st != NBMC_OK) return library_error(st, setup_error.c_str());
+  if (cli::interrupted()) return cancelled(progress);
+
+  // Upload, reconstruction.
   apply_memory_budget(ctx.get(), o);
   std::int32_t backend = o.desc.backend;
   if (nbmc_context_backend(ctx.get(), &backend) == NBMC_OK) report.backend = name_of(kBackends, backend);

@@ -34,6 +34,10 @@ struct Report {
   bool has_check = false;             // --check
   nbmc_mesh_check_result check{};     // of the written mesh
   double read_seconds = 0;
+  // The context's creation, measured where it ran while the file was read
+  // (single-frame runs without MPI; has_setup).
+  bool has_setup = false;
+  double setup_seconds = 0;
   double write_seconds = 0;
   double total_seconds = 0; // wall clock of the whole command
   std::uint64_t peak_rss_bytes = 0;

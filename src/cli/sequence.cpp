@@ -328,7 +328,9 @@ std::string format_sequence_json(const SequenceReport& r) {
     o += "{\"label\": " + json_string(f.label) + ", \"input\": " + json_string(f.input) +
          ", \"output\": " + json_string(f.output) + ", \"status\": " + json_string(f.status) +
          ", \"particle_count\": " + std::to_string(f.particles) + ", \"vertex_count\": " + std::to_string(f.vertices) +
-         ", \"triangle_count\": " + std::to_string(f.triangles) + ", \"seconds\": " + num(f.seconds);
+         ", \"triangle_count\": " + std::to_string(f.triangles) + ", \"seconds\": " + num(f.seconds) +
+         ", \"read_seconds\": " + num(f.read_seconds) + ", \"reconstruct_seconds\": " + num(f.reconstruct_seconds) +
+         ", \"write_seconds\": " + num(f.write_seconds);
     if (!f.error.empty()) o += ", \"error\": " + json_string(f.error);
     o += "}";
   }

@@ -51,6 +51,10 @@ struct FrameResult {
   std::string error;
   std::uint64_t particles = 0, vertices = 0, triangles = 0;
   double seconds = 0;
+  // Its three phases (with overlapped I/O they run beside other frames'):
+  // reading the file, the library (upload, reconstruction, post-processing;
+  // waiting for the GPU included), writing the mesh.
+  double read_seconds = 0, reconstruct_seconds = 0, write_seconds = 0;
 };
 
 // Frames per second over the frames processed so far and the time left.
