@@ -134,6 +134,45 @@ TEST_F(CliIo, OverlappedAndSequentialIoGiveTheSameFiles) {
   EXPECT_EQ(run("reconstruct 'frames/f_{}.xyz' -o 'c/s_{}.ply' --contexts 3" + common).exit_code, 2);
 }
 
+// An overlapped sequence runs itself again with OMP_WAIT_POLICY=passive
+// (libgomp's spinning threads otherwise take the cores from the I/O
+// threads), once; not when the user set the variable, nor with
+// --sequential-io; the same files every way.
+TEST_F(CliIo, OverlappedSequencesRunAgainWithPassiveOpenMp) {
+  if (!nbmc_backend_available(NBMC_BACKEND_OPENMP)) GTEST_SKIP() << "no OpenMP in this build";
+  for (int i = 0; i < 3; ++i) frame("frames/f_" + std::to_string(i) + ".xyz", 0.25 + 0.05 * i);
+  const char* had = std::getenv("OMP_WAIT_POLICY");
+  const std::string saved = had ? had : "";
+  ::unsetenv("OMP_WAIT_POLICY");
+  ::setenv("NBMC_TRACE", "1", 1);
+  const std::string line = "running again with OMP_WAIT_POLICY=passive";
+  const auto count = [&](const std::string& err) {
+    std::size_t n = 0;
+    for (std::size_t at = err.find(line); at != std::string::npos; at = err.find(line, at + 1)) ++n;
+    return n;
+  };
+  const Result a = run("reconstruct 'frames/f_{}.xyz' -o 'a/s_{}.ply' --spacing 0.1 -q");
+  const Result b = run("reconstruct 'frames/f_{}.xyz' -o 'b/s_{}.ply' --spacing 0.1 -q --sequential-io");
+  ::setenv("OMP_WAIT_POLICY", "active", 1);
+  const Result c = run("reconstruct 'frames/f_{}.xyz' -o 'c/s_{}.ply' --spacing 0.1 -q");
+  ::unsetenv("NBMC_TRACE");
+  if (had) ::setenv("OMP_WAIT_POLICY", saved.c_str(), 1);
+  else ::unsetenv("OMP_WAIT_POLICY");
+  ASSERT_EQ(a.exit_code, 0) << a.err;
+  ASSERT_EQ(b.exit_code, 0) << b.err;
+  ASSERT_EQ(c.exit_code, 0) << c.err;
+  EXPECT_EQ(count(a.err), 1u) << a.err.substr(0, 2000);
+  EXPECT_EQ(count(b.err), 0u);
+  EXPECT_EQ(count(c.err), 0u);
+  for (int i = 0; i < 3; ++i) {
+    const std::string f = "/s_" + std::to_string(i) + ".ply";
+    const std::string da = slurp(path("a" + f));
+    EXPECT_FALSE(da.empty()) << f;
+    EXPECT_EQ(da, slurp(path("b" + f))) << f;
+    EXPECT_EQ(da, slurp(path("c" + f))) << f;
+  }
+}
+
 TEST_F(CliIo, ResumeAndFrames) {
   for (int i = 0; i < 4; ++i) frame("frames/f_000" + std::to_string(i) + ".xyz", 0.3);
   Result r = run("reconstruct 'frames/f_{}.xyz' -o 'out/s_{}.glb' --spacing 0.1 --frames 1:3:2 -q");

@@ -527,6 +527,29 @@ bool overlapped_io(const Options& o, const std::vector<nbmc::cli::Frame>& frames
   return !o.sequential_io && frames.size() > 1 && !sequence_uses_hdf5(o, frames);
 }
 
+// An overlapped sequence runs its reading and writing threads beside the
+// library's OpenMP threads. By default libgomp's idle threads spin for a
+// while after every parallel region, and they then take the cores from the
+// I/O threads and from the thread that waits for the GPU: on an H100
+// machine's 16 cores, 8 copies of the 1.65 M frame at r/2 took 0.93-1.08 s,
+// slower than one frame after the other (0.94-1.03 s), and 0.62-0.64 s with
+// OMP_WAIT_POLICY=passive; single frames and the benchmarks ran as fast
+// either way (bench/RESULTS.md, "Session 28"). OpenMP reads the variable
+// once, when its library is loaded, before main: so the command runs itself
+// again with it set. Not when the user has set it (to anything), nor where
+// the library has no OpenMP; if the exec fails, the run goes on as it is.
+void run_again_with_passive_openmp(char** argv) {
+#if defined(__linux__)
+  if (std::getenv("OMP_WAIT_POLICY") != nullptr || !nbmc_backend_available(NBMC_BACKEND_OPENMP)) return;
+  if (::setenv("OMP_WAIT_POLICY", "passive", 1) != 0) return;
+  if (std::getenv("NBMC_TRACE") != nullptr) std::fputs("[nbmc trace] running again with OMP_WAIT_POLICY=passive\n", stderr);
+  ::execv("/proc/self/exe", argv);
+  ::unsetenv("OMP_WAIT_POLICY");
+#else
+  (void)argv;
+#endif
+}
+
 // ------------------------------------------------------------ a sequence
 int reconstruct_sequence(Options& o, const std::vector<nbmc::cli::Frame>& frames) {
   using namespace nbmc;
@@ -1634,6 +1657,7 @@ int main(int argc, char** argv) {
       return 2;
     }
     if (plan.is_sequence) {
+      if (overlapped_io(o, plan.frames)) run_again_with_passive_openmp(argv);
       nbmc::cli::install_interrupt_handler();
       return reconstruct_sequence(o, plan.frames);
     }
