@@ -17,6 +17,11 @@ build)
     OLDPID=$!
   fi ;;
 fastbuild)
+  if [ -n "${WITH_OLD:-}" ] && [ ! -x $OB/bench/nbmc_bench ]; then
+    mkdir -p /tmp/old && tar -xf out/dev/old.tar -C /tmp/old
+    (cd /tmp/old && NBMC_CUDA_CMAKE_ARGS="-DNBMC_BUILD_TESTS=OFF" NBMC_JOBS=6 scripts/setup.sh --cuda-only > $L/old-build.txt 2>&1; echo "old build rc $?") &
+    OLDPID=$!
+  fi
   NBMC_CUDA_CMAKE_ARGS="-DNBMC_BUILD_TESTS=OFF" NBMC_JOBS=14 scripts/setup.sh --cuda-only > $L/build.txt 2>&1 || { tail -30 $L/build.txt; exit 1; }
   echo "new built in $(( $(date +%s) - t0 )) s" ;;
 check)
@@ -182,5 +187,39 @@ PY
   } > $O/seq3.txt 2>&1
   cut -c1-120 $O/seq3.txt
   echo "seq3 done at $(( $(date +%s) - t0 )) s" ;;
+exitcost)
+  nvcc -O2 -arch=sm_90 out/dev/init_probe.cu -o $L/init_probe
+  {
+  for r in 1 2 3; do
+    for m in normal quick reset; do s=$(date +%s%N); $L/init_probe $m > $L/p.txt; echo "probe $m r$r: process wall $(( ($(date +%s%N) - s) / 1000000 )) ms; $(grep -E 'reset' $L/p.txt)"; done
+    for E in X=1 NBMC_QUICK_EXIT=1; do
+      s=$(date +%s%N); env $E $N/install/bin/nbmc reconstruct $BIG --spacing 0.00484 --cell-size 0.5 --backend cuda --no-cleanup -o $L/f.ply > $L/r.txt 2>&1
+      echo "nbmc $E r$r: process wall $(( ($(date +%s%N) - s) / 1000000 )) ms; report $(grep -E '^  total' $L/r.txt | tr -s ' ')"
+      s=$(date +%s%N); env $E $N/install/bin/nbmc reconstruct $BIG --spacing 0.00484 --cell-size 0.5 --backend openmp --threads 16 --no-cleanup -o $L/f.ply > $L/r.txt 2>&1
+      echo "nbmc cpu $E r$r: process wall $(( ($(date +%s%N) - s) / 1000000 )) ms; report $(grep -E '^  total' $L/r.txt | tr -s ' ')"
+    done
+  done
+  } > $O/exitcost.txt 2>&1
+  cat $O/exitcost.txt
+  echo "exitcost done at $(( $(date +%s) - t0 )) s" ;;
+hostbuf)
+  [ -n "${OLDPID:-}" ] && wait $OLDPID
+  { echo "== equivalence (new)"; NBMC_CHECK_BAND=1 $N/tests/gpu/nbmc_cuda_equivalence $D 2>&1 | tail -60; } > $O/equivalence.txt
+  tail -1 $O/equivalence.txt
+  {
+  for round in 1 2; do
+    for v in old new thp0 cache0; do
+      B=$N; [ $v = old ] && B=$OB; E="X=1"; [ $v = thp0 ] && E="NBMC_HOST_THP=0"; [ $v = cache0 ] && E="NBMC_HOST_CACHE=0"
+      for args in "--backend openmp --threads 16 --no-cleanup --repeat 3" "--backend openmp --threads 16 --repeat 3" "--backend openmp --threads 16 --no-cleanup" "--backend cuda --no-cleanup --repeat 5" "--backend cuda --repeat 3"; do
+        echo "# $v r$round $args"; env $E $B/bench/nbmc_bench $BIG --spacing 0.00484 $args 2>&1 | grep RESULT
+      done
+      [ $round = 1 ] && { echo "# $v r$round tile2 cpu"; env $E $B/bench/nbmc_bench $BIG --spacing 0.00484 --backend openmp --threads 16 --no-cleanup --tile 2 --repeat 2 2>&1 | grep RESULT; }
+      s=$(date +%s%N); env $E $B/install/bin/nbmc reconstruct $BIG --spacing 0.00484 --cell-size 0.5 --backend openmp --threads 16 -o $L/f.ply > $L/r.txt 2>&1
+      echo "# $v r$round cli cpu single: wall $(( ($(date +%s%N) - s) / 1000000 )) ms; $(sed -n '/^stage/,/library/p' $L/r.txt | tr -s ' ' | paste -sd' ')"
+    done
+  done
+  } > $O/hostbuf.txt 2>&1
+  grep -A1 "^# " $O/hostbuf.txt | grep -o "^# .*bench.*\|^# [a-z0-9]* r[12] [a-z-].*\|peak_rss_mib=[0-9.]*\|total=[0-9.]*\| t[0-6]=[0-9.]*\|postprocess=[0-9.]*" | paste -sd' ' | sed 's/# /\n/g' | cut -c1-250
+  echo "hostbuf done at $(( $(date +%s) - t0 )) s" ;;
 esac; done
 echo "total $(( $(date +%s) - t0 )) s"
