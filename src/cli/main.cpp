@@ -50,6 +50,13 @@ double seconds_since(Clock::time_point t0) {
   return std::chrono::duration<double>(Clock::now() - t0).count();
 }
 
+// Stores the seconds of its life into `to` (on every way out of a scope).
+struct SecondsInto {
+  double& to;
+  Clock::time_point t0 = Clock::now();
+  ~SecondsInto() { to = seconds_since(t0); }
+};
+
 // ------------------------------------------------------------ name tables
 struct Named {
   const char* name;
@@ -414,12 +421,7 @@ FrameInput read_frame(const Options& o, const nbmc::cli::Frame& f) {
 MeshPtr reconstruct_frame(const Options& o, nbmc_context* ctx, FrameInput& in, nbmc::cli::FrameResult& r,
                           bool& cancelled_run) {
   using namespace nbmc;
-  const auto t0 = Clock::now();
-  struct Lap {  // r.reconstruct_seconds on every way out
-    nbmc::cli::FrameResult& r;
-    Clock::time_point t0;
-    ~Lap() { r.reconstruct_seconds = seconds_since(t0); }
-  } lap{r, t0};
+  const SecondsInto lap{r.reconstruct_seconds};
   try {
     const io::Particles& particles = in.particles;
     r.particles = particles.count();
@@ -454,12 +456,7 @@ MeshPtr reconstruct_frame(const Options& o, nbmc_context* ctx, FrameInput& in, n
 void write_frame(const Options& o, const nbmc::cli::Frame& f, const nbmc_mesh* mesh, nbmc::cli::FrameResult& r,
                  bool& cancelled_run) {
   using namespace nbmc;
-  const auto t0 = Clock::now();
-  struct Lap {  // r.write_seconds on every way out
-    nbmc::cli::FrameResult& r;
-    Clock::time_point t0;
-    ~Lap() { r.write_seconds = seconds_since(t0); }
-  } lap{r, t0};
+  const SecondsInto lap{r.write_seconds};
   try {
     io::MeshView view = mesh_view(mesh);
     const std::vector<io::Attribute> attrs = mesh_attributes(mesh);
