@@ -602,11 +602,13 @@ int reconstruct_sequence(Options& o, const std::vector<nbmc::cli::Frame>& frames
     if (show) std::fputs(cli::progress_line(results.size() + 1, frames.size(), r, meter).c_str(), stderr);
     results.push_back(std::move(r));
   };
-  // With CUDA, two contexts take turns: frame i's stages on the GPU run while
-  // frame i-1 is post-processed (clean-up) on the host threads, which is
-  // most of a GPU frame's time. Reconstructions on one backend are
-  // serialised inside nbmc, the post-processing is not. Each context holds
-  // its own buffers, so not under a memory budget unless asked for.
+  // With CUDA, two contexts take turns: one frame's upload and what the
+  // library does outside its Kokkos thread run while the other's frame is
+  // reconstructed. The reconstructions and their clean-ups run one at a
+  // time on nbmc's Kokkos thread, so the gain is small (8 frames of 1.65 M
+  // particles on an H100 machine: 0.59-0.67 s, one context 0.63-0.71 s;
+  // bench/RESULTS.md, "Session 28"). Each context holds its own buffers, so
+  // not under a memory budget unless asked for.
   int n_contexts = o.contexts > 0 ? o.contexts
                    : backend == NBMC_BACKEND_CUDA && o.memory_budget.empty() ? 2 : 1;
   if (!overlap) n_contexts = 1;

@@ -16,9 +16,8 @@
 // that holds it and is at most a quarter larger. Blocks come from
 // std::malloc (advised for huge pages: huge_pages.hpp) and go back with
 // std::free, so a block freed through another copy of this header (another
-// shared object) is simply freed. Off under
-// AddressSanitizer (kept blocks would hide use-after-free) and with
-// NBMC_HOST_CACHE=0.
+// shared object) is simply freed. Off under AddressSanitizer (kept blocks
+// would hide use-after-free) and with NBMC_HOST_CACHE=0.
 #pragma once
 
 #include "huge_pages.hpp"
