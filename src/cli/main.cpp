@@ -390,30 +390,34 @@ struct FrameInput {
   double seconds = 0;
 };
 
-FrameInput read_frame(const Options& o, const nbmc::cli::Frame& f) {
+// Reads one file's particles (H5Part: step) and checks the --attributes;
+// errors go into the result, not thrown.
+FrameInput read_input(const Options& o, const std::string& path, std::int64_t step) {
   using namespace nbmc;
   FrameInput in;
   const auto t0 = Clock::now();
-  if (!f.missing.empty()) {
-    in.error = f.missing;
-  } else if (o.resume && cli::output_exists(f.output)) {
-    in.skipped = true;
-  } else {
-    try {
-      io::ReadOptions ro = read_options(o);
-      ro.frame = f.step;
-      in.particles = io::read_particles(f.input, ro);
-      check_attributes(f.input, in.particles, ro.only, ro);
-    } catch (const io::Cancelled&) {
-      in.cancelled = true;
-    } catch (const std::bad_alloc&) {
-      in.error = "out of memory";
-    } catch (const std::exception& e) {
-      in.error = e.what();
-    }
-    if (!in.error.empty()) in.particles = io::Particles();
+  try {
+    io::ReadOptions ro = read_options(o);
+    ro.frame = step;
+    in.particles = io::read_particles(path, ro);
+    check_attributes(path, in.particles, ro.only, ro);
+  } catch (const io::Cancelled&) {
+    in.cancelled = true;
+  } catch (const std::bad_alloc&) {
+    in.error = "out of memory";
+  } catch (const std::exception& e) {
+    in.error = e.what();
   }
+  if (!in.error.empty()) in.particles = io::Particles();
   in.seconds = seconds_since(t0);
+  return in;
+}
+
+FrameInput read_frame(const Options& o, const nbmc::cli::Frame& f) {
+  FrameInput in;
+  if (!f.missing.empty()) in.error = f.missing;
+  else if (o.resume && nbmc::cli::output_exists(f.output)) in.skipped = true;
+  else in = read_input(o, f.input, f.step);
   return in;
 }
 
@@ -746,8 +750,6 @@ int reconstruct(Options& o) {
   report.output_path = o.output;
 
   // Check the file names first, to fail early.
-  io::ReadOptions ro = read_options(o);
-  ro.frame = o.step;
   try {
     report.output_format = io::mesh_format(o.output);
     report.input_format = io::particle_format(o.input, o.input_format);
@@ -759,22 +761,8 @@ int reconstruct(Options& o) {
   // the context (with CUDA: the driver, the device and its memory pools, a
   // large part of a single run's time). Errors are reported in the order of
   // a sequential run: the file's first.
-  struct Read {
-    io::Particles particles;
-    double seconds = 0;
-    std::string error;  // an io::Error's message
-  };
-  std::future<Read> reading = std::async(std::launch::async, [&o, &ro] {
-    Read r;
-    const auto t0 = Clock::now();
-    try {
-      r.particles = io::read_particles(o.input, ro);
-    } catch (const io::Error& e) {
-      r.error = e.what();
-    }
-    r.seconds = seconds_since(t0);
-    return r;
-  });
+  std::future<FrameInput> reading =
+      std::async(std::launch::async, [&o] { return read_input(o, o.input, o.step); });
   const auto t_setup = Clock::now();
   nbmc_context* raw = nullptr;
   std::int32_t st = nbmc_context_create(&o.desc, &raw);
@@ -785,18 +773,14 @@ int reconstruct(Options& o) {
 
   io::Particles particles;
   {
-    Read r = reading.get();
-    report.read_seconds = r.seconds;
-    try {
-      if (r.error.empty()) check_attributes(o.input, r.particles, ro.only, ro);
-    } catch (const io::Error& e) {
-      r.error = e.what();
-    }
-    if (!r.error.empty()) {
-      std::fprintf(stderr, "nbmc: error: %s\n", r.error.c_str());
+    FrameInput in = reading.get();
+    report.read_seconds = in.seconds;
+    if (in.cancelled) return cancelled(progress);
+    if (!in.error.empty()) {
+      std::fprintf(stderr, "nbmc: error: %s\n", in.error.c_str());
       return 1;
     }
-    particles = std::move(r.particles);
+    particles = std::move(in.particles);
   }
   report.particle_count = particles.count();
   if (st != NBMC_OK) return library_error(st, setup_error.c_str());
