@@ -129,6 +129,11 @@ struct NeighbourView {
     b = dense_start(d + std::size_t(x0));
     e = dense_start(d + std::size_t(x1) + 1);
   }
+  // Whether rows can be cut to sub-cells: the dense table and its sub-cell
+  // splits (sub_range) are there.
+  KOKKOS_INLINE_FUNCTION bool has_sub_cells() const {
+    return dense_start.extent(0) != 0 && dense_sub.extent(0) != 0;
+  }
   // The x at which sub-cell m of a row starts (sub_cell_edge).
   KOKKOS_INLINE_FUNCTION float sub_edge(int m) const { return sub_cell_edge(m, sub_width); }
   // With dense_sub: one range of row (y, z)'s particles, in sorted order,

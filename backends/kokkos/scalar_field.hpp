@@ -375,9 +375,11 @@ KOKKOS_INLINE_FUNCTION std::uint32_t sum_vertex_direct(const NeighbourView<MemSp
   std::int64_t lo[3], hi[3];
   cell_span(nb, x, x, fc.R, lo, hi);
   const float* X = nb.pos.data();
+  const SoaPositions soa{X, X + nb.n, X + 2 * nb.n};
+  const float* pd = Method::P ? nb.pdata.data() : nullptr;
+  const float* q = Method::radii ? nb.support.data() : nullptr;
   const float inv_R2 = fc.inv_R2, R2 = fc.R * fc.R;
-  const bool rows = nb.dense_start.extent(0) != 0;
-  if constexpr (Path != kRowsWalk) if (Path == kRowsSubCells || (rows && nb.dense_sub.extent(0) != 0)) {
+  if constexpr (Path != kRowsWalk) if (Path == kRowsSubCells || nb.has_sub_cells()) {
     // Each row is cut to the chord of the ball at the row's distance in y
     // and z, to the sub-cell, from the table (NeighbourView::sub_range): no
     // walk over particles, and fewer particles visited than the whole row
@@ -430,13 +432,10 @@ KOKKOS_INLINE_FUNCTION std::uint32_t sum_vertex_direct(const NeighbourView<MemSp
         std::uint32_t b, e;
         nb.sub_range(m0, m1, y, z, b, e);
         if (b >= e) continue;
-        const float* pd = Method::P ? nb.pdata.data() : nullptr;
-        const float* q = Method::radii ? nb.support.data() : nullptr;
         if (nb.pos4.extent(0) != 0)
           evals += Method::accumulate(acc, Aos4Positions{nb.pos4.data()}, pd, q, b, e, x[0], x[1], x[2], fc.inv_R2);
         else
-          evals += Method::accumulate(acc, SoaPositions{X, X + nb.n, X + 2 * nb.n}, pd, q, b, e, x[0], x[1], x[2],
-                                      fc.inv_R2);
+          evals += Method::accumulate(acc, soa, pd, q, b, e, x[0], x[1], x[2], fc.inv_R2);
       }
     }
     return evals;
@@ -452,9 +451,9 @@ KOKKOS_INLINE_FUNCTION std::uint32_t sum_vertex_direct(const NeighbourView<MemSp
   auto add = [&](std::uint32_t b, std::uint32_t e) {
     while (b < e && X[b] < x[0] && beyond(X[b] - x[0])) ++b;
     while (e > b && X[e - 1] > x[0] && beyond(X[e - 1] - x[0])) --e;
-    evals += Method::accumulate(acc, SoaPositions{X, X + nb.n, X + 2 * nb.n}, Method::P ? nb.pdata.data() : nullptr,
-                                Method::radii ? nb.support.data() : nullptr, b, e, x[0], x[1], x[2], fc.inv_R2);
+    evals += Method::accumulate(acc, soa, pd, q, b, e, x[0], x[1], x[2], fc.inv_R2);
   };
+  const bool rows = nb.dense_start.extent(0) != 0;
   for (std::int64_t z = lo[2]; z <= hi[2]; ++z)
     for (std::int64_t y = lo[1]; y <= hi[1]; ++y) {
       // The distance first: a cell that is too far needs no lookup. The
@@ -850,7 +849,7 @@ std::uint64_t gather_field(const ExecSpace& space, const NeighbourView<typename 
   // Chunks bound the time to react to cancellation. On a GPU, launches of
   // 4096 words filled half a wave of an H100 (ncu), so chunks are larger there.
   constexpr bool host = Kokkos::SpaceAccessibility<Kokkos::HostSpace, MemSpace>::accessible;
-  const bool sub_cells = nb.dense_start.extent(0) != 0 && nb.dense_sub.extent(0) != 0;
+  const bool sub_cells = nb.has_sub_cells();
   if constexpr (!host) {
     if (!list.listed() && device_gather_kind() == 2) {
       // One thread per band vertex (phi holds the band's values), in chunks.
