@@ -238,7 +238,7 @@ void reference_sums(const NeighbourView<Host>& nb, const float x[3], float S, co
         for (std::uint32_t j = b; j < e; ++j) {
           const float dx = X[j] - x[0], dy = Y[j] - x[1], dz = Z[j] - x[2];
           const float q = Method::radii ? nb.support(j) : fc.inv_R2;
-          const float s2 = (dx * dx + dy * dy + dz * dz) * q;
+          const float s2 = std::fma(dz, dz, std::fma(dy, dy, dx * dx)) * q;  // scaled_distance2
           evals += s2 < 1.f ? 1 : 0;
           Method::add(acc, dx, dy, dz, s2 < 1.f ? 1.f - s2 : 0.f,
                       Method::P ? nb.pdata.data() + std::size_t(Method::P) * j : nullptr, q);

@@ -165,7 +165,7 @@ struct FieldSPHT {
       P(j, px, py, pz);
       const float dx = px - x0, dy = py - x1, dz = pz - x2;
       const float q = inv_support2<Radii>(Q, j, inv_R2);
-      const float s2 = (dx * dx + dy * dy + dz * dz) * q;
+      const float s2 = scaled_distance2(dx, dy, dz, q);
       if (!(s2 < 1.f)) continue;  // it would add exactly +0 (field_common.hpp)
       const float k = s2 < 1.f ? 1.f - s2 : 0.f;
       count += s2 < 1.f ? 1u : 0u;
@@ -206,7 +206,7 @@ struct SphDensityT {
       P(j, px, py, pz);
       const float dx = px - x0, dy = py - x1, dz = pz - x2;
       const float q = inv_support2<Radii>(Q, j, inv_R2);
-      const float s2 = (dx * dx + dy * dy + dz * dz) * q;
+      const float s2 = scaled_distance2(dx, dy, dz, q);
       if (!(s2 < 1.f)) continue;  // it would add exactly +0 (field_common.hpp)
       const float k = s2 < 1.f ? 1.f - s2 : 0.f;
       count += s2 < 1.f ? 1u : 0u;

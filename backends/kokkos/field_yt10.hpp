@@ -147,7 +147,7 @@ struct FieldYT10 {
       float px, py, pz;
       P(j, px, py, pz);
       const float dx = px - x0, dy = py - x1, dz = pz - x2;
-      const float s2 = (dx * dx + dy * dy + dz * dz) * inv_R2;
+      const float s2 = scaled_distance2(dx, dy, dz, inv_R2);
       if (!(s2 < 1.f)) continue;  // it would add exactly +0 (field_common.hpp)
       const float k = s2 < 1.f ? 1.f - s2 : 0.f;
       count += s2 < 1.f ? 1u : 0u;
@@ -204,7 +204,7 @@ struct Yt10Moments {
       float px, py, pz;
       P(j, px, py, pz);
       const float dx = px - x0, dy = py - x1, dz = pz - x2;
-      const float s2 = (dx * dx + dy * dy + dz * dz) * inv_R2;
+      const float s2 = scaled_distance2(dx, dy, dz, inv_R2);
       if (!(s2 < 1.f)) continue;  // it would add exactly +0 (field_common.hpp)
       const float k = s2 < 1.f ? 1.f - s2 : 0.f;
       count += s2 < 1.f ? 1u : 0u;

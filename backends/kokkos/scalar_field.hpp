@@ -235,7 +235,7 @@ inline bool eval_points_host_lanes(const NeighbourView<MemSpace>& nb, const std:
         const HostVecF dz = lanes_of<HostVecF>(Z[p]) - vz;
         HostVecF q = inv_R2;
         if constexpr (Method::radii) q = lanes_of<HostVecF>(Qt[p]);
-        const HostVecF s2 = (dx * dx + dy * dy + dz * dz) * q;
+        const HostVecF s2 = scaled_distance2(dx, dy, dz, q);
         const HostVecI inside = (s2 < one) & visit;  // -1 where the particle contributes
         const HostVecF k = (HostVecF)((HostVecI)(one - s2) & inside);
         count -= inside;
@@ -386,7 +386,7 @@ KOKKOS_INLINE_FUNCTION std::uint32_t sum_vertex_direct(const NeighbourView<MemSp
     // within R in x. The cut is conservative: what it leaves out of the
     // row's cells within R (the same cells as below) lies farther than R
     // with margins far above float rounding, so it would add k = 0 (exactly
-    // +0) with s2 = ((dx^2 + dy^2) + dz^2) * q_j, q_j >= inv_R2. The same
+    // +0) with s2 = scaled_distance2(dx, dy, dz, q_j), q_j >= inv_R2. The same
     // particles in the same order contribute as in the walk below. Cell and
     // sub-cell coordinates fit 32 bits here (build_dense_cells).
     const float ax = x[0] < 0 ? -x[0] : x[0], ay = x[1] < 0 ? -x[1] : x[1], az = x[2] < 0 ? -x[2] : x[2];
@@ -445,7 +445,7 @@ KOKKOS_INLINE_FUNCTION std::uint32_t sum_vertex_direct(const NeighbourView<MemSp
   // first and after the last that can reach x are skipped. They would add
   // k = 0 (exactly +0 to every sum): a skipped particle has
   // ((X - x0)^2) * inv_R2 >= 1 with the float operations of s2, and
-  // s2 = ((dx^2 + dy^2) + dz^2) * q_j is at least that (rounding is
+  // s2 = scaled_distance2(dx, dy, dz, q_j) is at least that (rounding is
   // monotone; q_j >= inv_R2 with radii).
   auto beyond = [&](float d) { return (d * d) * inv_R2 >= 1.f; };
   auto add = [&](std::uint32_t b, std::uint32_t e) {
@@ -918,7 +918,7 @@ std::uint64_t scatter_field(const ExecSpace& space, MemoryTracker& tracker,
         float* row = a + N * std::size_t(d0) * (std::size_t(j) + std::size_t(d1) * std::size_t(k));
         for (std::int64_t i = lo[0]; i <= hi[0]; ++i) {
           const float dx = px - float(i) * float(c);
-          const float s2 = (dx * dx + dy * dy + dz * dz) * qp;
+          const float s2 = scaled_distance2(dx, dy, dz, qp);
           if (s2 >= 1.f) continue;
           Method::add(row + N * i, dx, dy, dz, 1.f - s2, pd, qp);
           ++evals;
