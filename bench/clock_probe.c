@@ -7,13 +7,15 @@
 // efficiency any program can show against its one-thread time.
 //
 //   cc -O2 -march=native -pthread bench/clock_probe.c -o clock_probe
-//   ./clock_probe [SECONDS_PER_RUN=2]      prints T, Gflop/s per thread (min, mean), ratio to T = 1
+//   ./clock_probe [SECONDS_PER_RUN=2 [T ...]]   prints T, Gflop/s per thread (min, mean), ratio to the
+//                                              first T (default T: 1 2 4 8 12 16 1)
 #include <pthread.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <time.h>
 
 typedef float v16 __attribute__((vector_size(64)));
+enum { kMaxThreads = 256 };
 
 static double now(void) {
   struct timespec ts;
@@ -50,8 +52,8 @@ static void* work(void* out) {
 }
 
 static double run(int T, double* lo) {
-  pthread_t th[256];
-  double r[256];
+  pthread_t th[kMaxThreads];
+  double r[kMaxThreads];
   go = 0;
   for (int i = 0; i < T; ++i) pthread_create(&th[i], NULL, work, &r[i]);
   go = 1;
@@ -67,10 +69,18 @@ static double run(int T, double* lo) {
 
 int main(int argc, char** argv) {
   if (argc > 1) seconds = atof(argv[1]);
-  const int counts[] = {1, 2, 4, 8, 12, 16, 1};
+  int counts[64] = {1, 2, 4, 8, 12, 16, 1};
+  int n = 7;
+  if (argc > 2) {  // the thread counts to run, in order
+    n = 0;
+    for (int a = 2; a < argc && n < 64; ++a) {
+      const int t = atoi(argv[a]);
+      if (t >= 1 && t <= kMaxThreads) counts[n++] = t;
+    }
+  }
   double base = 0;
   printf("threads  Gflop/s per thread (min, mean)  mean / one thread\n");
-  for (int c = 0; c < (int)(sizeof counts / sizeof counts[0]); ++c) {
+  for (int c = 0; c < n; ++c) {
     double lo;
     const double mean = run(counts[c], &lo);
     if (c == 0) base = mean;
