@@ -19,6 +19,55 @@
 namespace nbmc {
 namespace Details {
 
+// The host's pass over the particles of one neighbour cell, [b, e): L
+// particles at a time as SIMD lanes (sum_cell_particles_host_lanes; each
+// D_j bit for bit a device thread's), their weights 1 / D_j into w.
+template <bool Radii, int L, class MemSpace>
+KOKKOS_INLINE_FUNCTION void sph_cell_host_lanes(const NeighbourView<MemSpace>& nb, float S, const FieldConstants& fc,
+                                                std::uint32_t b, std::uint32_t e, float* w) {
+  sum_cell_particles_host_lanes<SphDensityT<Radii>, L>(
+      nb, S, fc, b, e, [&](std::uint32_t j, const float* a, std::uint32_t) { w[j] = 1.f / SphDensityT<Radii>::value(a, fc); });
+}
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wpsabi"  // 32- and 64-byte vectors never cross a call that is not inlined
+#endif
+// 8 lanes where the CPU has AVX2, 16 where it has AVX-512F
+// (host_simd_lanes), as for the band tiles.
+#if defined(NBMC_HOST_AVX2)
+template <bool Radii, class MemSpace>
+__attribute__((target("avx2,fma"), flatten)) void sph_cell_host_avx2(const NeighbourView<MemSpace>& nb, float S,
+                                                                  const FieldConstants& fc, std::uint32_t b,
+                                                                  std::uint32_t e, float* w) {
+  sph_cell_host_lanes<Radii, 8>(nb, S, fc, b, e, w);
+}
+#endif
+#if defined(NBMC_HOST_AVX512)
+template <bool Radii, class MemSpace>
+__attribute__((target("avx512f"), flatten)) void sph_cell_host_avx512(const NeighbourView<MemSpace>& nb, float S,
+                                                                    const FieldConstants& fc, std::uint32_t b,
+                                                                    std::uint32_t e, float* w) {
+  sph_cell_host_lanes<Radii, 16>(nb, S, fc, b, e, w);
+}
+#endif
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic pop
+#endif
+
+// The pass over one neighbour cell with `lanes` lanes (host_simd_lanes).
+template <bool Radii, class MemSpace>
+KOKKOS_INLINE_FUNCTION void sph_cell_host(const NeighbourView<MemSpace>& nb, float S, const FieldConstants& fc,
+                                          std::uint32_t b, std::uint32_t e, float* w, int lanes) {
+#if defined(NBMC_HOST_AVX512)
+  if (lanes == 16) return sph_cell_host_avx512<Radii>(nb, S, fc, b, e, w);
+#endif
+#if defined(NBMC_HOST_AVX2)
+  if (lanes == 8) return sph_cell_host_avx2<Radii>(nb, S, fc, b, e, w);
+#endif
+  (void)lanes;
+  sph_cell_host_lanes<Radii, 4>(nb, S, fc, b, e, w);
+}
+
 template <bool Radii, class ExecSpace>
 void compute_sph_weights(const ExecSpace& space, MemoryTracker& tracker,
                          Neighbourhood<typename ExecSpace::memory_space>& nbh, const Grid& g,
@@ -30,15 +79,27 @@ void compute_sph_weights(const ExecSpace& space, MemoryTracker& tracker,
   const auto w = nbh.pdata.view();
   const float S = float(g.nb_cell);
   const std::size_t n = nbh.n;
-  Kokkos::parallel_for(
-      "nbmc::scalar_field::sph_density", Kokkos::RangePolicy<ExecSpace>(space, 0, n),
-      KOKKOS_LAMBDA(const std::size_t j) {
-        const float x[3] = {nb.pos(j), nb.pos(n + j), nb.pos(2 * n + j)};
-        std::uint64_t evals = 0;
-        // >= 1: the particle's own W~(0) = 1 is in the sum
-        const float d = eval_vertex_direct<SphDensityT<Radii>>(nb, x, S, fc, evals);
-        w(j) = 1.f / d;
-      });
+  // (D_j >= 1: the particle's own W~(0) = 1 is in the sum.)
+  if constexpr (Kokkos::SpaceAccessibility<Kokkos::HostSpace, MemSpace>::accessible) {
+    // One work item per occupied neighbour cell, its particles as SIMD lanes
+    // (one particle at a time, this pass took longer than the field itself).
+    const int lanes = host_simd_lanes();
+    const auto starts = nbh.cell_start.view();
+    float* const o = w.data();
+    Kokkos::parallel_for(
+        "nbmc::scalar_field::sph_density",
+        Kokkos::RangePolicy<ExecSpace, Kokkos::Schedule<Kokkos::Dynamic>>(space, 0, nbh.n_cells),
+        KOKKOS_LAMBDA(const std::size_t c) { sph_cell_host<Radii>(nb, S, fc, starts(c), starts(c + 1), o, lanes); });
+  } else {
+    // One thread per particle.
+    Kokkos::parallel_for(
+        "nbmc::scalar_field::sph_density", Kokkos::RangePolicy<ExecSpace>(space, 0, n),
+        KOKKOS_LAMBDA(const std::size_t j) {
+          const float x[3] = {nb.pos(j), nb.pos(n + j), nb.pos(2 * n + j)};
+          std::uint64_t evals = 0;
+          w(j) = 1.f / eval_vertex_direct<SphDensityT<Radii>>(nb, x, S, fc, evals);
+        });
+  }
   space.fence();
 }
 

@@ -44,48 +44,12 @@ template <int L, class MemSpace>
 KOKKOS_INLINE_FUNCTION float yt10_cell_host_lanes(const NeighbourView<MemSpace>& nb, float S, const FieldConstants& fc,
                                                   const Yt10Constants& k, std::uint32_t b, std::uint32_t e,
                                                   float* out) {
-#if defined(__CUDA_ARCH__)
-  (void)nb; (void)S; (void)fc; (void)k; (void)b; (void)e; (void)out;
-  return 0.f;  // device code runs one thread per particle (compute_yt10_kernels)
-#else
   float reach = 0;
-  const float* X = nb.pos.data();
-  const float* Y = X + nb.n;
-  const float* Z = Y + nb.n;
-  for (std::uint32_t c0 = b; c0 < e; c0 += 64) {
-    const std::uint32_t c1 = e - c0 < 64 ? e : c0 + 64;
-    float xmin[3] = {X[c0], Y[c0], Z[c0]}, xmax[3] = {X[c0], Y[c0], Z[c0]};
-    for (std::uint32_t j = c0 + 1; j < c1; ++j) {
-      const float x[3] = {X[j], Y[j], Z[j]};
-      for (int a = 0; a < 3; ++a) {
-        xmin[a] = x[a] < xmin[a] ? x[a] : xmin[a];
-        xmax[a] = x[a] > xmax[a] ? x[a] : xmax[a];
-      }
-    }
-    std::int64_t lo[3], hi[3];
-    cell_span(nb, xmin, xmax, fc.R, lo, hi);  // contains each particle's own span (monotone in x)
-    auto kernel = [&](std::uint32_t j, const float* a, std::uint32_t count) {
-      const float r = yt10_kernel(a, count, k, out + std::size_t(kYt10Floats) * j);
-      reach = r > reach ? r : reach;
-    };
-    const bool tiled = eval_points_host_lanes<Yt10Moments, L>(
-        nb, lo, hi, S, fc, int(c1 - c0),
-        [&](int i, float x[3]) {
-          x[0] = X[c0 + i];
-          x[1] = Y[c0 + i];
-          x[2] = Z[c0 + i];
-        },
-        [&](int i, const float* a, std::uint32_t count) { kernel(c0 + std::uint32_t(i), a, count); });
-    if (!tiled)  // very coarse cells: one particle at a time
-      for (std::uint32_t j = c0; j < c1; ++j) {
-        const float x[3] = {X[j], Y[j], Z[j]};
-        float a[Yt10Moments::N];
-        const std::uint32_t count = sum_vertex_direct<Yt10Moments>(nb, x, S, fc, a);
-        kernel(j, a, count);
-      }
-  }
+  sum_cell_particles_host_lanes<Yt10Moments, L>(nb, S, fc, b, e, [&](std::uint32_t j, const float* a, std::uint32_t count) {
+    const float r = yt10_kernel(a, count, k, out + std::size_t(kYt10Floats) * j);
+    reach = r > reach ? r : reach;
+  });
   return reach;
-#endif
 }
 #if defined(__GNUC__) && !defined(__clang__)
 #pragma GCC diagnostic push
