@@ -666,3 +666,94 @@ TEST(SurfaceSums, EveryLaneCountGivesTheScalarSums) {
             best);
   EXPECT_EQ(surface_sums_host(X.data(), Y.data(), Z.data(), begin, end, 3, 0, 3, h2, best, gx, gy, gz, count), 4);
 }
+
+// SSP07's largest eigenvalue takes cos(acos(r) / 3) from a polynomial with
+// IEEE operations only (field_ssp07.hpp), so that CPU and GPU agree bit for
+// bit. Its accuracy against a long double reference, over floats of [-1, 1]
+// (every 4099th bit pattern of each sign, and both ends): within 1.5 ulps
+// of the result (measured: 1.08).
+TEST(Ssp07Eigenvalue, CosThirdAcosWithinOneAndAHalfUlps) {
+  double worst = 0;
+  float worst_r = 0;
+  std::size_t n = 0;
+  auto check = [&](float r) {
+    const long double ref = std::cos(std::acos(static_cast<long double>(r)) / 3.0L);
+    const float got = cos_third_acos(r);
+    const float rf = static_cast<float>(ref);
+    const double ulp = double(std::nextafter(rf, 2.f) - rf);
+    const double err = double(std::fabs(static_cast<long double>(got) - ref)) / ulp;
+    if (err > worst) {
+      worst = err;
+      worst_r = r;
+    }
+    ++n;
+  };
+  for (std::uint32_t b = 0; b < 0x3f800000u; b += 4099) {
+    float r;
+    std::memcpy(&r, &b, 4);
+    check(r);
+    check(-r);
+  }
+  check(1.f);
+  check(-1.f);
+  EXPECT_LE(worst, 1.5) << "at r = " << worst_r;
+  EXPECT_GT(n, 500000u);
+  EXPECT_GE(cos_third_acos(-1.f), 0.5f - 1e-7f);  // a double largest eigenvalue
+  EXPECT_LE(cos_third_acos(1.f), 1.f);
+}
+
+// The largest eigenvalue of random symmetric 3x3 matrices (R D R^T, with
+// random rotations R and eigenvalues D, some of them repeated): within 1e-5
+// of the largest |eigenvalue| where the eigenvalues are apart; where the
+// largest is (nearly) double, r is near -1 and the closed form loses half
+// the digits with any cos(acos(r) / 3) (an error of 1e-7 in r moves the
+// root by about 3e-4): there no farther from the truth than the same formula
+// with the C library's acosf and cosf, give or take 2e-6.
+TEST(Ssp07Eigenvalue, LargestOfRandomSymmetricMatrices) {
+  std::mt19937 rng(30);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  int separated = 0, within = 0;
+  for (int trial = 0; trial < 20000; ++trial) {
+    double D[3] = {3 * u(rng), 3 * u(rng), 3 * u(rng)};
+    if (trial % 4 == 1) D[1] = D[0];  // a repeated eigenvalue
+    if (trial % 4 == 2) D[2] = D[1] = D[0] + 1e-3 * u(rng);
+    // a random rotation from a unit quaternion
+    double q[4] = {u(rng), u(rng), u(rng), u(rng)};
+    const double l = std::sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+    for (double& v : q) v /= l;
+    const double w = q[0], x = q[1], y = q[2], z = q[3];
+    const double Rm[3][3] = {{1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)},
+                             {2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)},
+                             {2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)}};
+    double S[3][3] = {};
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j)
+        for (int k = 0; k < 3; ++k) S[i][j] += Rm[i][k] * D[k] * Rm[j][k];
+    const double want = std::max(D[0], std::max(D[1], D[2]));
+    const double scale = std::max(std::fabs(D[0]), std::max(std::fabs(D[1]), std::fabs(D[2])));
+    const float got = largest_eigenvalue_sym3(float(S[0][0]), float(S[1][1]), float(S[2][2]), float(S[0][1]),
+                                              float(S[0][2]), float(S[1][2]));
+    const double tol = 1e-5 * std::max(1.0, scale);
+    // the same steps as largest_eigenvalue_sym3, with the C library
+    const float a = float(S[0][0]), b = float(S[1][1]), c = float(S[2][2]), d = float(S[0][1]), e = float(S[0][2]),
+                f = float(S[1][2]);
+    const float p1 = d * d + e * e + f * f, qm = (a + b + c) / 3.f;
+    const float aa = a - qm, bb = b - qm, cc = c - qm;
+    const float p2 = aa * aa + bb * bb + cc * cc + 2.f * p1;
+    float libm = qm;
+    if (p2 > 1e-20f) {
+      const float p = std::sqrt(p2 / 6.f), inv = 1.f / p;
+      const float ba = aa * inv, bb2 = bb * inv, bc = cc * inv, bd = d * inv, be = e * inv, bf = f * inv;
+      float r = 0.5f * (ba * (bb2 * bc - bf * bf) - bd * (bd * bc - bf * be) + be * (bd * bf - bb2 * be));
+      r = r < -1.f ? -1.f : (r > 1.f ? 1.f : r);
+      libm = qm + 2.f * p * std::cos(std::acos(r) / 3.f);
+    }
+    const double err = std::fabs(got - want);
+    ASSERT_TRUE(err <= tol || err <= std::fabs(libm - want) + 0.2 * tol)
+        << "trial " << trial << ": " << got << " against " << want << " (C library: " << libm << ")";
+    separated += std::fabs(libm - want) <= tol ? 1 : 0;
+    within += err <= tol ? 1 : 0;
+  }  // The distinct cases (half the trials and most of the others) within 1e-5.
+  EXPECT_GE(within, separated);
+  EXPECT_GT(within, 10000);
+}

@@ -2,9 +2,7 @@
 // Per-particle radii on the CUDA backend (run on a GPU machine):
 //  - a coarse box and a sphere sampled four times finer, with their radii
 //    (and larger twins of some fine particles at their very positions):
-//    OpenMP and CUDA give the same topology (the SPH density the same mesh
-//    bit for bit; SSP07 and ZB05 positions within 1e-3 of a cell, as
-//    cuda_equivalence allows for the eigenvalue's acosf/cosf);
+//    OpenMP and CUDA give the same mesh bit for bit (SSP07, ZB05, SPH);
 //  - radii from device memory (float strided, double packed) equal the same
 //    radii from the host, bit for bit; device particles with host radii, and
 //    a device mesh, too;
@@ -81,27 +79,7 @@ int main() {
     const MeshReport rep = check_mesh(gm);
     check(rep.closed && rep.oriented && rep.vertex_manifold && rep.components == 2,
           name + ": GPU mesh closed, two components (" + rep.summary() + ")");
-    // As tests/gpu/cuda_equivalence.cpp: identical topology with positions
-    // within 1e-3 of a cell, or (a value within rounding of zero) the same
-    // triangle count with at most 0.01% of the triangles different.
-    const bool topology = !cpu.triangles.empty() && cpu.triangles == gpu.triangles;
-    double worst = 0;
-    std::size_t diff = 0;
-    if (topology) {
-      for (std::size_t i = 0; i < cpu.positions.size(); ++i)
-        worst = std::max(worst, double(std::fabs(cpu.positions[i] - gpu.positions[i])));
-    } else {
-      for (std::size_t t = 0; t < std::min(cpu.triangles.size(), gpu.triangles.size()); ++t) diff += cpu.triangles[t] != gpu.triangles[t];
-    }
-    const double cell = rf;
-    if (method == NBMC_METHOD_SPH)
-      check(same(cpu, gpu), name + ": OpenMP and CUDA meshes bit for bit");
-    else
-      check(topology ? worst <= 1e-3 * cell
-                     : cpu.triangles.size() == gpu.triangles.size() && double(diff) <= 1e-4 * double(cpu.triangles.size()),
-            name + ": OpenMP and CUDA topology " + (topology ? "identical" : "differs in " + std::to_string(diff) +
-                                                                                  " indices") +
-                ", max |dpos| " + std::to_string(worst / cell) + " cell");
+    check(same(cpu, gpu), name + ": OpenMP and CUDA meshes bit for bit");
   }
 
   Ctx gpu(NBMC_BACKEND_CUDA);
