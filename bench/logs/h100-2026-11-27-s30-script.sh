@@ -47,6 +47,22 @@ bench3)
   } > $O/bench3.txt 2>&1
   grep -A1 "^# " $O/bench3.txt | grep -o "^# .*\|total=[0-9.]*\| t4=[0-9.]*" | paste -sd' ' | sed 's/# /\n/g'
   echo "bench3 done at $(( $(date +%s) - t0 )) s" ;;
+topo)  # the host's CPU topology and the thread scaling of the OpenMP backend
+  { lscpu; echo; lscpu -e; echo; nproc; cat /sys/devices/system/cpu/smt/active 2>/dev/null; } > $O/lscpu.txt 2>&1
+  grep -E "Model name|Thread\(s\) per core|Core\(s\) per socket|Socket\(s\)|NUMA node\(s\)|L3|Hypervisor|Flags" $O/lscpu.txt | cut -c1-160
+  lscpu -e | head -20
+  {
+  for round in 1 2; do
+    for t in 1 2 4 8 16; do
+      echo "# t$t r$round"; $N/bench/nbmc_bench $BIG --spacing 0.00484 --backend openmp --threads $t --no-cleanup --repeat 2 2>&1 | grep RESULT
+    done
+    for t in 8 16; do
+      echo "# t$t cores-spread r$round"; OMP_PLACES=cores OMP_PROC_BIND=spread $N/bench/nbmc_bench $BIG --spacing 0.00484 --backend openmp --threads $t --no-cleanup --repeat 2 2>&1 | grep RESULT
+    done
+  done
+  } > $O/scaling.txt 2>&1
+  grep -A1 "^# " $O/scaling.txt | grep -o "^# .*\|total=[0-9.]*\| t[1-5]=[0-9.]*" | paste -sd' ' | sed 's/# /\n/g'
+  echo "topo done at $(( $(date +%s) - t0 )) s" ;;
 check)
   { echo "== equivalence (new)"; NBMC_CHECK_BAND=1 $N/tests/gpu/nbmc_cuda_equivalence $D 2>&1 | tail -80; } > $O/equivalence.txt
   tail -1 $O/equivalence.txt; grep FAIL $O/equivalence.txt | head
