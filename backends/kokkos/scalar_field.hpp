@@ -285,36 +285,29 @@ KOKKOS_INLINE_FUNCTION bool eval_tile_host_lanes(const NeighbourView<MemSpace>& 
 #endif
 }
 
-// 8 lanes on CPUs with AVX2, chosen at run time: the tile code above compiled
-// for AVX2 (flatten: everything it calls is inlined into this one function,
-// so no other code is compiled for AVX2 and FMA).
+// The host's 8 and 16 lanes, chosen at run time (host_simd_lanes below):
+// f(L), L a std::integral_constant<int, 8> or <int, 16>, called inside a
+// function compiled for AVX2 with FMA or for AVX-512F (flatten: f and
+// everything it calls are inlined into that one function, so no other code
+// is compiled for those targets). The band tiles, YT10's and SPH's cell
+// passes and the surface particles' sums go through with_host_lanes.
+// AVX-512F has 32 zmm registers: SSP07's 14 or 15 accumulators, the lanes'
+// coordinates and the temporaries fit (GCC 12 keeps all but the lanes' x in
+// registers, reloaded once per particle, where the 16 ymm registers of the
+// AVX2 loop spilled 9 or 13 per particle; measured with SSP07's former 17 or
+// 18 accumulators).
 #if defined(NBMC_HOST_SIMD8)  // field_common.hpp: GCC, or any compiler with -mavx2
 #define NBMC_HOST_AVX2 1
-template <class Method, class MemSpace>
-__attribute__((target("avx2,fma"), flatten)) bool eval_tile_host_avx2(
-    const NeighbourView<MemSpace>& nb, const std::int64_t lo[3], const std::int64_t hi[3], float S,
-    const FieldConstants& fc, std::uint64_t word, std::uint64_t full, std::size_t w, const BandView<MemSpace>& band,
-    float c, const Kokkos::View<float*, MemSpace>& phi, std::uint64_t& evals) {
-  return eval_tile_host_lanes<Method, 8>(nb, lo, hi, S, fc, word, full, w, band, c, phi, evals);
+template <class F>
+__attribute__((target("avx2,fma"), flatten)) auto host_lanes_avx2(const F& f) {
+  return f(std::integral_constant<int, 8>());
 }
 #endif
-
-// 16 lanes on CPUs with AVX-512F, chosen at run time, as the 8 above: the
-// same tile code with 64-byte vectors (32 zmm registers: SSP07's 14 or 15
-// accumulators, the lanes' coordinates and the temporaries fit; GCC 12 keeps
-// all but the lanes' x in registers, reloaded once per particle, where the
-// 16 ymm registers of the AVX2 loop spilled 9 or 13 per particle; measured
-// with SSP07's former 17 or 18 accumulators).
-// A group of 16 is a 4x4 layer of the tile (tile_order), whose vertices visit
-// nearly the same cells.
 #if defined(NBMC_HOST_SIMD16)  // field_common.hpp: GCC, or any compiler with -mavx512f
 #define NBMC_HOST_AVX512 1
-template <class Method, class MemSpace>
-__attribute__((target("avx512f"), flatten)) bool eval_tile_host_avx512(
-    const NeighbourView<MemSpace>& nb, const std::int64_t lo[3], const std::int64_t hi[3], float S,
-    const FieldConstants& fc, std::uint64_t word, std::uint64_t full, std::size_t w, const BandView<MemSpace>& band,
-    float c, const Kokkos::View<float*, MemSpace>& phi, std::uint64_t& evals) {
-  return eval_tile_host_lanes<Method, 16>(nb, lo, hi, S, fc, word, full, w, band, c, phi, evals);
+template <class F>
+__attribute__((target("avx512f"), flatten)) auto host_lanes_avx512(const F& f) {
+  return f(std::integral_constant<int, 16>());
 }
 #endif
 
@@ -336,6 +329,22 @@ inline int host_simd_lanes() {
   return best;
 }
 
+// f(L) with L = lanes (16, 8 or 4, as host_simd_lanes gives), the 8 and 16
+// compiled for their targets (host_lanes_avx2, host_lanes_avx512).
+template <class F>
+KOKKOS_INLINE_FUNCTION auto with_host_lanes(int lanes, const F& f) {
+#if defined(NBMC_HOST_AVX512)
+  if (lanes == 16) return host_lanes_avx512(f);
+#endif
+#if defined(NBMC_HOST_AVX2)
+  if (lanes == 8) return host_lanes_avx2(f);
+#endif
+  (void)lanes;
+  return f(std::integral_constant<int, 4>());
+}
+
+// A group of 16 is a 4x4 layer of the tile (tile_order), whose vertices visit
+// nearly the same cells.
 template <class Method, class MemSpace>
 KOKKOS_INLINE_FUNCTION bool eval_tile_host(const NeighbourView<MemSpace>& nb, const std::int64_t lo[3],
                                            const std::int64_t hi[3], float S, const FieldConstants& fc,
@@ -343,14 +352,9 @@ KOKKOS_INLINE_FUNCTION bool eval_tile_host(const NeighbourView<MemSpace>& nb, co
                                            const BandView<MemSpace>& band, float c,
                                            const Kokkos::View<float*, MemSpace>& phi, std::uint64_t& evals,
                                            int lanes) {
-#if defined(NBMC_HOST_AVX512)
-  if (lanes == 16) return eval_tile_host_avx512<Method>(nb, lo, hi, S, fc, word, full, w, band, c, phi, evals);
-#endif
-#if defined(NBMC_HOST_AVX2)
-  if (lanes == 8) return eval_tile_host_avx2<Method>(nb, lo, hi, S, fc, word, full, w, band, c, phi, evals);
-#endif
-  (void)lanes;
-  return eval_tile_host_lanes<Method, 4>(nb, lo, hi, S, fc, word, full, w, band, c, phi, evals);
+  return with_host_lanes(lanes, [&nb, lo, hi, S, &fc, word, full, w, &band, c, &phi, &evals](auto L) {
+    return eval_tile_host_lanes<Method, decltype(L)::value>(nb, lo, hi, S, fc, word, full, w, band, c, phi, evals);
+  });
 }
 
 #if defined(__GNUC__) && !defined(__clang__)

@@ -85,22 +85,6 @@ inline void surface_sums_lanes(const float* X, const float* Y, const float* Z, c
     count_out[l] = count[l];
   }
 }
-// 8 lanes where the CPU has AVX2, 16 where it has AVX-512F (host_simd_lanes),
-// compiled as the field's tile kernels are (scalar_field.hpp).
-#if defined(NBMC_HOST_AVX2)
-__attribute__((target("avx2"), flatten)) inline void surface_sums_avx2(
-    const float* X, const float* Y, const float* Z, const std::uint32_t* begin, const std::uint32_t* end, int n_cells,
-    std::uint32_t i0, std::uint32_t last, float h2, float* gx, float* gy, float* gz, int* count) {
-  surface_sums_lanes<8>(X, Y, Z, begin, end, n_cells, i0, last, h2, gx, gy, gz, count);
-}
-#endif
-#if defined(NBMC_HOST_AVX512)
-__attribute__((target("avx512f"), flatten)) inline void surface_sums_avx512(
-    const float* X, const float* Y, const float* Z, const std::uint32_t* begin, const std::uint32_t* end, int n_cells,
-    std::uint32_t i0, std::uint32_t last, float h2, float* gx, float* gy, float* gz, int* count) {
-  surface_sums_lanes<16>(X, Y, Z, begin, end, n_cells, i0, last, h2, gx, gy, gz, count);
-}
-#endif
 #if defined(__GNUC__) && !defined(__clang__)
 #pragma GCC diagnostic pop
 #endif
@@ -113,22 +97,11 @@ inline int surface_sums_host(const float* X, const float* Y, const float* Z, con
                              const std::uint32_t* end, int n_cells, std::uint32_t i0, std::uint32_t last, float h2,
                              int lanes, float* gx, float* gy, float* gz, int* count) {
   const std::uint32_t left = last - i0;
-#if defined(NBMC_HOST_AVX512)
-  if (lanes >= 16 && left > 8) {
-    surface_sums_avx512(X, Y, Z, begin, end, n_cells, i0, last, h2, gx, gy, gz, count);
-    return 16;
-  }
-#endif
-#if defined(NBMC_HOST_AVX2)
-  if (lanes >= 8 && left > 4) {
-    surface_sums_avx2(X, Y, Z, begin, end, n_cells, i0, last, h2, gx, gy, gz, count);
-    return 8;
-  }
-#endif
-  (void)lanes;
-  (void)left;
-  surface_sums_lanes<4>(X, Y, Z, begin, end, n_cells, i0, last, h2, gx, gy, gz, count);
-  return 4;
+  const int L = lanes >= 16 && left > 8 ? 16 : lanes >= 8 && left > 4 ? 8 : 4;
+  return with_host_lanes(L, [=](auto W) {
+    surface_sums_lanes<decltype(W)::value>(X, Y, Z, begin, end, n_cells, i0, last, h2, gx, gy, gz, count);
+    return int(decltype(W)::value);
+  });
 }
 #endif
 

@@ -55,42 +55,16 @@ KOKKOS_INLINE_FUNCTION float yt10_cell_host_lanes(const NeighbourView<MemSpace>&
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wpsabi"  // 32- and 64-byte vectors never cross a call that is not inlined
 #endif
-// 8 lanes where the CPU has AVX2, 16 where it has AVX-512F
-// (host_simd_lanes), as for the band tiles.
-#if defined(NBMC_HOST_AVX2)
-template <class MemSpace>
-__attribute__((target("avx2,fma"), flatten)) float yt10_cell_host_avx2(const NeighbourView<MemSpace>& nb, float S,
-                                                                   const FieldConstants& fc, const Yt10Constants& k,
-                                                                   std::uint32_t b, std::uint32_t e, float* out) {
-  return yt10_cell_host_lanes<8>(nb, S, fc, k, b, e, out);
-}
-#endif
-#if defined(NBMC_HOST_AVX512)
-template <class MemSpace>
-__attribute__((target("avx512f"), flatten)) float yt10_cell_host_avx512(
-    const NeighbourView<MemSpace>& nb, float S, const FieldConstants& fc, const Yt10Constants& k, std::uint32_t b,
-    std::uint32_t e, float* out) {
-  return yt10_cell_host_lanes<16>(nb, S, fc, k, b, e, out);
-}
-#endif
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC diagnostic pop
-#endif
-
 // The pass over one neighbour cell with `lanes` lanes (host_simd_lanes).
 template <class MemSpace>
 KOKKOS_INLINE_FUNCTION float yt10_cell_host(const NeighbourView<MemSpace>& nb, float S, const FieldConstants& fc,
                                              const Yt10Constants& k, std::uint32_t b, std::uint32_t e, float* out,
                                              int lanes) {
-#if defined(NBMC_HOST_AVX512)
-  if (lanes == 16) return yt10_cell_host_avx512(nb, S, fc, k, b, e, out);
-#endif
-#if defined(NBMC_HOST_AVX2)
-  if (lanes == 8) return yt10_cell_host_avx2(nb, S, fc, k, b, e, out);
-#endif
-  (void)lanes;
-  return yt10_cell_host_lanes<4>(nb, S, fc, k, b, e, out);
+  return with_host_lanes(lanes, [&nb, S, &fc, &k, b, e, out](auto L) { return yt10_cell_host_lanes<decltype(L)::value>(nb, S, fc, k, b, e, out); });
 }
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic pop
+#endif
 
 // Computes the kernels into nbh.pdata and returns the field's constants:
 // fc with the visited radius narrowed to R_f = 1.02 times the largest reach
