@@ -334,12 +334,51 @@ KOKKOS_INLINE_FUNCTION T lane_max(T a, T b) {
 #endif
 }
 
+// The IEEE square root in every lane (T a float, or with GCC a host SIMD
+// vector of 8 floats: one vsqrtps), and m ? a : b lane-wise (GCC's vector
+// ?: for vectors, m a comparison of them). For the methods' values computed
+// on lanes (value_t), which must give each lane the scalar code's bits.
+template <class T>
+KOKKOS_INLINE_FUNCTION T lane_sqrt(T v) {
+#if !defined(__CUDA_ARCH__)
+  if constexpr (!std::is_same<T, float>::value) {
+    T r;
+    for (std::size_t l = 0; l < sizeof(T) / sizeof(float); ++l) r[l] = __builtin_sqrtf(v[l]);
+    return r;
+  } else
+#endif
+    return Kokkos::Experimental::sqrt(v);
+}
+#if defined(NBMC_HOST_SIMD8)
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wpsabi"
+#endif
+template <>
+__attribute__((target("avx2,fma"))) inline HostSimd<8>::F lane_sqrt<HostSimd<8>::F>(HostSimd<8>::F v) {
+  __m256 x;
+  std::memcpy(&x, &v, 32);
+  const __m256 r = _mm256_sqrt_ps(x);
+  HostSimd<8>::F o;
+  std::memcpy(&o, &r, 32);
+  return o;
+}
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic pop
+#endif
+#endif
+template <class M, class T>
+KOKKOS_INLINE_FUNCTION T lane_select(M m, T a, T b) {
+  return m ? a : b;
+}
+
 // phi raised to the guard (scale: R for the distance methods, 1 for the
-// density) where the guard is on.
-KOKKOS_INLINE_FUNCTION float distance_guard(float phi, float k_max, float scale, const FieldConstants& c) {
+// density) where the guard is on. T: as lane_sqrt.
+template <class T>
+KOKKOS_INLINE_FUNCTION T distance_guard(T phi, T k_max, float scale, const FieldConstants& c) {
   if (!(c.guard_ratio > 0.f)) return phi;
-  const float g = scale * (Kokkos::Experimental::sqrt(1.f - k_max) - c.guard_ratio);
-  return g > phi ? g : phi;
+  const T g = scale * (lane_sqrt(1.f - k_max) - c.guard_ratio);
+  return lane_select(g > phi, g, phi);
 }
 
 // guard_ratio: max_distance / R (Params, guard_ratio()), 0 = no guard.

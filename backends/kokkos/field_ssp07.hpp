@@ -28,35 +28,38 @@ namespace Details {
 // 1.08 ulp (mean 0.27); cosf(acosf(r) / 3) of glibc 2.36: 1.53 ulp (mean
 // 0.27). On the CPU it replaces two calls into the C library (8 % of a
 // 1.65 M frame's time at cell r/2, R = 2r, perf on the dev VM).
-KOKKOS_INLINE_FUNCTION float cos_third_acos(float r) {
-  const float s = Kokkos::Experimental::sqrt((1.f + r) * 0.5f);
-  const float t = 2.f * s - 1.f;
-  float h = 6.96938741e-07f;
-  h = fmadd(h, t, -2.4961721e-06f);
-  h = fmadd(h, t, 7.41952726e-06f);
-  h = fmadd(h, t, -2.84990274e-05f);
-  h = fmadd(h, t, 0.000116469746f);
-  h = fmadd(h, t, -0.000504277996f);
-  h = fmadd(h, t, 0.0024663473f);
-  h = fmadd(h, t, -0.0155091695f);
-  h = fmadd(h, t, 0.247409061f);
-  return fmadd(h, t, 0.766044438f);
+template <class T>
+KOKKOS_INLINE_FUNCTION T cos_third_acos(T r) {
+  const T s = lane_sqrt((1.f + r) * 0.5f);
+  const T t = 2.f * s - 1.f;
+  T h = lanes_of<T>(6.96938741e-07f);
+  h = fmadd(h, t, lanes_of<T>(-2.4961721e-06f));
+  h = fmadd(h, t, lanes_of<T>(7.41952726e-06f));
+  h = fmadd(h, t, lanes_of<T>(-2.84990274e-05f));
+  h = fmadd(h, t, lanes_of<T>(0.000116469746f));
+  h = fmadd(h, t, lanes_of<T>(-0.000504277996f));
+  h = fmadd(h, t, lanes_of<T>(0.0024663473f));
+  h = fmadd(h, t, lanes_of<T>(-0.0155091695f));
+  h = fmadd(h, t, lanes_of<T>(0.247409061f));
+  return fmadd(h, t, lanes_of<T>(0.766044438f));
 }
 
-// Largest eigenvalue of the symmetric matrix [[a, d, e], [d, b, f], [e, f, c]].
-KOKKOS_INLINE_FUNCTION float largest_eigenvalue_sym3(float a, float b, float c, float d, float e, float f) {
-  const float p1 = d * d + e * e + f * f;
-  const float q = (a + b + c) / 3.f;
-  const float aa = a - q, bb = b - q, cc = c - q;
-  const float p2 = aa * aa + bb * bb + cc * cc + 2.f * p1;
-  if (!(p2 > 1e-20f)) return q;
-  const float p = Kokkos::Experimental::sqrt(p2 / 6.f);
-  const float inv = 1.f / p;
+// Largest eigenvalue of the symmetric matrix [[a, d, e], [d, b, f], [e, f, c]]
+// (T: a float, or lanes of them, as lane_sqrt; every lane the float's bits).
+template <class T>
+KOKKOS_INLINE_FUNCTION T largest_eigenvalue_sym3(T a, T b, T c, T d, T e, T f) {
+  const T p1 = d * d + e * e + f * f;
+  const T q = (a + b + c) / 3.f;
+  const T aa = a - q, bb = b - q, cc = c - q;
+  const T p2 = aa * aa + bb * bb + cc * cc + 2.f * p1;
+  const T p = lane_sqrt(p2 / 6.f);
+  const T inv = 1.f / p;
   // det((S - qI) / p) / 2
-  const float ba = aa * inv, bb2 = bb * inv, bc = cc * inv, bd = d * inv, be = e * inv, bf = f * inv;
-  float r = 0.5f * (ba * (bb2 * bc - bf * bf) - bd * (bd * bc - bf * be) + be * (bd * bf - bb2 * be));
-  r = r < -1.f ? -1.f : (r > 1.f ? 1.f : r);
-  return q + 2.f * p * cos_third_acos(r);
+  const T ba = aa * inv, bb2 = bb * inv, bc = cc * inv, bd = d * inv, be = e * inv, bf = f * inv;
+  T r = 0.5f * (ba * (bb2 * bc - bf * bf) - bd * (bd * bc - bf * be) + be * (bd * bf - bb2 * be));
+  r = lane_select(r < -1.f, lanes_of<T>(-1.f), lane_select(r > 1.f, lanes_of<T>(1.f), r));
+  // a (nearly) scalar matrix: q (computed for every lane, kept where p2 > 1e-20)
+  return lane_select(p2 > 1e-20f, q + 2.f * p * cos_third_acos(r), q);
 }
 
 // Radii = true: per-particle support R_j and radius r_j (field_common.hpp):
@@ -148,35 +151,42 @@ struct FieldSSP07T {
     (void)Rj;
     return count;
   }
-  KOKKOS_INLINE_FUNCTION static float eigenvalue(const float* a, const FieldConstants& c) {
-    const float inv = 1.f / a[0];
+  // The value from the sums, for T a float or (with GCC, on the host) 8 lanes
+  // of them (value_lanes in scalar_field.hpp): the same operations in every
+  // lane, each lane the scalar's bits; the branches are selects (both sides
+  // computed, the one taken kept).
+  template <class T>
+  KOKKOS_INLINE_FUNCTION static T eigenvalue(const T* a, const FieldConstants& c) {
+    const T inv = 1.f / a[0];
     // With radii the sums carry their 1/R_j^2 already.
-    const float s = Radii ? 6.f * inv : 6.f * c.inv_R2 * inv;
-    const float db[3] = {a[1] * inv, a[2] * inv, a[3] * inv};
-    const float g[3] = {a[4], a[5], a[6]};
+    const T s = Radii ? 6.f * inv : 6.f * c.inv_R2 * inv;
+    const T db[3] = {a[1] * inv, a[2] * inv, a[3] * inv};
+    const T g[3] = {a[4], a[5], a[6]};
     // sum d_a k^2 d_b is symmetric (one sum per pair, a[7..12]); the
     // Jacobian is not, through dbar_a (grad k)_b.
     const int m[9] = {7, 8, 9, 8, 10, 11, 9, 11, 12};
-    float J[9];
+    T J[9];
     for (int r = 0; r < 3; ++r)
       for (int q = 0; q < 3; ++q) J[3 * r + q] = s * (a[m[3 * r + q]] - db[r] * g[q]);
     return largest_eigenvalue_sym3(J[0], J[4], J[8], 0.5f * (J[1] + J[3]), 0.5f * (J[2] + J[6]),
                                    0.5f * (J[5] + J[7]));
   }
-  KOKKOS_INLINE_FUNCTION static float value(const float* a, const FieldConstants& c) {
-    if (!(a[0] > 0)) return c.outside;
-    const float inv = 1.f / a[0];
-    const float x = a[1] * inv, y = a[2] * inv, z = a[3] * inv;
-    const float ev = eigenvalue(a, c);
-    float f = 1.f;
-    if (!(ev < c.t_low)) {
-      float g = (c.t_high - ev) / (c.t_high - c.t_low);
-      g = g < 0.f ? 0.f : (g > 1.f ? 1.f : g);
-      f = g * g * g - 3.f * g * g + 3.f * g;
-    }
-    const float rbar = Radii ? a[RS] * inv : c.iso_radius;
-    return distance_guard(Kokkos::Experimental::sqrt(x * x + y * y + z * z) - rbar * f, a[KM], c.R, c);
+  static constexpr bool lane_value = true;
+  template <class T>
+  KOKKOS_INLINE_FUNCTION static T value_t(const T* a, const FieldConstants& c) {
+    const T inv = 1.f / a[0];
+    const T x = a[1] * inv, y = a[2] * inv, z = a[3] * inv;
+    const T ev = eigenvalue(a, c);
+    T g = (c.t_high - ev) / (c.t_high - c.t_low);
+    g = lane_select(g < 0.f, lanes_of<T>(0.f), lane_select(g > 1.f, lanes_of<T>(1.f), g));
+    const T f = lane_select(ev < c.t_low, lanes_of<T>(1.f), g * g * g - 3.f * g * g + 3.f * g);
+    T rbar;
+    if constexpr (Radii) rbar = a[RS] * inv;
+    else rbar = lanes_of<T>(c.iso_radius);
+    const T phi = distance_guard(lane_sqrt(x * x + y * y + z * z) - rbar * f, a[KM], c.R, c);
+    return lane_select(a[0] > 0.f, phi, lanes_of<T>(c.outside));
   }
+  KOKKOS_INLINE_FUNCTION static float value(const float* a, const FieldConstants& c) { return value_t(a, c); }
 };
 using FieldSSP07 = FieldSSP07T<false>;
 

@@ -242,13 +242,50 @@ inline bool eval_points_host_lanes(const NeighbourView<MemSpace>& nb, const std:
         Method::add(acc, dx, dy, dz, k, Method::P ? PD + std::size_t(Method::P) * p : nullptr, q);
       }
     }
-    for (int l = 0; l < m; ++l) {
-      float a[Method::N];
-      for (int q = 0; q < Method::N; ++q) a[q] = acc[q][l];
-      sink(g0 + l, a, std::uint32_t(count[l]));
+    if constexpr (std::is_invocable<SinkFn&, int, int, const HostVecF*, const HostVecI&>::value) {
+      sink(g0, m, static_cast<const HostVecF*>(acc), count);  // the group's sums at once
+    } else {
+      for (int l = 0; l < m; ++l) {
+        float a[Method::N];
+        for (int q = 0; q < Method::N; ++q) a[q] = acc[q][l];
+        sink(g0 + l, a, std::uint32_t(count[l]));
+      }
     }
   }
   return true;
+}
+
+// Whether Method has value_t, its value computed on lanes.
+template <class M, class = void>
+struct HasLaneValue : std::false_type {};
+template <class M>
+struct HasLaneValue<M, decltype(void(M::lane_value))> : std::true_type {};
+
+// Method::value of every lane of a group's sums (acc: Method::N vectors of
+// L lanes) into out[0..L): with GCC, where Method has value_t, 8 lanes at a
+// time (16 as two halves: the 64-byte vectors' comparisons are slow under
+// AVX-512F alone, session 22), each lane the scalar value's bits; otherwise
+// lane by lane. Inside the tile kernels only (8 lanes under AVX2 + FMA, 16
+// under AVX-512F + FMA).
+template <class Method, int L>
+inline void value_lanes(const typename HostSimd<L>::F* acc, const FieldConstants& fc, float* out) {
+#if defined(NBMC_HOST_SIMD8) && defined(__GNUC__) && !defined(__clang__)
+  if constexpr (HasLaneValue<Method>::value && (L == 8 || L == 16)) {
+    using V = typename HostSimd<8>::F;
+    for (int h = 0; h < L / 8; ++h) {
+      V a[Method::N];
+      for (int q = 0; q < Method::N; ++q) std::memcpy(&a[q], reinterpret_cast<const char*>(&acc[q]) + 32 * h, 32);
+      const V v = Method::template value_t<V>(a, fc);
+      std::memcpy(out + 8 * h, &v, 32);
+    }
+    return;
+  }
+#endif
+  for (int l = 0; l < L; ++l) {
+    float a[Method::N];
+    for (int q = 0; q < Method::N; ++q) a[q] = acc[q][l];
+    out[l] = Method::value(a, fc);
+  }
 }
 #endif
 
@@ -277,10 +314,14 @@ KOKKOS_INLINE_FUNCTION bool eval_tile_host_lanes(const NeighbourView<MemSpace>& 
         x[1] = float(vj) * c;
         x[2] = float(vk) * c;
       },
-      [&](int i, const float* a, std::uint32_t count) {
-        evals += count;
-        const int bit = bits[i];
-        phi(band.word_offset(w) + popcount64(full & ((std::uint64_t(1) << bit) - 1))) = Method::value(a, fc);
+      [&](int g0, int m, const typename HostSimd<L>::F* acc, const typename HostSimd<L>::I& count) {
+        float v[L];
+        value_lanes<Method, L>(acc, fc, v);
+        for (int l = 0; l < m; ++l) {
+          evals += std::uint32_t(count[l]);
+          const int bit = bits[g0 + l];
+          phi(band.word_offset(w) + popcount64(full & ((std::uint64_t(1) << bit) - 1))) = v[l];
+        }
       });
 #endif
 }
@@ -306,7 +347,7 @@ __attribute__((target("avx2,fma"), flatten)) auto host_lanes_avx2(const F& f) {
 #if defined(NBMC_HOST_SIMD16)  // field_common.hpp: GCC, or any compiler with -mavx512f
 #define NBMC_HOST_AVX512 1
 template <class F>
-__attribute__((target("avx512f"), flatten)) auto host_lanes_avx512(const F& f) {
+__attribute__((target("avx512f,fma"), flatten)) auto host_lanes_avx512(const F& f) {
   return f(std::integral_constant<int, 16>());
 }
 #endif
@@ -321,7 +362,7 @@ inline int host_simd_lanes() {
   if (__builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma")) best = 8;
 #endif
 #if defined(NBMC_HOST_AVX512)
-  if (__builtin_cpu_supports("avx512f")) best = 16;
+  if (__builtin_cpu_supports("avx512f") && __builtin_cpu_supports("fma")) best = 16;
 #endif
   const char* e = std::getenv("NBMC_HOST_SIMD");
   const int asked = e ? std::atoi(e) : 0;

@@ -75,7 +75,7 @@ bench)
   for round in 1 2 3; do
     for v in old new; do
       B=$N; [ $v = old ] && B=$OB
-      for args in "--no-cleanup --repeat 5" "--no-cleanup --device-resident --repeat 5" "--repeat 3" "--no-cleanup --tile 2 --repeat 2" "--no-cleanup --method zb05 --repeat 3"; do
+      for args in "--no-cleanup --repeat 5" "--no-cleanup --device-resident --repeat 5" "--repeat 3" "--no-cleanup --tile 2 --repeat 2"; do
         echo "# $v r$round $args"; $B/bench/nbmc_bench $BIG --spacing 0.00484 --backend cuda $args 2>&1 | grep RESULT
       done
     done
