@@ -328,10 +328,12 @@ KOKKOS_INLINE_FUNCTION bool eval_tile_host_lanes(const NeighbourView<MemSpace>& 
 
 // The host's 8 and 16 lanes, chosen at run time (host_simd_lanes below):
 // f(L), L a std::integral_constant<int, 8> or <int, 16>, called inside a
-// function compiled for AVX2 with FMA or for AVX-512F (flatten: f and
-// everything it calls are inlined into that one function, so no other code
-// is compiled for those targets). The band tiles, YT10's and SPH's cell
-// passes and the surface particles' sums go through with_host_lanes.
+// function compiled for AVX2 with FMA or for AVX-512F with FMA (flatten: f
+// and everything it calls are inlined into that one function, so no other
+// code is compiled for those targets; FMA for the 8-lane helpers that the
+// 16-lane code calls too, value_lanes). The band tiles, YT10's cell pass and
+// the surface particles' sums go through with_host_lanes (SPH's cell pass
+// keeps its own wrappers, sph_density.hpp says why).
 // AVX-512F has 32 zmm registers: SSP07's 14 or 15 accumulators, the lanes'
 // coordinates and the temporaries fit (GCC 12 keeps all but the lanes' x in
 // registers, reloaded once per particle, where the 16 ymm registers of the
@@ -352,7 +354,7 @@ __attribute__((target("avx512f,fma"), flatten)) auto host_lanes_avx512(const F& 
 }
 #endif
 
-// Lanes of the host field kernel: 16 where the CPU has AVX-512F, else 8
+// Lanes of the host field kernel: 16 where the CPU has AVX-512F (and FMA), else 8
 // where it has AVX2, else 4. NBMC_HOST_SIMD=4|8|16 asks for a width; a
 // width the CPU (or the build) lacks gives the widest one below it. The
 // results are the same for every width.
