@@ -340,14 +340,7 @@ KOKKOS_INLINE_FUNCTION T lane_max(T a, T b) {
 // on lanes (value_t), which must give each lane the scalar code's bits.
 template <class T>
 KOKKOS_INLINE_FUNCTION T lane_sqrt(T v) {
-#if !defined(__CUDA_ARCH__)
-  if constexpr (!std::is_same<T, float>::value) {
-    T r;
-    for (std::size_t l = 0; l < sizeof(T) / sizeof(float); ++l) r[l] = __builtin_sqrtf(v[l]);
-    return r;
-  } else
-#endif
-    return Kokkos::Experimental::sqrt(v);
+  return Kokkos::Experimental::sqrt(v);
 }
 #if defined(NBMC_HOST_SIMD8)
 #if defined(__GNUC__) && !defined(__clang__)
