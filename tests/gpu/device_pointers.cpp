@@ -130,8 +130,8 @@ void errors() {
 }
 // nbmc_params.double_positions on CUDA: marching cubes writes doubles on the
 // device (copied to a host mesh); far from the origin (1e7) the CUDA mesh
-// has OpenMP's triangles and its doubles within 1e-3 cell (as float meshes),
-// and the same doubles bit for bit from device particles and subdomains;
+// is OpenMP's bit for bit (doubles, normals, triangles: as float meshes,
+// cuda_equivalence.cpp), and so from device particles and subdomains;
 // a device mesh with double positions is refused (float arrays only).
 struct F64Mesh {
   std::vector<double> positions;
@@ -169,15 +169,17 @@ void double_positions() {
                                           nbmc_context_last_error(cpu.c) + nbmc_context_last_error(gpu.c));
   if (s != NBMC_OK || t != NBMC_OK) return;
   const F64Mesh ref = take(a), cuda = take(b);
-  // As for float meshes (cuda_equivalence.cpp): the same triangles, positions
-  // within 1e-3 of a cell (the spacing here) of the CPU's.
+  // The same field sums in the same order with the same IEEE operations on
+  // both backends, and pass C's doubles from the same float t: bit for bit.
   double worst = ref.positions.size() == cuda.positions.size() ? 0 : 1e300;
   for (std::size_t i = 0; i < ref.positions.size() && i < cuda.positions.size(); ++i)
     worst = std::fmax(worst, std::fabs(ref.positions[i] - cuda.positions[i]));
-  check(!ref.positions.empty() && cuda.triangles == ref.triangles && worst <= 1e-3 * 0.01,
-        "double_positions at 1e7: the CUDA mesh's triangles equal OpenMP's, doubles within 1e-3 cell (" +
-            std::to_string(ref.positions.size() / 3) + " vertices, max diff " + std::to_string(worst / 0.01) +
-            " cell)");
+  check(!ref.positions.empty() && cuda == ref,
+        "double_positions at 1e7: the CUDA mesh equals OpenMP's bit for bit (" +
+            std::to_string(ref.positions.size() / 3) + " vertices, triangles " +
+            (cuda.triangles == ref.triangles ? "equal" : "differ") + ", normals " +
+            (cuda.normals == ref.normals ? "equal" : "differ") + ", max position diff " +
+            std::to_string(worst / 0.01) + " cell)");
   double* d = nullptr;
   cudaMalloc(&d, pts.size() * sizeof(double));
   cudaMemcpy(d, pts.data(), pts.size() * sizeof(double), cudaMemcpyHostToDevice);
