@@ -260,7 +260,7 @@ float reference_field(const NeighbourView<Host>& nb, const float x[3], float S, 
 // ------------------------------------------------------------ the check
 struct Outcome {
   std::size_t particles = 0, surface = 0, band_vertices = 0, flag_mismatches = 0, field_mismatches = 0,
-              direct_mismatches = 0, weight_mismatches = 0;
+              direct_mismatches = 0, weight_mismatches = 0, reach_mismatches = 0, unreached = 0;
   std::uint64_t evals = 0, ref_evals = 0;
   std::string first;  // the first mismatch, described
 };
@@ -399,6 +399,24 @@ Outcome run(const Exec& space, const Points& xyz, const Params& p, bool dense, c
       }
     });
   if (direct_evals != out.ref_evals) ++out.direct_mismatches;
+
+  // SPH on a narrow band, as the pipeline runs it: the weights of the
+  // particles the band reaches only (SphWeights). Each of them the same bits
+  // as computed for every particle, and the field the same bits.
+  if (sph && !dense) {
+    std::vector<float> full(nbh.pdata.data(), nbh.pdata.data() + n);
+    SphWeights<typename Exec::memory_space> reach;
+    reach.start(space, tracker, nbh, g, false);
+    reach.add_words(space, bv, band.n_blocks * 8, {});
+    reach.template update<Method::radii>(space, nbh, g, fc);
+    for (std::size_t j = 0; j < n; ++j) {
+      if (nbh.pdata.data()[j] == 0.f) ++out.unreached;
+      else out.reach_mismatches += bits(nbh.pdata.data()[j]) != bits(full[j]);
+    }
+    Kokkos::View<float*, Host> phi2("phi2", band.n_vertices);
+    gather_field<Method>(space, view_of(nbh, g), bv, band.n_blocks * 8, g, fc, phi2, Progress{});
+    for (std::size_t v = 0; v < band.n_vertices; ++v) out.reach_mismatches += bits(phi2(v)) != bits(phi(v));
+  }
   return out;
 }
 
@@ -435,6 +453,8 @@ void check(const char* name, const Points& xyz, double r, double cell, bool dens
     EXPECT_EQ(o.direct_mismatches, 0u) << what << ": eval_vertex_direct does not sum in plain serial order";
     EXPECT_EQ(o.weight_mismatches, 0u) << what << ": SPH weights or YT10 kernels differ from the serial order";
     EXPECT_EQ(o.evals, o.ref_evals) << what << ": contributing-particle count";
+    EXPECT_EQ(o.reach_mismatches, 0u) << what << ": SPH with the weights of the band's reach only differs ("
+                                      << o.unreached << " of " << o.particles << " particles unreached)";
   }
 }
 
@@ -459,6 +479,26 @@ TEST(FieldOrder, JitteredLatticeBall) {
     check<FieldZB05>("jittered ball", p, kR, cell);
     check<FieldSPH>("jittered ball", p, kR, cell);
     check<FieldYT10>("jittered ball", p, kR, cell);
+  }
+}
+
+// SPH computes the weights of the particles the band reaches only
+// (SphWeights): a ball of radius 28 r has a core that no band vertex
+// reaches, and the field is still every band vertex's serial sum.
+TEST(FieldOrder, SphWeightsOfTheBandsReachOnly) {
+  const Points p = jittered_ball(0, 0, 0, 28 * kR, kR, 0.05, 5);
+  for (double cell : {1.0, 0.5}) {
+    const Params prm = make_params(kR, cell, NBMC_METHOD_SPH);
+#if defined(KOKKOS_ENABLE_OPENMP)
+    const Outcome o = run<FieldSPH>(Kokkos::OpenMP(), p, prm, false, {});
+#else
+    const Outcome o = run<FieldSPH>(Kokkos::Serial(), p, prm, false, {});
+#endif
+    const std::string what = "ball of radius 28 r, cell " + std::to_string(cell) + " r";
+    EXPECT_GT(o.unreached, o.particles / 50) << what << ": the core's weights are computed too";
+    EXPECT_EQ(o.reach_mismatches, 0u) << what;
+    EXPECT_EQ(o.field_mismatches, 0u) << what << ": " << o.first;
+    EXPECT_EQ(o.weight_mismatches, 0u) << what;
   }
 }
 

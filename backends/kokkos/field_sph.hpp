@@ -11,8 +11,9 @@
 // D_j >= W~(0) = 1). phi(x) = iso_threshold - rho(x): negative inside.
 //
 // The particles' 1 / D_j are their weights (NeighbourView::pdata), computed
-// before the field by compute_sph_weights (sph_density.hpp) with the same
-// kernel and the same summation order as a vertex's field value.
+// before the field, for the particles the band reaches, by SphWeights
+// (sph_density.hpp) with the same kernel and the same summation order as a
+// vertex's field value.
 //
 // Per-particle radii (Radii = true, field_common.hpp): particle j's smoothing
 // length is h_j = R_j = R t_j. With masses m_j ~ r_j^3 (the particles' own
@@ -183,7 +184,7 @@ struct FieldSPHT {
 using FieldSPH = FieldSPHT<false>;
 
 // D_j of one particle: the same sum with unit weights (not a field method
-// of its own; compute_sph_weights evaluates it at every particle).
+// of its own; SphWeights evaluates it at the particles the band reaches).
 template <bool Radii>
 struct SphDensityT {
   static constexpr const char* name = "sph-density";

@@ -361,9 +361,15 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
   // The passes over the particles: the SPH density's weights, YT10's kernels
   // (which also narrow the radius the field visits; YT10 has no radii
   // variant, params.hpp refuses it with per-particle radii).
-  if (p.method == Method::SPH) {
-    if (radii) compute_sph_weights<true>(space, tracker, nbh, g, fc);
-    else compute_sph_weights<false>(space, tracker, nbh, g, fc);
+  SphWeights<MemSpace> sph;
+  auto sph_update = [&] {
+    if (radii) sph.template update<true>(space, nbh, g, fc);
+    else sph.template update<false>(space, nbh, g, fc);
+  };
+  if (p.method == Method::SPH) {  // the band's reach (every particle for the other fields)
+    sph.start(space, tracker, nbh, g, p.field != FieldKind::NarrowBand);
+    sph.add_words(space, view_of(band, g), band.n_blocks * 8, {});
+    sph_update();
   }
   if (p.method == Method::YT10) fc = compute_yt10_kernels(space, tracker, nbh, g, p, fc);
   const NeighbourView<MemSpace> nbf = view_of(nbh, g);
@@ -400,6 +406,10 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
                                                   const WordList<MemSpace>& list,
                                                   const Kokkos::View<float*, MemSpace>& out,
                                                   const Kokkos::View<unsigned long long*, MemSpace>& sink) {
+      if (p.method == Method::SPH) {  // the new vertices' particles
+        sph.add_words(space, bv, n_list, list.words);
+        sph_update();
+      }
       auto grow = [&](auto method) {
         return gather_field<decltype(method)>(space, nbf, bv, n_list, g, fc, out, progress, list, sink);
       };
