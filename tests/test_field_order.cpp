@@ -400,21 +400,36 @@ Outcome run(const Exec& space, const Points& xyz, const Params& p, bool dense, c
     });
   if (direct_evals != out.ref_evals) ++out.direct_mismatches;
 
-  // SPH on a narrow band, as the pipeline runs it: the weights of the
-  // particles the band reaches only (SphWeights). Each of them the same bits
-  // as computed for every particle, and the field the same bits.
-  if (sph && !dense) {
-    std::vector<float> full(nbh.pdata.data(), nbh.pdata.data() + n);
-    SphWeights<typename Exec::memory_space> reach;
-    reach.start(space, tracker, nbh, g, false);
-    reach.add_words(space, bv, band.n_blocks * 8, {});
-    reach.template update<Method::radii>(space, nbh, g, fc);
+  // SPH and YT10 on a narrow band, as the pipeline runs them: the weights or
+  // kernels of the particles the band reaches only (ParticleReach). Each of
+  // them the same bits as computed for every particle, and the field the
+  // same bits (for YT10 with the R_f of the reached kernels).
+  const bool yt10 = std::is_same<Method, FieldYT10>::value;
+  if ((sph || yt10) && !dense) {
+    const std::size_t per = sph ? 1 : std::size_t(kYt10Floats);
+    std::vector<float> full(nbh.pdata.data(), nbh.pdata.data() + per * n);
+    FieldConstants fc2 = fc;
+    if constexpr (std::is_same<Method, FieldYT10>::value) {
+      Yt10Kernels<typename Exec::memory_space> reach;
+      reach.start(tracker, nbh, g, false);
+      reach.add_words(space, bv, band.n_blocks * 8, {});
+      fc2 = reach.update(space, nbh, g, p,
+                         field_constants(p.influence_radius, p.iso_radius, p.t_low, p.t_high, p.iso_threshold));
+    } else {
+      SphWeights<typename Exec::memory_space> reach;
+      reach.start(tracker, nbh, g, false);
+      reach.add_words(space, bv, band.n_blocks * 8, {});
+      reach.template update<Method::radii>(space, nbh, g, fc);
+    }
     for (std::size_t j = 0; j < n; ++j) {
-      if (nbh.pdata.data()[j] == 0.f) ++out.unreached;
-      else out.reach_mismatches += bits(nbh.pdata.data()[j]) != bits(full[j]);
+      bool zero = true;
+      for (std::size_t q = 0; q < per; ++q) zero = zero && nbh.pdata.data()[per * j + q] == 0.f;
+      if (zero) ++out.unreached;
+      else
+        for (std::size_t q = 0; q < per; ++q) out.reach_mismatches += bits(nbh.pdata.data()[per * j + q]) != bits(full[per * j + q]);
     }
     Kokkos::View<float*, Host> phi2("phi2", band.n_vertices);
-    gather_field<Method>(space, view_of(nbh, g), bv, band.n_blocks * 8, g, fc, phi2, Progress{});
+    gather_field<Method>(space, view_of(nbh, g), bv, band.n_blocks * 8, g, fc2, phi2, Progress{});
     for (std::size_t v = 0; v < band.n_vertices; ++v) out.reach_mismatches += bits(phi2(v)) != bits(phi(v));
   }
   return out;
@@ -453,7 +468,7 @@ void check(const char* name, const Points& xyz, double r, double cell, bool dens
     EXPECT_EQ(o.direct_mismatches, 0u) << what << ": eval_vertex_direct does not sum in plain serial order";
     EXPECT_EQ(o.weight_mismatches, 0u) << what << ": SPH weights or YT10 kernels differ from the serial order";
     EXPECT_EQ(o.evals, o.ref_evals) << what << ": contributing-particle count";
-    EXPECT_EQ(o.reach_mismatches, 0u) << what << ": SPH with the weights of the band's reach only differs ("
+    EXPECT_EQ(o.reach_mismatches, 0u) << what << ": the weights or kernels of the band's reach only differ ("
                                       << o.unreached << " of " << o.particles << " particles unreached)";
   }
 }
@@ -482,25 +497,28 @@ TEST(FieldOrder, JitteredLatticeBall) {
   }
 }
 
-// SPH computes the weights of the particles the band reaches only
-// (SphWeights): a ball of radius 28 r has a core that no band vertex
-// reaches, and the field is still every band vertex's serial sum.
-TEST(FieldOrder, SphWeightsOfTheBandsReachOnly) {
+// SPH's weights and YT10's kernels are computed for the particles the band
+// reaches only (ParticleReach): a ball of radius 28 r has a core that no
+// band vertex reaches, and the field is still every band vertex's serial sum.
+template <class Method>
+void check_reach(int method) {
   const Points p = jittered_ball(0, 0, 0, 28 * kR, kR, 0.05, 5);
   for (double cell : {1.0, 0.5}) {
-    const Params prm = make_params(kR, cell, NBMC_METHOD_SPH);
+    const Params prm = make_params(kR, cell, method);
 #if defined(KOKKOS_ENABLE_OPENMP)
-    const Outcome o = run<FieldSPH>(Kokkos::OpenMP(), p, prm, false, {});
+    const Outcome o = run<Method>(Kokkos::OpenMP(), p, prm, false, {});
 #else
-    const Outcome o = run<FieldSPH>(Kokkos::Serial(), p, prm, false, {});
+    const Outcome o = run<Method>(Kokkos::Serial(), p, prm, false, {});
 #endif
-    const std::string what = "ball of radius 28 r, cell " + std::to_string(cell) + " r";
+    const std::string what = std::string(Method::name) + ", ball of radius 28 r, cell " + std::to_string(cell) + " r";
     EXPECT_GT(o.unreached, o.particles / 50) << what << ": the core's weights are computed too";
     EXPECT_EQ(o.reach_mismatches, 0u) << what;
     EXPECT_EQ(o.field_mismatches, 0u) << what << ": " << o.first;
     EXPECT_EQ(o.weight_mismatches, 0u) << what;
   }
 }
+TEST(FieldOrder, SphWeightsOfTheBandsReachOnly) { check_reach<FieldSPH>(NBMC_METHOD_SPH); }
+TEST(FieldOrder, Yt10KernelsOfTheBandsReachOnly) { check_reach<FieldYT10>(NBMC_METHOD_YT10); }
 
 TEST(FieldOrder, LatticeBall) {
   // Particles on a lattice commensurate with the grid: many cell-box and

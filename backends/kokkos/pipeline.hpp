@@ -367,11 +367,17 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
     else sph.template update<false>(space, nbh, g, fc);
   };
   if (p.method == Method::SPH) {  // the band's reach (every particle for the other fields)
-    sph.start(space, tracker, nbh, g, p.field != FieldKind::NarrowBand);
+    sph.start(tracker, nbh, g, p.field != FieldKind::NarrowBand);
     sph.add_words(space, view_of(band, g), band.n_blocks * 8, {});
     sph_update();
   }
-  if (p.method == Method::YT10) fc = compute_yt10_kernels(space, tracker, nbh, g, p, fc);
+  Yt10Kernels<MemSpace> yt10;
+  const FieldConstants fc_r = fc;  // YT10's kernels are summed over R; fc's radius becomes R_f
+  if (p.method == Method::YT10) {  // the band's reach (every particle for the other fields)
+    yt10.start(tracker, nbh, g, p.field != FieldKind::NarrowBand);
+    yt10.add_words(space, view_of(band, g), band.n_blocks * 8, {});
+    fc = yt10.update(space, nbh, g, p, fc_r);
+  }
   const NeighbourView<MemSpace> nbf = view_of(nbh, g);
   Buffer<float, MemSpace> phi(tracker, "scalar_field::values", band.n_vertices);
   const BandView<MemSpace> bv0 = view_of(band, g);
@@ -409,6 +415,10 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
       if (p.method == Method::SPH) {  // the new vertices' particles
         sph.add_words(space, bv, n_list, list.words);
         sph_update();
+      }
+      if (p.method == Method::YT10) {
+        yt10.add_words(space, bv, n_list, list.words);
+        fc = yt10.update(space, nbh, g, p, fc_r);
       }
       auto grow = [&](auto method) {
         return gather_field<decltype(method)>(space, nbf, bv, n_list, g, fc, out, progress, list, sink);

@@ -14,6 +14,7 @@
 #include "common.hpp"
 #include "field_sph.hpp"
 #include "neighbourhood.hpp"
+#include "particle_reach.hpp"
 #include "scalar_field.hpp"
 
 namespace nbmc {
@@ -71,113 +72,37 @@ KOKKOS_INLINE_FUNCTION void sph_cell_host(const NeighbourView<MemSpace>& nb, flo
   sph_cell_host_lanes<Radii, 4>(nb, S, fc, b, e, w);
 }
 
-// The weights of the particles the band's field can reach, computed when
-// the band first reaches them: before the gather, and after each round of
-// band growth for the words it added. A particle's weight is read only by
-// band vertices within R of it (the field sums nothing from farther ones:
-// k = 0 there, and 0 * 0 adds an exact 0); on the 1.65 M frame at r/2 with
-// R = 4r, 59 % of the particles have a band vertex within R.
-// Reach is decided per occupied neighbour cell, conservatively: a cell is
-// reached when a band tile (4x4x4 vertices, a band word) with band vertices
-// meets the grid vertices within R of the cell's box (one vertex of margin,
-// and unbounded on the sides of the grid's edge cells, into which particles
-// outside it are clamped); on that frame 78 % of the particles are in
-// reached cells. The weights of unreached particles stay 0. Each weight is
-// computed once, by the same code as before: the same bits on every
-// backend, whichever pass computes it. The tiles are held as a bitmap over
-// the grid; where it would pass kMaxBits (very large sparse domains), every
-// particle's weight is computed at once.
+// The weights of the particles the band's field can reach (ParticleReach,
+// particle_reach.hpp): computed when the band first reaches them, before the
+// gather and after each round of band growth; the others stay 0 (never
+// read). Each weight is computed once, by the same code: the same bits on
+// every backend, whichever pass computes it.
 template <class MemSpace>
 struct SphWeights {
-  static constexpr std::uint64_t kMaxBits = std::uint64_t(1) << 27;  // 16 MiB
-  Buffer<std::uint32_t, MemSpace> tiles;  // the band's tiles, a bit per 4x4x4 tile of the grid
-  Buffer<std::uint8_t, MemSpace> state;    // per occupied neighbour cell: 0 unreached, 1 to compute, 2 done
-  std::int64_t tdims[3] = {0, 0, 0};
-  bool all = false;  // every particle (no bitmap)
+  ParticleReach<MemSpace> reach;
 
-  template <class ExecSpace>
-  void start(const ExecSpace& space, MemoryTracker& tracker, Neighbourhood<MemSpace>& nbh, const Grid& g,
-             bool whole_grid) {
+  void start(MemoryTracker& tracker, Neighbourhood<MemSpace>& nbh, const Grid& g, bool whole_grid) {
     nbh.pdata = Buffer<float, MemSpace>(tracker, "scalar_field::sph_weights", nbh.n, true);
-    for (int a = 0; a < 3; ++a) tdims[a] = 2 * g.block_dims(a);
-    const std::uint64_t bits = std::uint64_t(tdims[0]) * std::uint64_t(tdims[1]) * std::uint64_t(tdims[2]);
-    all = whole_grid || bits > kMaxBits;
-    state = Buffer<std::uint8_t, MemSpace>(tracker, "scalar_field::sph_cells", nbh.n_cells, true);
-    if (!all) tiles = Buffer<std::uint32_t, MemSpace>(tracker, "scalar_field::sph_tiles", (bits + 31) / 32, true);
-    (void)space;
+    reach.start(tracker, nbh.n_cells, g, whole_grid);
   }
-
-  // Adds the band's words list(0..n_list) (a word index each; without a
-  // list, words 0..n_list of the band that have vertices).
   template <class ExecSpace>
   void add_words(const ExecSpace& space, const BandView<MemSpace>& band, std::size_t n_list,
                  const Kokkos::View<const std::uint64_t*, MemSpace>& listed) {
-    if (all) return;
-    const auto bits = tiles.view();
-    const auto keys = band.block_keys, words = band.words;
-    const std::int64_t d0 = tdims[0], d1 = tdims[1];
-    const bool by_list = listed.extent(0) != 0;
-    Kokkos::parallel_for(
-        "nbmc::scalar_field::sph_tiles", Kokkos::RangePolicy<ExecSpace>(space, 0, n_list),
-        KOKKOS_LAMBDA(const std::size_t q) {
-          const std::size_t w = by_list ? std::size_t(listed(q)) : q;
-          if (!by_list && words(w) == 0) return;
-          const std::uint64_t key = keys(w >> 3);
-          const int sub = int(w & 7);
-          const std::uint64_t t = std::uint64_t(2 * compact3(key) + (sub & 1)) +
-                                  std::uint64_t(d0) * (std::uint64_t(2 * compact3(key >> 1) + ((sub >> 1) & 1)) +
-                                                       std::uint64_t(d1) * std::uint64_t(2 * compact3(key >> 2) + (sub >> 2)));
-          Kokkos::atomic_fetch_or(&bits(t >> 5), std::uint32_t(1) << (t & 31));
-        });
+    reach.add_words(space, band, n_list, listed);
   }
 
-  // Computes the weights of the particles in the cells the blocks now reach
-  // and no pass has computed yet.
+  // Computes the weights of the cells reached since the last update.
   template <bool Radii, class ExecSpace>
   void update(const ExecSpace& space, Neighbourhood<MemSpace>& nbh, const Grid& g, const FieldConstants& fc) {
+    if (!reach.pending()) return;
     ScopedRegion region("nbmc::scalar_field::sph_density");
+    reach.select(space, nbh, g, double(fc.R));
     const NeighbourView<MemSpace> nb = view_of(nbh, g);
-    const auto st = state.view();
-    const auto keys = nbh.cell_keys.view();
-    const auto bits = tiles.view();
-    const bool every = all;
-    const double S = g.nb_cell, c = g.cell, R = double(fc.R);
-    const std::int64_t nd[3] = {g.nb_dims[0], g.nb_dims[1], g.nb_dims[2]};
-    const std::int64_t vd[3] = {g.dims[0], g.dims[1], g.dims[2]};
-    const std::int64_t td[3] = {tdims[0], tdims[1], tdims[2]};
-    Kokkos::parallel_for(
-        "nbmc::scalar_field::sph_reach", Kokkos::RangePolicy<ExecSpace>(space, 0, nbh.n_cells),
-        KOKKOS_LAMBDA(const std::size_t q) {
-          if (st(q) != 0) return;
-          bool reached = every;
-          if (!reached) {
-            std::int64_t x[3], lo[3], hi[3];
-            neighbour_cell_of_key(keys(q), nd, x[0], x[1], x[2]);
-            for (int a = 0; a < 3; ++a) {
-              lo[a] = x[a] == 0 ? 0 : std::int64_t(Kokkos::Experimental::floor((double(x[a]) * S - R) / c)) - 1;
-              hi[a] = x[a] == nd[a] - 1 ? vd[a] - 1
-                                        : std::int64_t(Kokkos::Experimental::ceil((double(x[a] + 1) * S + R) / c)) + 1;
-              lo[a] = lo[a] < 0 ? 0 : lo[a];
-              hi[a] = hi[a] > vd[a] - 1 ? vd[a] - 1 : hi[a];
-              lo[a] >>= 2;
-              hi[a] >>= 2;
-            }
-            for (std::int64_t k = lo[2]; k <= hi[2] && !reached; ++k)
-              for (std::int64_t j = lo[1]; j <= hi[1] && !reached; ++j)
-                for (std::int64_t i = lo[0]; i <= hi[0]; ++i) {
-                  const std::uint64_t b =
-                      std::uint64_t(i) + std::uint64_t(td[0]) * (std::uint64_t(j) + std::uint64_t(td[1]) * std::uint64_t(k));
-                  if ((bits(b >> 5) >> (b & 31)) & 1u) {
-                    reached = true;
-                    break;
-                  }
-                }
-          }
-          if (reached) st(q) = 1;
-        });
+    const auto st = reach.state.view();
+    const bool every = reach.all;
     const auto w = nbh.pdata.view();
     const auto starts = nbh.cell_start.view();
-    const float Sf = float(g.nb_cell);
+    const float S = float(g.nb_cell);
     // (D_j >= 1: the particle's own W~(0) = 1 is in the sum.)
     if constexpr (Kokkos::SpaceAccessibility<Kokkos::HostSpace, MemSpace>::accessible) {
       // One work item per cell, its particles as SIMD lanes (one particle at
@@ -188,34 +113,21 @@ struct SphWeights {
           "nbmc::scalar_field::sph_density",
           Kokkos::RangePolicy<ExecSpace, Kokkos::Schedule<Kokkos::Dynamic>>(space, 0, nbh.n_cells),
           KOKKOS_LAMBDA(const std::size_t q) {
-            if (st(q) != 1) return;
-            sph_cell_host<Radii>(nb, Sf, fc, starts(q), starts(q + 1), o, lanes);
-            st(q) = 2;
+            if (ParticleReach<MemSpace>::now(st, every, q))
+              sph_cell_host<Radii>(nb, S, fc, starts(q), starts(q + 1), o, lanes);
           });
     } else {
-      // One thread per particle of a cell to compute (its cell by bisection
-      // of the cell starts), then the cells marked done.
-      const std::size_t n = nbh.n, n_cells = nbh.n_cells;
+      // One thread per particle, every particle (ParticleReach: all).
+      const std::size_t n = nbh.n;
       Kokkos::parallel_for(
           "nbmc::scalar_field::sph_density", Kokkos::RangePolicy<ExecSpace>(space, 0, n),
           KOKKOS_LAMBDA(const std::size_t j) {
-            std::size_t a = 0, b = n_cells;  // the cell q with starts(q) <= j < starts(q + 1)
-            while (b - a > 1) {
-              const std::size_t m = (a + b) / 2;
-              if (starts(m) <= j) a = m;
-              else b = m;
-            }
-            if (st(a) != 1) return;
             const float x[3] = {nb.pos(j), nb.pos(n + j), nb.pos(2 * n + j)};
             std::uint64_t evals = 0;
-            w(j) = 1.f / eval_vertex_direct<SphDensityT<Radii>>(nb, x, Sf, fc, evals);
-          });
-      Kokkos::parallel_for(
-          "nbmc::scalar_field::sph_done", Kokkos::RangePolicy<ExecSpace>(space, 0, n_cells),
-          KOKKOS_LAMBDA(const std::size_t q) {
-            if (st(q) == 1) st(q) = 2;
+            w(j) = 1.f / eval_vertex_direct<SphDensityT<Radii>>(nb, x, S, fc, evals);
           });
     }
+    reach.finish(space);
     space.fence();
   }
 };
@@ -226,7 +138,7 @@ void compute_sph_weights(const ExecSpace& space, MemoryTracker& tracker,
                          Neighbourhood<typename ExecSpace::memory_space>& nbh, const Grid& g,
                          const FieldConstants& fc) {
   SphWeights<typename ExecSpace::memory_space> w;
-  w.start(space, tracker, nbh, g, true);
+  w.start(tracker, nbh, g, true);
   w.template update<Radii>(space, nbh, g, fc);
 }
 

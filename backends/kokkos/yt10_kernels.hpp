@@ -1,5 +1,5 @@
 // SPDX-License-Identifier: MIT
-// The pass before the YT10 field (field_yt10.hpp): every particle's
+// The pass before the YT10 field (field_yt10.hpp): a particle's
 // anisotropic kernel (smoothed centre, G, det(h G) / D) from the moments of
 // its neighbours within R, in the sorted order of the neighbourhood. Each
 // particle's moments are summed like a band vertex's field
@@ -14,6 +14,7 @@
 #include "common.hpp"
 #include "field_yt10.hpp"
 #include "neighbourhood.hpp"
+#include "particle_reach.hpp"
 #include "scalar_field.hpp"
 
 #include <algorithm>
@@ -66,59 +67,102 @@ KOKKOS_INLINE_FUNCTION float yt10_cell_host(const NeighbourView<MemSpace>& nb, f
 #pragma GCC diagnostic pop
 #endif
 
-// Computes the kernels into nbh.pdata and returns the field's constants:
-// fc with the visited radius narrowed to R_f = 1.02 times the largest reach
-// of a kernel (at most R; field_yt10.hpp says why that changes no value).
+// The kernels of the particles the band's field can reach (ParticleReach,
+// particle_reach.hpp), into nbh.pdata: computed when the band first reaches
+// them, before the gather and after each round of band growth; the others
+// stay 0 (never read). Each kernel is computed once, by the same code: the
+// same bits on every backend, whichever pass computes it. update() returns
+// the field's constants: fc with the visited radius narrowed to R_f = 1.02
+// times the largest reach of a kernel computed so far (at most R;
+// field_yt10.hpp says why that changes no value: a particle reached later
+// lies farther than R from every vertex evaluated before).
+template <class MemSpace>
+struct Yt10Kernels {
+  ParticleReach<MemSpace> reach;
+  float largest = 0;  // the largest reach of a kernel computed so far
+
+  void start(MemoryTracker& tracker, Neighbourhood<MemSpace>& nbh, const Grid& g, bool whole_grid) {
+    nbh.pdata = Buffer<float, MemSpace>(tracker, "scalar_field::yt10_kernels", std::size_t(kYt10Floats) * nbh.n, true);
+    reach.start(tracker, nbh.n_cells, g, whole_grid);
+  }
+  template <class ExecSpace>
+  void add_words(const ExecSpace& space, const BandView<MemSpace>& band, std::size_t n_list,
+                 const Kokkos::View<const std::uint64_t*, MemSpace>& listed) {
+    reach.add_words(space, band, n_list, listed);
+  }
+
+  // Computes the kernels of the cells reached since the last update (fc:
+  // the constants of influence radius R).
+  template <class ExecSpace>
+  FieldConstants update(const ExecSpace& space, Neighbourhood<MemSpace>& nbh, const Grid& g, const Params& p,
+                        const FieldConstants& fc) {
+    if (!reach.pending()) return constants(p, fc);
+    ScopedRegion region("nbmc::scalar_field::yt10_kernels");
+    reach.select(space, nbh, g, p.influence_radius);
+    const NeighbourView<MemSpace> nb = view_of(nbh, g);
+    const auto st = reach.state.view();
+    const bool every = reach.all;
+    const auto out = nbh.pdata.view();
+    const auto starts = nbh.cell_start.view();
+    const Yt10Constants k = yt10_constants(p);
+    const float S = float(g.nb_cell);
+    const std::size_t n = nbh.n;
+    float r_new = 0;
+    if constexpr (Kokkos::SpaceAccessibility<Kokkos::HostSpace, MemSpace>::accessible) {
+      // One work item per occupied neighbour cell, its particles as SIMD lanes.
+      const int lanes = host_simd_lanes();
+      float* const o = out.data();
+      Kokkos::parallel_reduce(
+          "nbmc::scalar_field::yt10_kernels",
+          Kokkos::RangePolicy<ExecSpace, Kokkos::Schedule<Kokkos::Dynamic>>(space, 0, nbh.n_cells),
+          KOKKOS_LAMBDA(const std::size_t c, float& r) {
+            if (!ParticleReach<MemSpace>::now(st, every, c)) return;
+            const float rc = yt10_cell_host(nb, S, fc, k, starts(c), starts(c + 1), o, lanes);
+            if (rc > r) r = rc;
+          },
+          Kokkos::Max<float>(r_new));
+    } else {
+      // One thread per particle, every particle (ParticleReach: all).
+      Kokkos::parallel_reduce(
+          "nbmc::scalar_field::yt10_kernels", Kokkos::RangePolicy<ExecSpace>(space, 0, n),
+          KOKKOS_LAMBDA(const std::size_t j, float& r) {
+            const float x[3] = {nb.pos(j), nb.pos(n + j), nb.pos(2 * n + j)};
+            float a[Yt10Moments::N];
+            const std::uint32_t count = sum_vertex_direct<Yt10Moments>(nb, x, S, fc, a);
+            float kern[kYt10Floats];
+            const float rj = yt10_kernel(a, count, k, kern);
+            for (int q = 0; q < kYt10Floats; ++q) out(std::size_t(kYt10Floats) * j + q) = kern[q];
+            if (rj > r) r = rj;
+          },
+          Kokkos::Max<float>(r_new));
+    }
+    reach.finish(space);
+    space.fence();
+    trace("yt10 kernels", n);
+    largest = r_new > largest ? r_new : largest;
+    const FieldConstants f = constants(p, fc);
+    trace("yt10 R_f / R (per mille)", std::uint64_t(1000.0 * double(f.R) / p.influence_radius + 0.5));
+    return f;
+  }
+  // fc with R_f from the kernels computed so far.
+  FieldConstants constants(const Params& p, const FieldConstants& fc) const {
+    FieldConstants f = fc;
+    const double Rf = largest > 0 ? std::min(p.influence_radius, 1.02 * double(largest)) : p.influence_radius;
+    f.R = float(Rf);
+    f.inv_R2 = float(1.0 / (Rf * Rf));
+    return f;
+  }
+};
+
+// Every particle's kernel (the dense and scatter fields, and tests); returns
+// the field's constants as Yt10Kernels::update.
 template <class ExecSpace>
 FieldConstants compute_yt10_kernels(const ExecSpace& space, MemoryTracker& tracker,
                                     Neighbourhood<typename ExecSpace::memory_space>& nbh, const Grid& g,
                                     const Params& p, const FieldConstants& fc) {
-  using MemSpace = typename ExecSpace::memory_space;
-  ScopedRegion region("nbmc::scalar_field::yt10_kernels");
-  nbh.pdata = Buffer<float, MemSpace>(tracker, "scalar_field::yt10_kernels", std::size_t(kYt10Floats) * nbh.n);
-  const NeighbourView<MemSpace> nb = view_of(nbh, g);
-  const auto out = nbh.pdata.view();
-  const Yt10Constants k = yt10_constants(p);
-  const float S = float(g.nb_cell);
-  const std::size_t n = nbh.n;
-  float reach = 0;
-  if constexpr (Kokkos::SpaceAccessibility<Kokkos::HostSpace, MemSpace>::accessible) {
-    // One work item per occupied neighbour cell, its particles as SIMD lanes.
-    const int lanes = host_simd_lanes();
-    const auto starts = nbh.cell_start.view();
-    float* const o = out.data();
-    Kokkos::parallel_reduce(
-        "nbmc::scalar_field::yt10_kernels",
-        Kokkos::RangePolicy<ExecSpace, Kokkos::Schedule<Kokkos::Dynamic>>(space, 0, nbh.n_cells),
-        KOKKOS_LAMBDA(const std::size_t c, float& r) {
-          const std::uint32_t b = starts(c), e = starts(c + 1);
-          const float rc = yt10_cell_host(nb, S, fc, k, b, e, o, lanes);
-          if (rc > r) r = rc;
-        },
-        Kokkos::Max<float>(reach));
-  } else {
-    // One thread per particle.
-    Kokkos::parallel_reduce(
-        "nbmc::scalar_field::yt10_kernels", Kokkos::RangePolicy<ExecSpace>(space, 0, n),
-        KOKKOS_LAMBDA(const std::size_t j, float& r) {
-          const float x[3] = {nb.pos(j), nb.pos(n + j), nb.pos(2 * n + j)};
-          float a[Yt10Moments::N];
-          const std::uint32_t count = sum_vertex_direct<Yt10Moments>(nb, x, S, fc, a);
-          float kern[kYt10Floats];
-          const float rj = yt10_kernel(a, count, k, kern);
-          for (int q = 0; q < kYt10Floats; ++q) out(std::size_t(kYt10Floats) * j + q) = kern[q];
-          if (rj > r) r = rj;
-        },
-        Kokkos::Max<float>(reach));
-  }
-  space.fence();
-  trace("yt10 kernels", n);
-  FieldConstants f = fc;
-  const double Rf = reach > 0 ? std::min(p.influence_radius, 1.02 * double(reach)) : p.influence_radius;
-  f.R = float(Rf);
-  f.inv_R2 = float(1.0 / (Rf * Rf));
-  trace("yt10 R_f / R (per mille)", std::uint64_t(1000.0 * Rf / p.influence_radius + 0.5));
-  return f;
+  Yt10Kernels<typename ExecSpace::memory_space> kernels;
+  kernels.start(tracker, nbh, g, true);
+  return kernels.update(space, nbh, g, p, fc);
 }
 
 }  // namespace Details
