@@ -132,7 +132,8 @@ struct SphWeights {
   }
 };
 
-// Every particle's weight (the dense and scatter fields, and tests).
+// Every particle's weight at once (tests; the pipeline runs SphWeights, which
+// does the same without a narrow band).
 template <bool Radii, class ExecSpace>
 void compute_sph_weights(const ExecSpace& space, MemoryTracker& tracker,
                          Neighbourhood<typename ExecSpace::memory_space>& nbh, const Grid& g,

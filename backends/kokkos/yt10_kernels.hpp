@@ -154,7 +154,8 @@ struct Yt10Kernels {
   }
 };
 
-// Every particle's kernel (the dense and scatter fields, and tests); returns
+// Every particle's kernel at once (tests; the pipeline runs Yt10Kernels, which
+// does the same without a narrow band); returns
 // the field's constants as Yt10Kernels::update.
 template <class ExecSpace>
 FieldConstants compute_yt10_kernels(const ExecSpace& space, MemoryTracker& tracker,
