@@ -94,29 +94,27 @@ struct ParticleReach {
         KOKKOS_LAMBDA(const std::size_t q) {
           if (st(q) != 0) return;
           bool reached = false;
-          {
-            std::int64_t x[3], lo[3], hi[3];
-            neighbour_cell_of_key(keys(q), nd, x[0], x[1], x[2]);
-            for (int a = 0; a < 3; ++a) {
-              lo[a] = x[a] == 0 ? 0 : std::int64_t(Kokkos::Experimental::floor((double(x[a]) * S - R) / c)) - 1;
-              hi[a] = x[a] == nd[a] - 1 ? vd[a] - 1
-                                        : std::int64_t(Kokkos::Experimental::ceil((double(x[a] + 1) * S + R) / c)) + 1;
-              lo[a] = lo[a] < 0 ? 0 : lo[a];
-              hi[a] = hi[a] > vd[a] - 1 ? vd[a] - 1 : hi[a];
-              lo[a] >>= 2;  // tiles
-              hi[a] >>= 2;
-            }
-            for (std::int64_t k = lo[2]; k <= hi[2] && !reached; ++k)
-              for (std::int64_t j = lo[1]; j <= hi[1] && !reached; ++j)
-                for (std::int64_t i = lo[0]; i <= hi[0]; ++i) {
-                  const std::uint64_t b =
-                      std::uint64_t(i) + std::uint64_t(td[0]) * (std::uint64_t(j) + std::uint64_t(td[1]) * std::uint64_t(k));
-                  if ((bits(b >> 5) >> (b & 31)) & 1u) {
-                    reached = true;
-                    break;
-                  }
-                }
+          std::int64_t x[3], lo[3], hi[3];
+          neighbour_cell_of_key(keys(q), nd, x[0], x[1], x[2]);
+          for (int a = 0; a < 3; ++a) {
+            lo[a] = x[a] == 0 ? 0 : std::int64_t(Kokkos::Experimental::floor((double(x[a]) * S - R) / c)) - 1;
+            hi[a] = x[a] == nd[a] - 1 ? vd[a] - 1
+                                      : std::int64_t(Kokkos::Experimental::ceil((double(x[a] + 1) * S + R) / c)) + 1;
+            lo[a] = lo[a] < 0 ? 0 : lo[a];
+            hi[a] = hi[a] > vd[a] - 1 ? vd[a] - 1 : hi[a];
+            lo[a] >>= 2;  // tiles
+            hi[a] >>= 2;
           }
+          for (std::int64_t k = lo[2]; k <= hi[2] && !reached; ++k)
+            for (std::int64_t j = lo[1]; j <= hi[1] && !reached; ++j)
+              for (std::int64_t i = lo[0]; i <= hi[0]; ++i) {
+                const std::uint64_t b =
+                    std::uint64_t(i) + std::uint64_t(td[0]) * (std::uint64_t(j) + std::uint64_t(td[1]) * std::uint64_t(k));
+                if ((bits(b >> 5) >> (b & 31)) & 1u) {
+                  reached = true;
+                  break;
+                }
+              }
           if (reached) st(q) = 1;
         });
   }
