@@ -520,6 +520,51 @@ void check_reach(int method) {
 TEST(FieldOrder, SphWeightsOfTheBandsReachOnly) { check_reach<FieldSPH>(NBMC_METHOD_SPH); }
 TEST(FieldOrder, Yt10KernelsOfTheBandsReachOnly) { check_reach<FieldYT10>(NBMC_METHOD_YT10); }
 
+TEST(ParticleReach, HostRangesTakeEachCellComputedNowOnce) {
+  // Occupied cells of four rows of 21 (not a multiple of the runs' 8, so a
+  // row ends inside a run), random states; the host passes' work items must
+  // cover the particles of exactly the cells computed now, each once, in
+  // ascending ranges within one row's run.
+  const std::uint64_t row = 21;
+  std::mt19937 rng(7);
+  for (int trial = 0; trial < 200; ++trial) {
+    std::vector<std::uint64_t> keys;
+    for (std::uint64_t k = 0; k < 4 * row; ++k)
+      if (rng() % 3 != 0) keys.push_back(k);
+    const std::size_t n_cells = keys.size();
+    Kokkos::View<std::uint64_t*, Host> kv("keys", n_cells);
+    Kokkos::View<std::uint32_t*, Host> sv("starts", n_cells + 1);
+    Kokkos::View<std::uint8_t*, Host> st("state", n_cells);
+    sv(0) = 0;
+    for (std::size_t q = 0; q < n_cells; ++q) {
+      kv(q) = keys[q];
+      sv(q + 1) = sv(q) + 1 + rng() % 12;
+      st(q) = std::uint8_t(rng() % 3);
+    }
+    for (bool every : {false, true}) {
+      std::vector<int> taken(sv(n_cells), 0);
+      for (std::size_t q = 0; q < n_cells; ++q) {
+        ParticleRanges r;
+        ParticleReach<Host>::host_ranges(st, every, kv, sv, row, q, r);
+        for (int i = 0; i < r.n; ++i) {
+          ASSERT_LT(r.b[i], r.e[i]);
+          if (i > 0) ASSERT_LT(r.e[i - 1], r.b[i]) << "touching ranges are one";
+          for (std::uint32_t j = r.b[i]; j < r.e[i]; ++j) ++taken[j];
+        }
+        if (r.n > 0) {
+          // One row, one run of 8.
+          const std::size_t last = std::size_t(std::upper_bound(&sv(0), &sv(0) + n_cells + 1, r.e[r.n - 1] - 1) - &sv(0)) - 1;
+          EXPECT_EQ(kv(q) / row, kv(last) / row);
+          EXPECT_EQ(kv(q) % row / kRunCells, kv(last) % row / kRunCells);
+        }
+      }
+      for (std::size_t q = 0; q < n_cells; ++q)
+        for (std::uint32_t j = sv(q); j < sv(q + 1); ++j)
+          ASSERT_EQ(taken[j], every || st(q) == 1 ? 1 : 0) << "trial " << trial << ", cell key " << kv(q);
+    }
+  }
+}
+
 TEST(FieldOrder, LatticeBall) {
   // Particles on a lattice commensurate with the grid: many cell-box and
   // particle distances equal R up to rounding, where the visit decisions

@@ -31,6 +31,16 @@
 namespace nbmc {
 namespace Details {
 
+// Cells of a row in one work item of the host passes (ParticleReach::host_ranges).
+constexpr int kRunCells = 8;
+
+// The particles of one such work item: ranges [b[i], e[i]) of the sorted
+// order, i < n, ascending.
+struct ParticleRanges {
+  std::uint32_t b[kRunCells], e[kRunCells];
+  int n = 0;
+};
+
 template <class MemSpace>
 struct ParticleReach {
   static constexpr std::uint64_t kMaxBits = std::uint64_t(1) << 27;  // 16 MiB
@@ -122,6 +132,61 @@ struct ParticleReach {
   // Whether a pass computes cell q now (host code, after select).
   KOKKOS_INLINE_FUNCTION static bool now(const Kokkos::View<std::uint8_t*, MemSpace>& st, bool every, std::size_t q) {
     return every || st(q) == 1;
+  }
+
+  // The host passes' work item q (an occupied neighbour cell): the particles
+  // it computes now, as ranges in the sorted order (out.n = 0: none). The
+  // cells of a row are taken in runs of kRunCells (aligned in x): the run's
+  // first cell computed now takes every cell of its run computed now (their
+  // particles follow one another: cell keys are row-major, a cell's
+  // particles are sorted by x), the run's other items nothing. So the SIMD
+  // lanes are filled with neighbouring particles of several cells (a cell of
+  // R/2 holds about 9 particles of a fluid at rest with R = 4r: 16 lanes
+  // over one cell ran about half empty). Which particles are computed, and
+  // how each is summed, stay the same.
+  KOKKOS_INLINE_FUNCTION static void host_ranges(const Kokkos::View<std::uint8_t*, MemSpace>& st, bool every,
+                                                 const Kokkos::View<const std::uint64_t*, MemSpace>& keys,
+                                                 const Kokkos::View<const std::uint32_t*, MemSpace>& starts,
+                                                 std::uint64_t row, std::size_t q, ParticleRanges& out) {
+    out.n = 0;
+    if (!now(st, every, q)) return;
+    const std::uint64_t k = keys(q), run = k / row * row + (k % row) / kRunCells * kRunCells;
+    if (k > run && q > 0)
+      for (std::size_t p = q - 1;; --p) {
+        if (keys(p) < run) break;
+        if (now(st, every, p)) return;  // (taken by an earlier item of the run)
+        if (p == 0) break;
+      }
+    const std::size_t n_cells = keys.extent(0);
+    const std::uint64_t end = run + kRunCells < k / row * row + row ? run + kRunCells : k / row * row + row;
+    for (std::size_t p = q; p < n_cells && keys(p) < end; ++p) {
+      if (!now(st, every, p)) continue;
+      const std::uint32_t b = starts(p), e = starts(p + 1);
+      if (out.n > 0 && out.e[out.n - 1] == b) {
+        out.e[out.n - 1] = e;
+      } else {
+        out.b[out.n] = b;
+        out.e[out.n] = e;
+        ++out.n;
+      }
+    }
+  }
+
+  // How many particles the pass computes now (every one without the
+  // bitmap); for the trace.
+  template <class ExecSpace>
+  std::uint64_t count_now(const ExecSpace& space, const Neighbourhood<MemSpace>& nbh) const {
+    if (all) return nbh.n;
+    const auto st = state.view();
+    const auto starts = nbh.cell_start.view();
+    std::uint64_t n = 0;
+    Kokkos::parallel_reduce(
+        "nbmc::scalar_field::reached_count", Kokkos::RangePolicy<ExecSpace>(space, 0, st.extent(0)),
+        KOKKOS_LAMBDA(const std::size_t q, std::uint64_t& sum) {
+          if (st(q) == 1) sum += starts(q + 1) - starts(q);
+        },
+        n);
+    return n;
   }
 
   // Marks the cells of state 1 done (2).

@@ -532,29 +532,39 @@ KOKKOS_INLINE_FUNCTION std::uint32_t sum_vertex_direct(const NeighbourView<MemSp
   return evals;
 }
 
-// Method's sums at the particles [b, e) of one neighbour cell, each as a
-// point (the passes before the SPH and YT10 fields: compute_sph_weights,
-// compute_yt10_kernels): chunks of 64 particles sharing one cell span, L at
-// a time as the lanes of eval_points_host_lanes, or one by one with
-// sum_vertex_direct where the cells are too coarse for the lanes; bit for
-// bit a device thread's sum_vertex_direct either way. sink(j, a, count)
-// receives particle j's Method::N sums and how many particles contributed.
-// Host code only.
-template <class Method, int L, class MemSpace, class SinkFn>
-KOKKOS_INLINE_FUNCTION void sum_cell_particles_host_lanes(const NeighbourView<MemSpace>& nb, float S,
-                                                          const FieldConstants& fc, std::uint32_t b, std::uint32_t e,
-                                                          SinkFn&& sink) {
+// Method's sums at the particles of ranges r (r.b[i]..r.e[i], i < r.n:
+// ParticleRanges, particle_reach.hpp), each as a point (the passes before the
+// SPH and YT10 fields: SphWeights, Yt10Kernels): chunks of 64 particles
+// sharing one cell span, L at a time as the lanes of eval_points_host_lanes,
+// or one by one with sum_vertex_direct where the cells are too coarse for the
+// lanes; bit for bit a device thread's sum_vertex_direct either way.
+// sink(j, a, count) receives particle j's Method::N sums and how many
+// particles contributed. Host code only.
+template <class Method, int L, class MemSpace, class Ranges, class SinkFn>
+KOKKOS_INLINE_FUNCTION void sum_particles_host_lanes(const NeighbourView<MemSpace>& nb, float S,
+                                                     const FieldConstants& fc, const Ranges& r, SinkFn&& sink) {
 #if defined(__CUDA_ARCH__)
-  (void)nb; (void)S; (void)fc; (void)b; (void)e; (void)sink;
+  (void)nb; (void)S; (void)fc; (void)r; (void)sink;
 #else
   const float* X = nb.pos.data();
   const float* Y = X + nb.n;
   const float* Z = Y + nb.n;
-  for (std::uint32_t c0 = b; c0 < e; c0 += 64) {
-    const std::uint32_t c1 = e - c0 < 64 ? e : c0 + 64;
-    float xmin[3] = {X[c0], Y[c0], Z[c0]}, xmax[3] = {X[c0], Y[c0], Z[c0]};
-    for (std::uint32_t j = c0 + 1; j < c1; ++j) {
-      const float x[3] = {X[j], Y[j], Z[j]};
+  std::uint32_t idx[64];
+  int range = 0;
+  std::uint32_t next = r.n > 0 ? r.b[0] : 0;
+  for (;;) {
+    int m = 0;  // the chunk: the next (up to) 64 particles of the ranges
+    while (m < 64 && range < r.n) {
+      if (next < r.e[range]) {
+        idx[m++] = next++;
+      } else if (++range < r.n) {
+        next = r.b[range];
+      }
+    }
+    if (m == 0) return;
+    float xmin[3] = {X[idx[0]], Y[idx[0]], Z[idx[0]]}, xmax[3] = {xmin[0], xmin[1], xmin[2]};
+    for (int i = 1; i < m; ++i) {
+      const float x[3] = {X[idx[i]], Y[idx[i]], Z[idx[i]]};
       for (int a = 0; a < 3; ++a) {
         xmin[a] = x[a] < xmin[a] ? x[a] : xmin[a];
         xmax[a] = x[a] > xmax[a] ? x[a] : xmax[a];
@@ -563,19 +573,19 @@ KOKKOS_INLINE_FUNCTION void sum_cell_particles_host_lanes(const NeighbourView<Me
     std::int64_t lo[3], hi[3];
     cell_span(nb, xmin, xmax, fc.R, lo, hi);  // contains each particle's own span (monotone in x)
     const bool tiled = eval_points_host_lanes<Method, L>(
-        nb, lo, hi, S, fc, int(c1 - c0),
+        nb, lo, hi, S, fc, m,
         [&](int i, float x[3]) {
-          x[0] = X[c0 + i];
-          x[1] = Y[c0 + i];
-          x[2] = Z[c0 + i];
+          x[0] = X[idx[i]];
+          x[1] = Y[idx[i]];
+          x[2] = Z[idx[i]];
         },
-        [&](int i, const float* a, std::uint32_t count) { sink(c0 + std::uint32_t(i), a, count); });
+        [&](int i, const float* a, std::uint32_t count) { sink(idx[i], a, count); });
     if (!tiled)  // very coarse cells: one particle at a time
-      for (std::uint32_t j = c0; j < c1; ++j) {
-        const float x[3] = {X[j], Y[j], Z[j]};
+      for (int i = 0; i < m; ++i) {
+        const float x[3] = {X[idx[i]], Y[idx[i]], Z[idx[i]]};
         float a[Method::N];
         const std::uint32_t count = sum_vertex_direct<Method>(nb, x, S, fc, a);
-        sink(j, a, count);
+        sink(idx[i], a, count);
       }
   }
 #endif

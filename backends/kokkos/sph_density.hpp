@@ -20,14 +20,14 @@
 namespace nbmc {
 namespace Details {
 
-// The host's pass over the particles of one neighbour cell, [b, e): L
-// particles at a time as SIMD lanes (sum_cell_particles_host_lanes; each
-// D_j bit for bit a device thread's), their weights 1 / D_j into w.
+// The host's pass over the particles of one work item (ParticleRanges): L
+// particles at a time as SIMD lanes (sum_particles_host_lanes; each D_j bit
+// for bit a device thread's), their weights 1 / D_j into w.
 template <bool Radii, int L, class MemSpace>
 KOKKOS_INLINE_FUNCTION void sph_cell_host_lanes(const NeighbourView<MemSpace>& nb, float S, const FieldConstants& fc,
-                                                std::uint32_t b, std::uint32_t e, float* w) {
-  sum_cell_particles_host_lanes<SphDensityT<Radii>, L>(
-      nb, S, fc, b, e, [&](std::uint32_t j, const float* a, std::uint32_t) { w[j] = 1.f / SphDensityT<Radii>::value(a, fc); });
+                                                const ParticleRanges& r, float* w) {
+  sum_particles_host_lanes<SphDensityT<Radii>, L>(
+      nb, S, fc, r, [&](std::uint32_t j, const float* a, std::uint32_t) { w[j] = 1.f / SphDensityT<Radii>::value(a, fc); });
 }
 #if defined(__GNUC__) && !defined(__clang__)
 #pragma GCC diagnostic push
@@ -41,35 +41,35 @@ KOKKOS_INLINE_FUNCTION void sph_cell_host_lanes(const NeighbourView<MemSpace>& n
 #if defined(NBMC_HOST_AVX2)
 template <bool Radii, class MemSpace>
 __attribute__((target("avx2,fma"), flatten)) void sph_cell_host_avx2(const NeighbourView<MemSpace>& nb, float S,
-                                                                  const FieldConstants& fc, std::uint32_t b,
-                                                                  std::uint32_t e, float* w) {
-  sph_cell_host_lanes<Radii, 8>(nb, S, fc, b, e, w);
+                                                                  const FieldConstants& fc, const ParticleRanges& r,
+                                                                  float* w) {
+  sph_cell_host_lanes<Radii, 8>(nb, S, fc, r, w);
 }
 #endif
 #if defined(NBMC_HOST_AVX512)
 template <bool Radii, class MemSpace>
 __attribute__((target("avx512f"), flatten)) void sph_cell_host_avx512(const NeighbourView<MemSpace>& nb, float S,
-                                                                    const FieldConstants& fc, std::uint32_t b,
-                                                                    std::uint32_t e, float* w) {
-  sph_cell_host_lanes<Radii, 16>(nb, S, fc, b, e, w);
+                                                                    const FieldConstants& fc, const ParticleRanges& r,
+                                                                    float* w) {
+  sph_cell_host_lanes<Radii, 16>(nb, S, fc, r, w);
 }
 #endif
 #if defined(__GNUC__) && !defined(__clang__)
 #pragma GCC diagnostic pop
 #endif
 
-// The pass over one neighbour cell with `lanes` lanes (host_simd_lanes).
+// The pass over one work item with `lanes` lanes (host_simd_lanes).
 template <bool Radii, class MemSpace>
 KOKKOS_INLINE_FUNCTION void sph_cell_host(const NeighbourView<MemSpace>& nb, float S, const FieldConstants& fc,
-                                          std::uint32_t b, std::uint32_t e, float* w, int lanes) {
+                                          const ParticleRanges& r, float* w, int lanes) {
 #if defined(NBMC_HOST_AVX512)
-  if (lanes == 16) return sph_cell_host_avx512<Radii>(nb, S, fc, b, e, w);
+  if (lanes == 16) return sph_cell_host_avx512<Radii>(nb, S, fc, r, w);
 #endif
 #if defined(NBMC_HOST_AVX2)
-  if (lanes == 8) return sph_cell_host_avx2<Radii>(nb, S, fc, b, e, w);
+  if (lanes == 8) return sph_cell_host_avx2<Radii>(nb, S, fc, r, w);
 #endif
   (void)lanes;
-  sph_cell_host_lanes<Radii, 4>(nb, S, fc, b, e, w);
+  sph_cell_host_lanes<Radii, 4>(nb, S, fc, r, w);
 }
 
 // The weights of the particles the band's field can reach (ParticleReach,
@@ -105,16 +105,20 @@ struct SphWeights {
     const float S = float(g.nb_cell);
     // (D_j >= 1: the particle's own W~(0) = 1 is in the sum.)
     if constexpr (Kokkos::SpaceAccessibility<Kokkos::HostSpace, MemSpace>::accessible) {
-      // One work item per cell, its particles as SIMD lanes (one particle at
-      // a time, this pass took longer than the field itself).
+      // The particles of a run of cells per work item (host_ranges), as SIMD
+      // lanes (one particle at a time, this pass took longer than the field
+      // itself).
       const int lanes = host_simd_lanes();
+      const Kokkos::View<const std::uint64_t*, MemSpace> keys = nbh.cell_keys.view();
+      const std::uint64_t row = std::uint64_t(g.nb_dims[0]);
       float* const o = w.data();
       Kokkos::parallel_for(
           "nbmc::scalar_field::sph_density",
           Kokkos::RangePolicy<ExecSpace, Kokkos::Schedule<Kokkos::Dynamic>>(space, 0, nbh.n_cells),
           KOKKOS_LAMBDA(const std::size_t q) {
-            if (ParticleReach<MemSpace>::now(st, every, q))
-              sph_cell_host<Radii>(nb, S, fc, starts(q), starts(q + 1), o, lanes);
+            ParticleRanges r;
+            ParticleReach<MemSpace>::host_ranges(st, every, keys, starts, row, q, r);
+            if (r.n > 0) sph_cell_host<Radii>(nb, S, fc, r, o, lanes);
           });
     } else {
       // One thread per particle, every particle (ParticleReach: all).
@@ -127,8 +131,10 @@ struct SphWeights {
             w(j) = 1.f / eval_vertex_direct<SphDensityT<Radii>>(nb, x, S, fc, evals);
           });
     }
+    const std::uint64_t computed = host_trace_on() ? reach.count_now(space, nbh) : 0;
     reach.finish(space);
     space.fence();
+    trace("sph weights", computed);
   }
 };
 

@@ -36,17 +36,16 @@ inline Yt10Constants yt10_constants(const Params& p) {
   return k;
 }
 
-// The host's pass over the particles of one neighbour cell, [b, e): groups
-// of L particles as the lanes of eval_points_host_lanes (each particle's
-// moments in the order of sum_vertex_direct, bit for bit), chunks of 64
-// particles sharing one cell span. Writes their kernels and returns the
-// largest reach.
+// The host's pass over the particles of one work item (ParticleRanges):
+// groups of L particles as the lanes of eval_points_host_lanes (each
+// particle's moments in the order of sum_vertex_direct, bit for bit), chunks
+// of 64 particles sharing one cell span. Writes their kernels and returns
+// the largest reach.
 template <int L, class MemSpace>
 KOKKOS_INLINE_FUNCTION float yt10_cell_host_lanes(const NeighbourView<MemSpace>& nb, float S, const FieldConstants& fc,
-                                                  const Yt10Constants& k, std::uint32_t b, std::uint32_t e,
-                                                  float* out) {
+                                                  const Yt10Constants& k, const ParticleRanges& r, float* out) {
   float reach = 0;
-  sum_cell_particles_host_lanes<Yt10Moments, L>(nb, S, fc, b, e, [&](std::uint32_t j, const float* a, std::uint32_t count) {
+  sum_particles_host_lanes<Yt10Moments, L>(nb, S, fc, r, [&](std::uint32_t j, const float* a, std::uint32_t count) {
     const float r = yt10_kernel(a, count, k, out + std::size_t(kYt10Floats) * j);
     reach = r > reach ? r : reach;
   });
@@ -56,12 +55,11 @@ KOKKOS_INLINE_FUNCTION float yt10_cell_host_lanes(const NeighbourView<MemSpace>&
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wpsabi"  // 32- and 64-byte vectors never cross a call that is not inlined
 #endif
-// The pass over one neighbour cell with `lanes` lanes (host_simd_lanes).
+// The pass over one work item with `lanes` lanes (host_simd_lanes).
 template <class MemSpace>
 KOKKOS_INLINE_FUNCTION float yt10_cell_host(const NeighbourView<MemSpace>& nb, float S, const FieldConstants& fc,
-                                             const Yt10Constants& k, std::uint32_t b, std::uint32_t e, float* out,
-                                             int lanes) {
-  return with_host_lanes(lanes, [&nb, S, &fc, &k, b, e, out](auto L) { return yt10_cell_host_lanes<decltype(L)::value>(nb, S, fc, k, b, e, out); });
+                                             const Yt10Constants& k, const ParticleRanges& r, float* out, int lanes) {
+  return with_host_lanes(lanes, [&nb, S, &fc, &k, &r, out](auto L) { return yt10_cell_host_lanes<decltype(L)::value>(nb, S, fc, k, r, out); });
 }
 #if defined(__GNUC__) && !defined(__clang__)
 #pragma GCC diagnostic pop
@@ -109,15 +107,19 @@ struct Yt10Kernels {
     const std::size_t n = nbh.n;
     float r_new = 0;
     if constexpr (Kokkos::SpaceAccessibility<Kokkos::HostSpace, MemSpace>::accessible) {
-      // One work item per occupied neighbour cell, its particles as SIMD lanes.
+      // The particles of a run of cells per work item (host_ranges), as SIMD lanes.
       const int lanes = host_simd_lanes();
+      const Kokkos::View<const std::uint64_t*, MemSpace> keys = nbh.cell_keys.view();
+      const std::uint64_t row = std::uint64_t(g.nb_dims[0]);
       float* const o = out.data();
       Kokkos::parallel_reduce(
           "nbmc::scalar_field::yt10_kernels",
           Kokkos::RangePolicy<ExecSpace, Kokkos::Schedule<Kokkos::Dynamic>>(space, 0, nbh.n_cells),
           KOKKOS_LAMBDA(const std::size_t c, float& r) {
-            if (!ParticleReach<MemSpace>::now(st, every, c)) return;
-            const float rc = yt10_cell_host(nb, S, fc, k, starts(c), starts(c + 1), o, lanes);
+            ParticleRanges rs;
+            ParticleReach<MemSpace>::host_ranges(st, every, keys, starts, row, c, rs);
+            if (rs.n == 0) return;
+            const float rc = yt10_cell_host(nb, S, fc, k, rs, o, lanes);
             if (rc > r) r = rc;
           },
           Kokkos::Max<float>(r_new));
@@ -136,9 +138,10 @@ struct Yt10Kernels {
           },
           Kokkos::Max<float>(r_new));
     }
+    const std::uint64_t computed = host_trace_on() ? reach.count_now(space, nbh) : 0;
     reach.finish(space);
     space.fence();
-    trace("yt10 kernels", n);
+    trace("yt10 kernels", computed);
     largest = r_new > largest ? r_new : largest;
     const FieldConstants f = constants(p, fc);
     trace("yt10 R_f / R (per mille)", std::uint64_t(1000.0 * double(f.R) / p.influence_radius + 0.5));
