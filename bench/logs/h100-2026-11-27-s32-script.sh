@@ -1,0 +1,60 @@
+#!/usr/bin/env bash
+# Session 32 device runs. new = working tree.
+set -uo pipefail
+R=$PWD; O=${OUT:-/tmp/o}; L=/tmp/L; mkdir -p $O $L
+export PATH=/usr/local/cuda/bin:$PATH
+mkdir -p ~/.cache/nbmc/src && cp -rn out/dev/kk/* ~/.cache/nbmc/src/
+D=$R/out/dev/data; BIG=$D/xyz/cbd1654k_t040_1654104.xyz
+N=$R/build-cuda
+t0=$(date +%s)
+for step in "$@"; do case $step in
+build)
+  NBMC_GPU_CHECK_STEPS=build scripts/gpu_check.sh $D $L/gc > $L/build.txt 2>&1 || { tail -40 $L/build.txt $L/gc/build.log | grep -v "^ *$" | tail -40; exit 1; }
+  echo "new built in $(( $(date +%s) - t0 )) s" ;;
+pointers)
+  NBMC_GPU_CHECK_STEPS="pointers" scripts/gpu_check.sh $D $L/gc2 > $O/pointers.txt 2>&1; echo "pointers rc $?"
+  grep -i "fail\|bit for bit\|PASS" $O/pointers.txt | head -20 ;;
+check)
+  { echo "== equivalence (new)"; NBMC_CHECK_BAND=1 $N/tests/gpu/nbmc_cuda_equivalence $D 2>&1 | tail -80; } > $O/equivalence.txt
+  tail -1 $O/equivalence.txt; grep FAIL $O/equivalence.txt | head
+  NBMC_GPU_CHECK_STEPS="pointers subdomains" scripts/gpu_check.sh $D $L/gc2 > $O/pointers-subdomains.txt 2>&1; echo "pointers+subdomains rc $?"
+  grep -i "fail\|DIFFERENT" $O/pointers-subdomains.txt | head
+  echo "check done at $(( $(date +%s) - t0 )) s" ;;
+readme)  # the README's figures: GPU and 16 CPU threads, defaults and without the clean-up
+  {
+  for round in 1 2 3; do
+    for args in "--backend cuda --repeat 5" "--backend cuda --no-cleanup --repeat 5" "--backend cuda --no-cleanup --device-resident --repeat 5" "--backend openmp --threads 16 --repeat 2"; do
+      echo "# r$round $args"; $N/bench/nbmc_bench $BIG --spacing 0.00484 $args 2>&1 | grep RESULT
+    done
+  done
+  } > $O/readme.txt 2>&1
+  grep -A1 "^# " $O/readme.txt | grep -o "^# .*\|total=[0-9.]*\| t4=[0-9.]*\| postprocess=[0-9.]*" | paste -sd' ' | sed 's/# /\n/g'
+  echo "readme done at $(( $(date +%s) - t0 )) s" ;;
+trace)
+  for b in cuda openmp; do
+    NBMC_TRACE=1 $N/bench/nbmc_bench $BIG --spacing 0.00484 --backend $b --threads 16 --repeat 2 > $O/trace-$b.txt 2>&1
+  done
+  grep -h "clean-up\|post-processing\|RESULT" $O/trace-cuda.txt | tail -30 | cut -c1-200
+  echo "trace done at $(( $(date +%s) - t0 )) s" ;;
+oldbg)  # after build: Kokkos is in the cache
+  mkdir -p out/oldsrc && tar -xf out/dev/old.tar -C out/oldsrc
+  (cd out/oldsrc && NBMC_CUDA_CMAKE_ARGS="-DNBMC_BUILD_TESTS=OFF" NBMC_JOBS=6 scripts/setup.sh --cuda-only > $L/old-build.txt 2>&1; echo "old build rc $? at $(( $(date +%s) - t0 )) s") &
+  OLDPID=$! ;;
+sphbench)
+  [ -n "${OLDPID:-}" ] && wait $OLDPID
+  OB=$R/out/oldsrc/build-cuda
+  {
+  for round in 1 2 3; do
+    for v in old new; do B=$N; [ $v = old ] && B=$OB
+      for m in sph yt10; do
+      for args in "--backend cuda --no-cleanup --repeat 5" "--backend openmp --threads 16 --no-cleanup --repeat 2"; do
+        echo "# $m $v r$round $args"; $B/bench/nbmc_bench $BIG --spacing 0.00484 --method $m $args 2>&1 | grep RESULT
+      done
+      done
+    done
+  done
+  } > $O/sphbench.txt 2>&1
+  grep -A1 "^# " $O/sphbench.txt | grep -o "^# .*\|total=[0-9.]*\| t4=[0-9.]*" | paste -sd' ' | sed 's/# /\n/g'
+  echo "sphbench done at $(( $(date +%s) - t0 )) s" ;;
+esac; done
+echo "total $(( $(date +%s) - t0 )) s"
