@@ -30,6 +30,7 @@
 #include "yt10_kernels.hpp"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <cstdlib>
@@ -563,6 +564,94 @@ TEST(ParticleReach, HostRangesTakeEachCellComputedNowOnce) {
           ASSERT_EQ(taken[j], every || st(q) == 1 ? 1 : 0) << "trial " << trial << ", cell key " << kv(q);
     }
   }
+}
+
+TEST(ParticleReach, SelectReachesEveryCellWithinROfABandTile) {
+  // The reach's margins, directly: random band tiles (4x4x4 grid vertices
+  // each) on random grids, every neighbour cell occupied. A gather from a
+  // band vertex visits the cells whose box lies within R of it (an edge
+  // cell's box unbounded outward: particles outside the grid are clamped
+  // into it), so select() must mark each cell within R of a vertex of a
+  // tile that is set (any of its vertices may be a band vertex). The
+  // distance here: per axis, the smallest gap between the cell's interval
+  // and the tile's vertex coordinates (a lattice point is nearest on each
+  // axis alone), checked against R (1 + 1e-6), stricter than the gathers'
+  // float test. Also: not every cell is reached (the test would pass on an
+  // "every cell" reach).
+  using Space = Kokkos::DefaultHostExecutionSpace;
+  const Space space;
+  std::mt19937 rng(11);
+  std::size_t unreached_cells = 0, near_misses = 0;
+  for (int trial = 0; trial < 60; ++trial) {
+    Grid g;
+    const double R = 1.0;
+    const double cells[] = {0.25, 0.125, 0.2, 0.37, 0.5, 0.0931};
+    g.cell = cells[trial % 6];
+    g.nb_cell = R * (0.5 + 0.5 * double(rng() % 1000) / 1000.0);  // S in [R/2, R]
+    const double extent[3] = {2.0 + double(rng() % 60) / 10, 2.0 + double(rng() % 60) / 10,
+                              2.0 + double(rng() % 60) / 10};
+    for (int a = 0; a < 3; ++a) {
+      g.dims[a] = std::int64_t(std::floor(extent[a] / g.cell)) + 2;
+      g.nb_dims[a] = std::int64_t(std::floor(extent[a] / g.nb_cell)) + 2;
+    }
+    const std::size_t n_cells = std::size_t(g.nb_dims[0] * g.nb_dims[1] * g.nb_dims[2]);
+    MemoryTracker tracker;
+    Neighbourhood<Host> nbh;
+    nbh.n_cells = n_cells;
+    nbh.cell_keys = Buffer<std::uint64_t, Host>(tracker, "keys", n_cells);
+    for (std::size_t q = 0; q < n_cells; ++q) nbh.cell_keys.view()(q) = q;
+    ParticleReach<Host> reach;
+    reach.start(tracker, n_cells, g, false);
+    ASSERT_FALSE(reach.all);
+    const std::int64_t* td = reach.tdims;
+    // A few tiles, some at the grid's edges.
+    std::vector<std::array<std::int64_t, 3>> set;
+    const int n_tiles = 1 + int(rng() % 4);
+    for (int i = 0; i < n_tiles; ++i) {
+      std::array<std::int64_t, 3> t;
+      for (int a = 0; a < 3; ++a) {
+        const std::int64_t last = (g.dims[a] - 1) / 4;  // the last tile with a grid vertex
+        const int r = int(rng() % 8);
+        t[a] = r == 0 ? 0 : r == 1 ? last : std::int64_t(rng() % std::uint64_t(last + 1));
+      }
+      set.push_back(t);
+      const std::uint64_t b = std::uint64_t(t[0]) + std::uint64_t(td[0]) * (std::uint64_t(t[1]) + std::uint64_t(td[1]) * std::uint64_t(t[2]));
+      reach.tiles.view()(b >> 5) |= std::uint32_t(1) << (b & 31);
+    }
+    reach.select(space, nbh, g, R);
+    space.fence();
+    const auto st = reach.state.view();
+    const double S = g.nb_cell, c = g.cell, R2 = R * R * (1 + 2e-6);
+    for (std::size_t q = 0; q < n_cells; ++q) {
+      std::int64_t x[3];
+      neighbour_cell_of_key(q, g.nb_dims, x[0], x[1], x[2]);
+      double best = HUGE_VAL;
+      for (const auto& t : set) {
+        double d2 = 0;
+        for (int a = 0; a < 3; ++a) {
+          const double lo = x[a] == 0 ? -HUGE_VAL : double(x[a]) * S;
+          const double hi = x[a] == g.nb_dims[a] - 1 ? HUGE_VAL : double(x[a] + 1) * S;
+          double m = HUGE_VAL;
+          for (std::int64_t v = 4 * t[a]; v <= std::min(4 * t[a] + 3, g.dims[a] - 1); ++v) {
+            const double p = double(v) * c, gap = p < lo ? lo - p : p > hi ? p - hi : 0.0;
+            m = std::min(m, gap * gap);
+          }
+          d2 += m;
+        }
+        best = std::min(best, d2);
+      }
+      if (best < R2) {
+        ASSERT_EQ(st(q), 1) << "trial " << trial << ": cell (" << x[0] << ", " << x[1] << ", " << x[2]
+                            << ") lies " << std::sqrt(best) / R << " R from a band tile, unreached (cell " << c
+                            << ", S " << S << ")";
+        if (best > 0.81 * R2) ++near_misses;  // (the margins are exercised)
+      } else if (st(q) == 0) {
+        ++unreached_cells;
+      }
+    }
+  }
+  EXPECT_GT(near_misses, 500u);
+  EXPECT_GT(unreached_cells, 1000u);
 }
 
 TEST(FieldOrder, LatticeBall) {
