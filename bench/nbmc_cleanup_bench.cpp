@@ -21,6 +21,11 @@
 #include <vector>
 
 namespace {
+long minor_faults() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return u.ru_minflt;
+}
 double cpu_seconds() {
   rusage u{};
   getrusage(RUSAGE_SELF, &u);
@@ -41,11 +46,13 @@ int main(int argc, char** argv) {
   for (int r = 0; r < repeat; ++r) {
     std::vector<float> p = m.positions, normals = m.normals;
     std::vector<std::uint32_t> t = m.triangles;
+    const long f0 = minor_faults();
     const double c0 = cpu_seconds();
     const auto w0 = std::chrono::steady_clock::now();
     const nbmc::mesh::CleanupResult c = nbmc::mesh::cleanup_mesh(p, normals, t, cell);
     const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - w0).count();
     const double cpu = cpu_seconds() - c0;
+    const long faults = minor_faults() - f0;
     std::uint64_t h = 1469598103934665603ull;  // FNV-1a over the positions' bits and the indices
     for (float x : p) {
       std::uint32_t b;
@@ -53,9 +60,9 @@ int main(int argc, char** argv) {
       h = (h ^ b) * 1099511628211ull;
     }
     for (std::uint32_t v : t) h = (h ^ v) * 1099511628211ull;
-    std::printf("CLEANUP threads=%zu bad=%llu->%llu vertices=%zu triangles=%zu wall=%.4f cpu=%.4f hash=%016llx\n",
+    std::printf("CLEANUP threads=%zu bad=%llu->%llu vertices=%zu triangles=%zu wall=%.4f cpu=%.4f faults=%ld hash=%016llx\n",
                 threads, (unsigned long long)c.bad_before, (unsigned long long)c.bad_after, p.size() / 3,
-                t.size() / 3, wall, cpu, (unsigned long long)h);
+                t.size() / 3, wall, cpu, faults, (unsigned long long)h);
   }
   return 0;
 }
