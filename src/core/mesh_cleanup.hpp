@@ -668,6 +668,9 @@ class Cleaner {
     std::vector<Undo> pass_log;
     std::uint64_t repaired = 0, rounds = 0, lost = 0;
     SpinBarrier barrier(threads);
+    // (NBMC_TRACE: the main thread's time in each step of the rounds.)
+    const bool trace = host_trace_on();
+    double step_ms[5] = {0, 0, 0, 0, 0};  // reserve, commit, release, merge, waits
     // The items of a round: each thread takes its own range first (in both
     // steps, so that an item commits where its region's lines are cached),
     // then what is left of the others'.
@@ -701,8 +704,18 @@ class Cleaner {
           failed = true;
         }
       };
+      using Clock = std::chrono::steady_clock;
+      Clock::time_point t0;
+      auto step = [&](int k) {  // (the main thread's, when tracing)
+        if (!trace || w != 0) return;
+        const Clock::time_point t1 = Clock::now();
+        if (k >= 0) step_ms[k] += std::chrono::duration<double, std::milli>(t1 - t0).count();
+        t0 = t1;
+      };
+      step(-1);
       for (;;) {
         barrier.wait();
+        step(4);
         if (done) return;
         // Reserve.
         guarded([&] {
@@ -717,7 +730,9 @@ class Cleaner {
             }
           });
         });
+        step(0);
         barrier.wait();
+        step(4);
         // Commit the items that hold their whole region.
         guarded([&] {
           each_item(cursor_b.get(), [&](std::size_t i) {
@@ -740,14 +755,18 @@ class Cleaner {
             if (hooks.check_writes) writes_outside += me.writes_outside(reg[i], logged);
           });
         });
+        step(1);
         barrier.wait();
+        step(4);
         // Release the reservations.
         guarded([&] {
           const std::size_t m = cur.size(), ib = m * w / threads, ie = m * (w + 1) / threads;
           for (std::size_t i = ib; i < ie; ++i)
             for (std::uint32_t x : reg[i]) slots_[x].reserve.store(kNone, std::memory_order_relaxed);
         });
+        step(2);
         barrier.wait();
+        step(4);
         if (w != 0) continue;
         // The main thread: take the workers' results, then the next round
         // (done after a failure too, so that no thread waits for ever).
@@ -782,6 +801,7 @@ class Cleaner {
           reset_cursors();
         });
         if (violation || failed) done = true;
+        step(3);
       }
     });
     if (error) std::rethrow_exception(error);
@@ -805,9 +825,12 @@ class Cleaner {
       h.writes_outside += writes_outside;
     }
     if (host_trace_on()) {
-      std::fprintf(stderr, "[nbmc trace] clean-up rounds: items=%zu threads=%zu rounds=%llu lost=%llu (%.1f%%)%s\n", n,
-                   threads, (unsigned long long)rounds, (unsigned long long)lost, 100.0 * double(lost) / double(n),
-                   violation ? " (undone, run serially)" : "");
+      std::fprintf(stderr,
+                   "[nbmc trace] clean-up rounds: items=%zu threads=%zu rounds=%llu lost=%llu (%.1f%%)%s; main "
+                   "thread: reserve %.3f, commit %.3f, release %.3f, merge %.3f, waiting %.3f ms\n",
+                   n, threads, (unsigned long long)rounds, (unsigned long long)lost, 100.0 * double(lost) / double(n),
+                   violation ? " (undone, run serially)" : "", step_ms[0],
+                   step_ms[1], step_ms[2], step_ms[3], step_ms[4]);
     }
     return finish(repaired);
   }
