@@ -43,6 +43,7 @@
 
 #include <cstdint>
 #include <cstring>
+#include <type_traits>
 
 namespace nbmc {
 namespace Details {
@@ -229,84 +230,138 @@ struct Yt10Constants {
   std::uint32_t neighbours = 25;  // N_eps
 };
 
+// |x| lane-wise (T a float or a host SIMD vector of them): the sign bit
+// cleared, as fabs.
+template <class T>
+KOKKOS_INLINE_FUNCTION T lane_abs(T x) {
+  if constexpr (std::is_same<T, float>::value) {
+    return Kokkos::Experimental::fabs(x);
+  } else {
+    using I = decltype(x < x);
+    return (T)((I)x & 0x7fffffff);
+  }
+}
+
+// Not m, lane-wise (m a bool, or a mask of host SIMD comparisons: -1 or 0).
+template <class M>
+KOKKOS_INLINE_FUNCTION M lane_not(M m) {
+  if constexpr (std::is_same<M, bool>::value) {
+    return !m;
+  } else {
+    return ~m;
+  }
+}
+
 // Eigen-decomposition of the symmetric 3x3 matrix A: cyclic Jacobi
 // rotations (Numerical Recipes' form, with square roots and divisions only),
 // kYt10JacobiSweeps sweeps over (0,1), (0,2), (1,2). On return A's diagonal
 // holds the eigenvalues and V's columns the eigenvectors (V starts as I).
-KOKKOS_INLINE_FUNCTION void jacobi_eigen_sym3(float A[3][3], float V[3][3]) {
+// T: a float, or a host SIMD vector of them (the host's pass, eight
+// particles at a time): every lane gets the float's bits. A rotation whose
+// entry is 0 leaves A and V as they are (computed and not taken: lanes).
+template <class T>
+KOKKOS_INLINE_FUNCTION void jacobi_eigen_sym3(T A[3][3], T V[3][3]) {
   for (int i = 0; i < 3; ++i)
-    for (int j = 0; j < 3; ++j) V[i][j] = i == j ? 1.f : 0.f;
+    for (int j = 0; j < 3; ++j) V[i][j] = lanes_of<T>(i == j ? 1.f : 0.f);
   for (int sweep = 0; sweep < kYt10JacobiSweeps; ++sweep)
     for (int r = 0; r < 3; ++r) {
       const int p = r == 2 ? 1 : 0, q = r == 0 ? 1 : 2, o = 3 - p - q;
-      const float apq = A[p][q];
-      if (apq == 0.f) continue;
-      const float theta = (A[q][q] - A[p][p]) / (2.f * apq);
+      const T apq = A[p][q];
+      if constexpr (std::is_same<T, float>::value) {
+        if (apq == 0.f) continue;
+      }
+      const auto turn = apq != 0.f;
+      const T theta = (A[q][q] - A[p][p]) / (2.f * apq);
       // t = tan of the rotation angle, the smaller root; theta^2 may overflow
       // to inf, which gives t = 0 (no rotation), as it should.
-      const float t = (theta >= 0.f ? 1.f : -1.f) /
-                      (Kokkos::Experimental::fabs(theta) + Kokkos::Experimental::sqrt(theta * theta + 1.f));
-      const float c = 1.f / Kokkos::Experimental::sqrt(t * t + 1.f), s = t * c;
-      A[p][p] = A[p][p] - t * apq;
-      A[q][q] = A[q][q] + t * apq;
-      A[p][q] = A[q][p] = 0.f;
-      const float aop = A[o][p], aoq = A[o][q];
-      A[o][p] = A[p][o] = c * aop - s * aoq;
-      A[o][q] = A[q][o] = s * aop + c * aoq;
+      const T t = lane_select(theta >= 0.f, lanes_of<T>(1.f), lanes_of<T>(-1.f)) /
+                  (lane_abs(theta) + lane_sqrt(theta * theta + 1.f));
+      const T c = 1.f / lane_sqrt(t * t + 1.f), s = t * c;
+      A[p][p] = lane_select(turn, A[p][p] - t * apq, A[p][p]);
+      A[q][q] = lane_select(turn, A[q][q] + t * apq, A[q][q]);
+      A[p][q] = A[q][p] = lane_select(turn, lanes_of<T>(0.f), A[p][q]);
+      const T aop = A[o][p], aoq = A[o][q];
+      A[o][p] = A[p][o] = lane_select(turn, c * aop - s * aoq, aop);
+      A[o][q] = A[q][o] = lane_select(turn, s * aop + c * aoq, aoq);
       for (int i = 0; i < 3; ++i) {
-        const float vp = V[i][p], vq = V[i][q];
-        V[i][p] = c * vp - s * vq;
-        V[i][q] = s * vp + c * vq;
+        const T vp = V[i][p], vq = V[i][q];
+        V[i][p] = lane_select(turn, c * vp - s * vq, vp);
+        V[i][q] = lane_select(turn, s * vp + c * vq, vq);
       }
     }
 }
 
 // Entry (i, j) of V diag(is) V^T.
-KOKKOS_INLINE_FUNCTION float yt10_entry(const float V[3][3], const float is[3], int i, int j) {
+template <class T>
+KOKKOS_INLINE_FUNCTION T yt10_entry(const T V[3][3], const T is[3], int i, int j) {
   return (V[i][0] * V[j][0] * is[0] + V[i][1] * V[j][1] * is[1]) + V[i][2] * V[j][2] * is[2];
 }
 
 // x clamped to [lo, hi] (lo <= hi); NaN gives lo.
-KOKKOS_INLINE_FUNCTION float yt10_clamp(float x, float lo, float hi) { return !(x >= lo) ? lo : (x > hi ? hi : x); }
+template <class T>
+KOKKOS_INLINE_FUNCTION T yt10_clamp(T x, T lo, T hi) {
+  return lane_select(x >= lo, lane_select(x > hi, hi, x), lo);
+}
 
-// One particle's kernel (kYt10Floats floats to out) from its moments a
-// (Yt10Moments) and the number of particles within R (itself included);
-// returns the kernel's reach: how far from the particle it is non-zero
-// (h s_1 + |xbar - x|, at most 0.95 R).
-KOKKOS_INLINE_FUNCTION float yt10_kernel(const float* a, std::uint32_t count, const Yt10Constants& k, float* out) {
-  const float inv = 1.f / a[0];  // a[0] >= 1: the particle itself
-  const float m0 = a[1] * inv, m1 = a[2] * inv, m2 = a[3] * inv;  // x_w - x_j
-  float s[3] = {k.kn, k.kn, k.kn};
-  float V[3][3] = {{1.f, 0.f, 0.f}, {0.f, 1.f, 0.f}, {0.f, 0.f, 1.f}};
-  if (count - 1 > k.neighbours) {
+// One particle's kernel (kYt10Floats floats to out[q], lane-wise for T a
+// host SIMD vector) from its moments a (Yt10Moments) and whether it has
+// more than N_eps neighbours within R (`crowd`, a mask of T's comparisons
+// for vectors); returns the kernel's reach: how far from the particle it is
+// non-zero (h s_1 + |xbar - x|, at most 0.95 R). Every lane gets the
+// float's bits: the same operations, and where a float takes a branch the
+// lanes compute both sides and select.
+template <class T, class M>
+KOKKOS_INLINE_FUNCTION T yt10_kernel_t(const T* a, M crowd, const Yt10Constants& k, T* out) {
+  const T inv = 1.f / a[0];  // a[0] >= 1: the particle itself
+  const T m0 = a[1] * inv, m1 = a[2] * inv, m2 = a[3] * inv;  // x_w - x_j
+  T s[3] = {lanes_of<T>(k.kn), lanes_of<T>(k.kn), lanes_of<T>(k.kn)};
+  T V[3][3];
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) V[i][j] = lanes_of<T>(i == j ? 1.f : 0.f);
+  bool any = true;
+  if constexpr (std::is_same<T, float>::value) any = crowd;
+  if (any) {
     // The covariance about the weighted mean, times k_s / sigma_0.
-    float A[3][3];
+    T A[3][3], Q[3][3];
     A[0][0] = (a[4] * inv - m0 * m0) * k.ks;
     A[0][1] = A[1][0] = (a[5] * inv - m0 * m1) * k.ks;
     A[0][2] = A[2][0] = (a[6] * inv - m0 * m2) * k.ks;
     A[1][1] = (a[7] * inv - m1 * m1) * k.ks;
     A[1][2] = A[2][1] = (a[8] * inv - m1 * m2) * k.ks;
     A[2][2] = (a[9] * inv - m2 * m2) * k.ks;
-    jacobi_eigen_sym3(A, V);
-    const float e[3] = {A[0][0], A[1][1], A[2][2]};
+    jacobi_eigen_sym3(A, Q);
+    const T e[3] = {A[0][0], A[1][1], A[2][2]};
     // The largest eigenvalue (the first of equal ones); the others are
     // clamped alike, so their order does not matter.
-    const int big = e[0] >= e[1] ? (e[0] >= e[2] ? 0 : 2) : (e[1] >= e[2] ? 1 : 2);
-    const float s1 = yt10_clamp(e[big], k.kn, k.max_axis);
-    for (int i = 0; i < 3; ++i) s[i] = i == big ? s1 : yt10_clamp(e[i], s1 * k.kr_inv, s1);
+    const auto b01 = e[0] >= e[1], b02 = e[0] >= e[2], b12 = e[1] >= e[2];
+    const auto big0 = b01 && b02, big1 = lane_not(b01) && b12;  // else 2
+    const T ebig = lane_select(big0, e[0], lane_select(big1, e[1], e[2]));
+    const T s1 = yt10_clamp(ebig, lanes_of<T>(k.kn), lanes_of<T>(k.max_axis));
+    const T lo = s1 * k.kr_inv;
+    const T c0 = lane_select(big0, s1, yt10_clamp(e[0], lo, s1));
+    const T c1 = lane_select(big1, s1, yt10_clamp(e[1], lo, s1));
+    const T c2 = lane_select(big0 || big1, yt10_clamp(e[2], lo, s1), s1);
+    s[0] = lane_select(crowd, c0, s[0]);
+    s[1] = lane_select(crowd, c1, s[1]);
+    s[2] = lane_select(crowd, c2, s[2]);
+    for (int i = 0; i < 3; ++i)
+      for (int j = 0; j < 3; ++j) V[i][j] = lane_select(crowd, Q[i][j], V[i][j]);
   }
   // G = (1/h) V diag(1/s) V^T
-  const float is[3] = {1.f / (k.h * s[0]), 1.f / (k.h * s[1]), 1.f / (k.h * s[2])};
+  const T is[3] = {1.f / (k.h * s[0]), 1.f / (k.h * s[1]), 1.f / (k.h * s[2])};
   // The smoothed centre, moved at most max_shift.
-  float o0 = k.lambda * m0, o1 = k.lambda * m1, o2 = k.lambda * m2;
-  const float len2 = (o0 * o0 + o1 * o1) + o2 * o2;
-  float len = Kokkos::Experimental::sqrt(len2);
-  if (len > k.max_shift) {
-    const float f = k.max_shift / len;
-    o0 *= f;
-    o1 *= f;
-    o2 *= f;
-    len = k.max_shift;
+  T o0 = k.lambda * m0, o1 = k.lambda * m1, o2 = k.lambda * m2;
+  const T len2 = (o0 * o0 + o1 * o1) + o2 * o2;
+  T len = lane_sqrt(len2);
+  const auto far = len > k.max_shift;
+  bool shift = true;
+  if constexpr (std::is_same<T, float>::value) shift = far;
+  if (shift) {
+    const T f = k.max_shift / len;
+    o0 = lane_select(far, o0 * f, o0);
+    o1 = lane_select(far, o1 * f, o1);
+    o2 = lane_select(far, o2 * f, o2);
+    len = lane_select(far, lanes_of<T>(k.max_shift), len);
   }
   out[0] = o0;
   out[1] = o1;
@@ -318,11 +373,17 @@ KOKKOS_INLINE_FUNCTION float yt10_kernel(const float* a, std::uint32_t count, co
   out[7] = yt10_entry(V, is, 1, 2);
   out[8] = yt10_entry(V, is, 2, 2);
   out[9] = 1.f / (((s[0] * s[1]) * s[2]) * a[10]);  // det(h G) / D
-  const float longest = s[0] > s[1] ? (s[0] > s[2] ? s[0] : s[2]) : (s[1] > s[2] ? s[1] : s[2]);
-  const float reach = k.h * longest + len;
-  const float bound = reach * kYt10ReachMargin;
+  const T longest = lane_select(s[0] > s[1], lane_select(s[0] > s[2], s[0], s[2]), lane_select(s[1] > s[2], s[1], s[2]));
+  const T reach = k.h * longest + len;
+  const T bound = reach * kYt10ReachMargin;
   out[10] = bound * bound;
   return reach;
+}
+
+// One particle's kernel (the float case, every backend) from its moments
+// and the number of particles within R (itself included).
+KOKKOS_INLINE_FUNCTION float yt10_kernel(const float* a, std::uint32_t count, const Yt10Constants& k, float* out) {
+  return yt10_kernel_t<float>(a, count - 1 > k.neighbours, k, out);
 }
 
 }  // namespace Details
