@@ -242,16 +242,6 @@ KOKKOS_INLINE_FUNCTION T lane_abs(T x) {
   }
 }
 
-// Not m, lane-wise (m a bool, or a mask of host SIMD comparisons: -1 or 0).
-template <class M>
-KOKKOS_INLINE_FUNCTION M lane_not(M m) {
-  if constexpr (std::is_same<M, bool>::value) {
-    return !m;
-  } else {
-    return ~m;
-  }
-}
-
 // Eigen-decomposition of the symmetric 3x3 matrix A: cyclic Jacobi
 // rotations (Numerical Recipes' form, with square roots and divisions only),
 // kYt10JacobiSweeps sweeps over (0,1), (0,2), (1,2). On return A's diagonal
@@ -334,7 +324,7 @@ KOKKOS_INLINE_FUNCTION T yt10_kernel_t(const T* a, M crowd, const Yt10Constants&
     // The largest eigenvalue (the first of equal ones); the others are
     // clamped alike, so their order does not matter.
     const auto b01 = e[0] >= e[1], b02 = e[0] >= e[2], b12 = e[1] >= e[2];
-    const auto big0 = b01 && b02, big1 = lane_not(b01) && b12;  // else 2
+    const auto big0 = b01 && b02, big1 = !b01 && b12;  // else 2 (bools, or GCC vector masks)
     const T ebig = lane_select(big0, e[0], lane_select(big1, e[1], e[2]));
     const T s1 = yt10_clamp(ebig, lanes_of<T>(k.kn), lanes_of<T>(k.max_axis));
     const T lo = s1 * k.kr_inv;

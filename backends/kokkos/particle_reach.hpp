@@ -9,9 +9,11 @@
 // reached when the box of a band tile's vertices (4x4x4 vertices, a band
 // word, with band vertices) lies within R of the cell's box (a small
 // margin; the cell's box unbounded on the sides of the grid's edge cells,
-// into which particles outside it are clamped); on that frame 72 % of the
-// particles lie in reached cells (59 % within R of a band vertex). Every cell a gather visits (box distance below R from one
-// of its vertices) is reached, so the data of the others is never read. A
+// into which particles outside it are clamped); on that frame 71 % of the
+// particles lie in reached cells (59 % within R of a band vertex). Every
+// cell a gather visits (box distance below R from one of its vertices) is
+// reached (test: ParticleReach.SelectReachesEveryCellWithinROfABandTile),
+// so the data of the others is never read. A
 // pass computes the cells reached since its last run: before the field, and
 // after each round of band growth for the words it added. The tiles are a
 // bitmap over the grid; where it would pass kMaxBits (very large sparse
