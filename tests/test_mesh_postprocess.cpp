@@ -3,12 +3,15 @@
 // (tetrahedron, cube, open box, two tetrahedra sharing a vertex, a flipped
 // triangle, a non-manifold edge, degenerate and sliver triangles) and the
 // clean-up on randomly pinched spheres (never opens or breaks the mesh), and
-// the clean-up's fairing flips (mesh_flip.hpp) on bumpy spheres and a torus.
+// the clean-up's fairing flips (mesh_flip.hpp) on bumpy spheres and a torus;
+// the incidence the CUDA pipeline builds for the clean-up, run on the host.
 #include "../src/core/mesh_check.hpp"
 #include "../src/core/mesh_cleanup.hpp"
 #include "../src/core/mesh_decimate.hpp"
 #include "../src/core/mesh_flip.hpp"
 #include "../src/core/mesh_smooth.hpp"
+#include "mesh_incidence.hpp"  // backends/kokkos
+#include "stage_tests.hpp"
 
 #include <gtest/gtest.h>
 
@@ -21,6 +24,9 @@
 #include <vector>
 
 namespace {
+
+const ::testing::Environment* const kokkos_env =
+    ::testing::AddGlobalTestEnvironment(new nbmc_test::KokkosThreads(2));
 
 using nbmc::mesh::check_mesh;
 using nbmc::mesh::CheckResult;
@@ -801,18 +807,11 @@ TEST(MeshCleanup, RandomPinchesNeverOpenTheMesh) {
               (unsigned long long)collapses);
 }
 
-// The repairs on several host threads (deterministic reservations) give
-// exactly the serial repairs' mesh: a sphere with many pinches side by side
-// (needles, caps, pinched holes with and without a cap, so that moves,
-// flips, widenings, collapses and cuts all happen and neighbouring repairs
-// compete for their regions), cleaned with the host thread limit at 1 and
-// at several threads, parallel from a few bad triangles per thread, with
-// rounds of 1 to 64 items per thread (different orders of commits), and
-// once with a pass undone after its second round (run again serially).
-// Every committed repair's writes must lie within its region.
-TEST(MeshCleanup, ParallelRepairsMatchSerial) {
-  using nbmc::mesh::detail::repair_pass_hooks;
-  TestMesh sphere = icosphere(4);
+// An icosphere (of level 4: 5,120 triangles) with 24 vertices split into
+// clusters of nearly coincident vertices (10^-7 to 10^-4 apart) and 1,500
+// random needles and caps: well over 1,000 degenerate and sliver triangles.
+TestMesh pinched_sphere(int levels = 4) {
+  TestMesh sphere = icosphere(levels);
   std::mt19937 rng(11);
   std::uniform_real_distribution<float> u(0, 1);
   {
@@ -848,6 +847,21 @@ TEST(MeshCleanup, ParallelRepairsMatchSerial) {
       else sphere.p[3 * a + x] = (1 - s) * (w * sphere.p[3 * b + x] + (1 - w) * sphere.p[3 * c + x]) + s * sphere.p[3 * a + x];
     }
   }
+  return sphere;
+}
+
+// The repairs on several host threads (deterministic reservations) give
+// exactly the serial repairs' mesh: a sphere with many pinches side by side
+// (needles, caps, pinched holes with and without a cap, so that moves,
+// flips, widenings, collapses and cuts all happen and neighbouring repairs
+// compete for their regions), cleaned with the host thread limit at 1 and
+// at several threads, parallel from a few bad triangles per thread, with
+// rounds of 1 to 64 items per thread (different orders of commits), and
+// once with a pass undone after its second round (run again serially).
+// Every committed repair's writes must lie within its region.
+TEST(MeshCleanup, ParallelRepairsMatchSerial) {
+  using nbmc::mesh::detail::repair_pass_hooks;
+  const TestMesh sphere = pinched_sphere();
   const CheckResult before = sphere.check();
   ASSERT_GT(before.degenerate_triangles + before.sliver_triangles, 1000u);
   auto clean = [&](std::size_t threads, std::size_t undo_after_round, std::size_t prefix,
@@ -930,6 +944,127 @@ TEST(MeshCleanup, ParallelRepairsMatchSerial) {
               (unsigned long long)r1.cuts, (unsigned long long)(h.parallel_passes - at_start.parallel_passes),
               (unsigned long long)(h.rounds - at_start.rounds), (unsigned long long)(h.lost - at_start.lost),
               (unsigned long long)(h.skipped - at_start.skipped));
+}
+
+// The incidence the CUDA pipeline builds for the clean-up
+// (backends/kokkos/mesh_incidence.hpp; here on the host threads, as Kokkos
+// runs it there) is exactly the clean-up's own: each vertex's triangles in
+// ascending order, and a bit on every triangle surely_good may reject (and
+// on none it surely accepts with a margin of 1e-3). The clean-up with it
+// gives the mesh it gives without it; one for another mesh, and a mesh with a
+// position that is not finite, are handled.
+template <class Real>
+nbmc::mesh::PrebuiltIncidence kokkos_incidence(const std::vector<Real>& p, const std::vector<std::uint32_t>& t) {
+  using Exec = Kokkos::DefaultHostExecutionSpace;
+  using Mem = Exec::memory_space;
+  using Unmanaged = Kokkos::MemoryTraits<Kokkos::Unmanaged>;
+  const std::size_t nv = p.size() / 3, nt = t.size() / 3;
+  nbmc::MemoryTracker tracker;
+  nbmc::mesh::PrebuiltIncidence inc;
+  inc.start.resize(nv + 1);
+  inc.incident.resize(3 * nt);
+  inc.maybe_bad.resize((nt + 31) / 32);
+  Kokkos::View<std::uint32_t*, Mem, Unmanaged> start(inc.start.data(), inc.start.size()),
+      incident(inc.incident.data(), inc.incident.size()), bits(inc.maybe_bad.data(), inc.maybe_bad.size());
+  nbmc::Details::build_prebuilt_incidence<Exec, Real>(
+      Exec(), tracker, Kokkos::View<const Real*, Mem, Unmanaged>(p.data(), p.size()),
+      Kokkos::View<const std::uint32_t*, Mem, Unmanaged>(t.data(), t.size()), nv, nt, start, incident, bits);
+  Exec().fence();
+  EXPECT_EQ(tracker.current.load(), 0u);  // (its scratch given back)
+  return inc;
+}
+
+template <class Real>
+void expect_prebuilt_incidence(const TestMesh& in) {
+  using nbmc::mesh::Vec3;
+  const std::vector<Real> p(in.p.begin(), in.p.end());
+  const std::size_t nv = p.size() / 3, nt = in.t.size() / 3;
+  nbmc::mesh::PrebuiltIncidence inc = kokkos_incidence(p, in.t);
+  // The lists.
+  std::vector<std::uint32_t> start(nv + 1, 0), incident(3 * nt);
+  for (std::uint32_t v : in.t) ++start[v + 1];
+  for (std::size_t v = 0; v < nv; ++v) start[v + 1] += start[v];
+  std::vector<std::uint32_t> fill(start.begin(), start.end() - 1);
+  for (std::size_t i = 0; i < 3 * nt; ++i) incident[fill[in.t[i]]++] = std::uint32_t(i / 3);
+  ASSERT_TRUE(inc.fits(nv, nt));
+  EXPECT_TRUE(std::equal(start.begin(), start.end(), inc.start.begin()));
+  EXPECT_TRUE(std::equal(incident.begin(), incident.end(), inc.incident.begin()));
+  // The bits, against the clean-up's degenerate area (its extent).
+  double lo[3], hi[3];
+  for (int a = 0; a < 3; ++a) lo[a] = hi[a] = double(p[a]);
+  for (std::size_t v = 0; v < nv; ++v)
+    for (int a = 0; a < 3; ++a) lo[a] = std::min(lo[a], double(p[3 * v + a])), hi[a] = std::max(hi[a], double(p[3 * v + a]));
+  const double extent = std::max({hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]});
+  const double degenerate = 2 * nbmc::mesh::kDegenerateAreaFraction * extent * extent;
+  std::size_t set = 0, rejected = 0;
+  for (std::size_t t = 0; t < nt; ++t) {
+    const Vec3 a = nbmc::mesh::load(p.data(), in.t[3 * t]), b = nbmc::mesh::load(p.data(), in.t[3 * t + 1]),
+               c = nbmc::mesh::load(p.data(), in.t[3 * t + 2]);
+    const bool bit = (inc.maybe_bad[t / 32] >> (t % 32)) & 1u;
+    const bool sure = nbmc::mesh::surely_good(a, b, c, degenerate);
+    // surely_good's test with a margin of 1e-3 (its own: 1e-6).
+    const Vec3 ab = b - a, bc = c - b, ca = a - c, n = cross(ab, ca);
+    const double area2 = dot(n, n), x = dot(ab, ab), y = dot(bc, bc), z = dot(ca, ca);
+    const double l12 = std::max({x * y, y * z, z * x}), s2 = nbmc::mesh::kSinOneDegree * nbmc::mesh::kSinOneDegree;
+    const bool clearly = area2 > 0 && area2 >= degenerate * degenerate * (1 + 1e-3) && area2 >= s2 * l12 * (1 + 1e-3);
+    EXPECT_TRUE(bit || sure) << "triangle " << t;
+    EXPECT_TRUE(!bit || !clearly) << "triangle " << t;
+    set += bit;
+    rejected += !sure;
+  }
+  EXPECT_GT(rejected, 1000u);
+  EXPECT_LT(set, rejected + rejected / 100 + 1);
+  // The clean-up, with and without it.
+  TestMesh plain = in, with = in;
+  std::vector<Real> pp = p, pw = p;
+  const nbmc::mesh::CleanupResult r0 = nbmc::mesh::cleanup_mesh(pp, plain.n, plain.t, 0.05);
+  const nbmc::mesh::CleanupResult r1 = nbmc::mesh::cleanup_mesh(pw, with.n, with.t, 0.05, &inc);
+  EXPECT_TRUE(inc.empty());  // (taken)
+  EXPECT_EQ(r0.bad_before, r1.bad_before);
+  EXPECT_EQ(r0.bad_after, r1.bad_after);
+  EXPECT_EQ(r0.collapses, r1.collapses);
+  EXPECT_EQ(r0.flips, r1.flips);
+  EXPECT_EQ(r0.moves, r1.moves);
+  EXPECT_EQ(r0.cuts, r1.cuts);
+  EXPECT_TRUE(pp == pw);
+  EXPECT_TRUE(plain.t == with.t);
+  EXPECT_GT(r0.collapses + r0.flips + r0.moves, 100u);
+}
+
+TEST(MeshCleanup, PrebuiltIncidenceIsTheCleanersOwn) {
+  const TestMesh sphere = pinched_sphere();
+  expect_prebuilt_incidence<float>(sphere);
+  expect_prebuilt_incidence<double>(sphere);
+  {
+    // Larger, on 3 threads: the clean-up's first scan in 3 chunks, whose
+    // bounds fall inside the bits' words.
+    const TestMesh large = pinched_sphere(6);
+    ASSERT_NE(large.t.size() / 3 % 96, 0u);
+    const nbmc::ScopedHostThreads three(3);
+    ASSERT_EQ(nbmc::chunk_count(large.t.size() / 3, 16384), 3u);
+    expect_prebuilt_incidence<float>(large);
+  }
+  // Another mesh's (here: one triangle fewer) is not taken.
+  {
+    TestMesh fewer = sphere;
+    fewer.t.resize(fewer.t.size() - 3);
+    nbmc::mesh::PrebuiltIncidence other = kokkos_incidence(fewer.p, fewer.t);
+    ASSERT_FALSE(other.fits(sphere.p.size() / 3, sphere.t.size() / 3));
+    TestMesh a = sphere, b = sphere;
+    nbmc::mesh::cleanup_mesh(a.p, a.n, a.t, 0.05);
+    nbmc::mesh::cleanup_mesh(b.p, b.n, b.t, 0.05, &other);
+    EXPECT_TRUE(a.p == b.p && a.t == b.t);
+  }
+  // A position that is not finite: every bit set.
+  {
+    TestMesh nan = sphere;
+    nan.p[3 * 5 + 1] = std::nanf("");
+    const nbmc::mesh::PrebuiltIncidence inc = kokkos_incidence(nan.p, nan.t);
+    const std::size_t nt = nan.t.size() / 3;
+    std::size_t set = 0;
+    for (std::size_t t = 0; t < nt; ++t) set += (inc.maybe_bad[t / 32] >> (t % 32)) & 1u;
+    EXPECT_EQ(set, nt);
+  }
 }
 
 // Taubin smoothing: a sphere keeps its size (its vertices stay within 1% of

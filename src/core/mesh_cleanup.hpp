@@ -94,7 +94,8 @@
 //    (such as a flat ZB05 droplet of 22 triangles and 0.3 cell^3).
 //    CleanupResult counts their triangles.
 // Cost: the adjacency and one scan of every triangle run on all host
-// threads (whether a vertex is regular is found only for the vertices the
+// threads (or come prebuilt with the mesh from the GPU: mesh_incidence.hpp;
+// whether a vertex is regular is found only for the vertices the
 // repairs ask about); after that only the bad triangles and
 // what the repairs changed are looked at again (each pass, on all host
 // threads from 1024 items), and only the components of the bad
@@ -131,6 +132,7 @@
 #pragma once
 
 #include "mesh_check.hpp"
+#include "mesh_incidence.hpp"
 #include "parallel.hpp"
 #include "params.hpp"
 #include "trace.hpp"
@@ -234,7 +236,11 @@ class SpinBarrier {
 template <class Real>
 class Cleaner {
  public:
-  Cleaner(Real* positions, float* normals, std::size_t nv, std::uint32_t* tri, std::size_t nt)
+  // prebuilt: the incidence and the maybe-bad bits of this mesh, built
+  // where it was made (mesh_incidence.hpp; may be null). Taken (moved
+  // from) when its sizes fit the mesh.
+  Cleaner(Real* positions, float* normals, std::size_t nv, std::uint32_t* tri, std::size_t nt,
+          PrebuiltIncidence* prebuilt = nullptr)
       : P_(positions), N_(normals), nv_(nv), T_(tri), nt_(nt), alive_own_(nt), irregular_own_(nv), next_own_(nv),
         tail_own_(nv), expanded_(nv) {
     // The per-triangle and per-vertex arrays are left unwritten by their
@@ -277,6 +283,37 @@ class Cleaner {
     }
     degenerate_double_area_ = 2 * kDegenerateAreaFraction * extent * extent;
     host_trace("clean-up: arrays, extent", nv);
+    if (prebuilt && prebuilt->fits(nv, nt)) {
+      // The lists as they are; the first scan classifies only the
+      // triangles whose bit is set (add_if_bad: the same list).
+      const std::uint32_t* bits = prebuilt->maybe_bad.data();
+      const std::size_t tparts = chunk_count(nt, 16384);
+      std::vector<BadList> bad(tparts);
+      state_.resize(nt);  // (unwritten: cleared here by each thread for its triangles)
+      for_chunks(nt, tparts, [&](std::size_t k, std::size_t b, std::size_t e) {
+        std::fill(alive_.begin() + b, alive_.begin() + e, std::uint8_t(1));
+        std::fill(state_.begin() + b, state_.begin() + e, kUnseen);
+        for (std::size_t t = b; t < e;) {  // (the set bits of [b, e), a word at a time)
+          const std::uint32_t w = bits[t >> 5] >> (t & 31);
+          if (w == 0) {
+            t = (t | 31) + 1;
+            continue;
+          }
+          t += std::size_t(__builtin_ctz(w));
+          if (t >= e) break;
+          add_if_bad(std::uint32_t(t), bad[k]);
+          ++t;
+        }
+      });
+      for (const auto& q : bad) initial_bad_.insert(initial_bad_.end(), q.begin(), q.end());
+      std::sort(initial_bad_.begin(), initial_bad_.end());
+      has_initial_bad_ = true;
+      start_ = std::move(prebuilt->start);
+      incident_ = std::move(prebuilt->incident);
+      prebuilt->clear();
+      host_trace("clean-up: prebuilt incidence", nt);
+      return;
+    }
     // Triangles around each vertex (CSR, ascending triangle index), on all
     // host threads without atomics: each thread sorts the corners of its
     // range of triangles by vertex range (a count, then a copy into one array
@@ -2737,14 +2774,18 @@ class Cleaner {
 // cell: the marching-cubes cell edge; with cell > 0, the components that
 // still hold a bad triangle at the end and enclose less than
 // kSmallComponentCells cells are removed (0: never).
+// prebuilt: this mesh's incidence, built where it was made (may be null;
+// taken when its sizes fit: see mesh_incidence.hpp); the result is the same.
 template <class PosVec, class NormalVec, class IndexVec>
-CleanupResult cleanup_mesh(PosVec& positions, NormalVec& normals, IndexVec& triangles, double cell = 0) {
+CleanupResult cleanup_mesh(PosVec& positions, NormalVec& normals, IndexVec& triangles, double cell = 0,
+                           PrebuiltIncidence* prebuilt = nullptr) {
   CleanupResult r;
   const std::size_t nv = positions.size() / 3, nt = triangles.size() / 3;
   if (nt == 0) return r;
   const bool has_normals = !normals.empty() && normals.size() == positions.size();
   host_trace("clean-up: start", nt);
-  detail::Cleaner<typename PosVec::value_type> c(positions.data(), has_normals ? normals.data() : nullptr, nv, triangles.data(), nt);
+  detail::Cleaner<typename PosVec::value_type> c(positions.data(), has_normals ? normals.data() : nullptr, nv, triangles.data(), nt,
+                                                 prebuilt);
   // Passes until nothing more can be repaired; then again with a looser
   // limit on the normals' turn for what is left (folds stay excluded);
   // then, for what is still left, with the last resorts (collapses that
