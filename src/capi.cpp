@@ -441,6 +441,7 @@ int32_t nbmc_context_reconstruct(nbmc_context* ctx, const nbmc_params* params, n
   nbmc::Params p = nbmc::resolve_params(*params);
   nbmc::apply_radii(*ctx, p);
   nbmc::check_domain(p);
+  p.prebuilt_incidence = full.cleanup != 0;  // (taken by postprocess_mesh's clean-up)
   // The post-processing and the attributes run on this thread's host
   // threads: no more than the context was given.
   const nbmc::ScopedHostThreads host_threads(nbmc::host_threads_of(*ctx));

@@ -96,7 +96,11 @@ void postprocess_positions(const nbmc_params& params, PosVec& positions, HostMes
     const auto c = counts();
     const StepMemory mem(tracker, mesh::cleanup_bytes(c.first, c.second), held(), "the mesh clean-up",
                          "nbmc_params.cleanup = 0; CLI --no-cleanup", c.first, c.second);
-    const mesh::CleanupResult r = mesh::cleanup_mesh(positions, m.normals, m.triangles, cell);
+    // (The first run on the pipeline's mesh takes its incidence, when the
+    // pipeline built one; the result is the same.)
+    const mesh::CleanupResult r =
+        mesh::cleanup_mesh(positions, m.normals, m.triangles, cell, first && !m.incidence.empty() ? &m.incidence : nullptr);
+    m.incidence.clear();
     // After smoothing, the fairing flips (core/mesh_flip.hpp): the
     // diagonals that bend the surface least; no vertex moves. Not in the
     // default clean-up: on the 1.65 M frame at r/2 they cost about 0.50 s of
@@ -197,6 +201,10 @@ mesh::PostprocessStats postprocess_mesh(const nbmc_params& params, HostMesh& m, 
                                         const FeatureParticles* fp) {
   mesh::PostprocessStats ps;
   ps.raw_triangles = ps.pre_decimation_triangles = m.triangle_count();
+  struct ClearIncidence {  // (whatever happens, not kept with the mesh)
+    HostMesh& m;
+    ~ClearIncidence() { m.incidence.clear(); }
+  } clear_incidence{m};
   if (!params.cleanup && params.smooth_iterations <= 0 && !(params.decimate_fraction < 1)) return ps;
   const auto t0 = std::chrono::steady_clock::now();
   host_trace("post-processing: start", m.triangle_count());

@@ -8,6 +8,7 @@
 #include "field_methods.hpp"
 #include "grid.hpp"
 #include "marching_cubes.hpp"
+#include "mesh_incidence.hpp"
 #include "narrow_band.hpp"
 #include "neighbourhood.hpp"
 #include "radii.hpp"
@@ -15,6 +16,7 @@
 #include "sph_density.hpp"
 #include "yt10_kernels.hpp"
 #include "surface_particles.hpp"
+#include "../../src/core/mesh_incidence.hpp"
 #include "../../src/core/piece.hpp"
 
 #include <cmath>
@@ -42,6 +44,12 @@ struct HostMesh {
   float* d_normals = nullptr;
   std::uint32_t* d_triangles = nullptr;
   std::uint64_t d_vertices = 0, d_triangles_count = 0;
+  // With Params::prebuilt_incidence, from the CUDA pipeline (a whole frame,
+  // mesh in host memory): the clean-up's incidence of this mesh
+  // (mesh_incidence.hpp). Only for the mesh as the pipeline made it: the
+  // clean-up takes it (capi_mesh.cpp); anything else that changes the
+  // triangles must clear it.
+  mesh::PrebuiltIncidence incidence;
   // A piece of a frame reconstructed over several processes: per vertex, its
   // id in the whole mesh (the same on every process that has the vertex).
   std::vector<std::uint64_t> global_ids;
@@ -463,8 +471,24 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
   if (p.double_positions && mesh_on_device)
     throw Error(4, "double_positions: the mesh must be in host memory (not NBMC_MEMORY_DEVICE)");
   const std::uint64_t pos_size = p.double_positions ? sizeof(double) : sizeof(float);
-  const std::uint64_t out_bytes = r.vertices * 3 * (pos_size + (p.normals ? sizeof(float) : 0)) +
-                                  r.triangles * 3 * sizeof(std::uint32_t);
+  // On the GPU, for the clean-up of a whole frame's host mesh: its
+  // incidence, built on the device and downloaded with the mesh.
+#if defined(KOKKOS_ENABLE_CUDA)
+  constexpr bool is_cuda = std::is_same<ExecSpace, Kokkos::Cuda>::value;
+#else
+  constexpr bool is_cuda = false;
+#endif
+  // (An optimisation: left out where it would pass the memory budget, which
+  // it counts twice, on the device (with its fill cursors) and the host.)
+  const std::uint64_t mesh_bytes = r.vertices * 3 * (pos_size + (p.normals ? sizeof(float) : 0)) +
+                                   r.triangles * 3 * sizeof(std::uint32_t);
+  const std::uint64_t prebuilt_words = (r.vertices + 1) + 3 * r.triangles + (r.triangles + 31) / 32;
+  const bool prebuilt = is_cuda && p.prebuilt_incidence && !region_in && !mesh_on_device && r.triangles > 0 &&
+                        3 * r.triangles <= std::numeric_limits<std::uint32_t>::max() &&  // (32-bit offsets)
+                        (!tracker.budget || tracker.current.load() + mesh_bytes +
+                                                    (2 * prebuilt_words + r.vertices) * sizeof(std::uint32_t) <=
+                                                tracker.budget);
+  const std::uint64_t out_bytes = mesh_bytes + (prebuilt ? prebuilt_words * sizeof(std::uint32_t) : 0);
   tracker.require(out_bytes, "the mesh");
   if (!mesh_on_device) {
     mesh.f64 = p.double_positions;
@@ -539,13 +563,29 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
       lap(5);
 #if defined(KOKKOS_ENABLE_CUDA)
       if constexpr (std::is_same<ExecSpace, Kokkos::Cuda>::value) {
+        mesh::PrebuiltIncidence& inc = mesh.incidence;
+        const std::size_t nv = r.vertices, nt = r.triangles;
+        Buffer<std::uint32_t, MemSpace> dstart(tracker, "incidence::start", prebuilt ? nv + 1 : 0);
+        Buffer<std::uint32_t, MemSpace> dinc(tracker, "incidence::incident", prebuilt ? 3 * nt : 0);
+        Buffer<std::uint32_t, MemSpace> dbits(tracker, "incidence::maybe_bad", prebuilt ? (nt + 31) / 32 : 0);
+        if (prebuilt) {
+          build_prebuilt_incidence<ExecSpace, Real>(space, tracker, dpos.view(), dtri.view(), nv, nt, dstart.view(),
+                                                    dinc.view(), dbits.view());
+          inc.start.resize(dstart.view().extent(0));
+          inc.incident.resize(dinc.view().extent(0));
+          inc.maybe_bad.resize(dbits.view().extent(0));
+          trace("incidence on the device", nt);
+        }
         const DownloadSegment segments[] = {
             {hpos.data(), dpos.data(), hpos.extent(0) * sizeof(Real)},
             {hnrm.data(), dnrm.data(), hnrm.extent(0) * sizeof(float)},
             {htri.data(), dtri.data(), htri.extent(0) * sizeof(std::uint32_t)},
             {hvkeys.data(), dvkeys.data(), hvkeys.extent(0) * sizeof(std::uint64_t)},
             {haxes.data(), daxes.data(), haxes.extent(0) * sizeof(std::uint8_t)},
-            {htkeys.data(), dtkeys.data(), htkeys.extent(0) * sizeof(std::uint64_t)}};
+            {htkeys.data(), dtkeys.data(), htkeys.extent(0) * sizeof(std::uint64_t)},
+            {inc.start.data(), dstart.data(), inc.start.size() * sizeof(std::uint32_t)},
+            {inc.incident.data(), dinc.data(), inc.incident.size() * sizeof(std::uint32_t)},
+            {inc.maybe_bad.data(), dbits.data(), inc.maybe_bad.size() * sizeof(std::uint32_t)}};
         download_segments(space, segments, sizeof(segments) / sizeof(segments[0]));
         return;
       }

@@ -110,6 +110,10 @@ struct Params {
   // particle j's are t_j = r_j / r_max times them (backends/kokkos/radii.hpp);
   // the cell size is the frame's.
   double radius_ref = 0;
+  // The clean-up will run on this mesh first (the C API, with
+  // nbmc_params.cleanup): the CUDA pipeline then builds its incidence on
+  // the GPU (HostMesh::incidence, mesh_incidence.hpp).
+  bool prebuilt_incidence = false;
 };
 
 // YT10's bounds (backends/kokkos/field_yt10.hpp): a kernel's longest axis is
