@@ -4,8 +4,9 @@
 // the clean-up's first run on the host (src/core/mesh_cleanup.hpp, Cleaner)
 // starts from it instead of building it on the host threads. On an H100
 // machine's 16 host threads, the 1.65 M frame at r/2 (843 k vertices, 1.69 M
-// triangles): the host's build and first scan took 7-7.5 ms of the
-// clean-up's 22 (bench/RESULTS.md, "Session 34").
+// triangles): the host's build and first scan took 8.3 ms of the
+// clean-up's 22; this takes 0.5 ms on the GPU, about 1.1 ms more download
+// and 1.6 ms on the host (bench/RESULTS.md, "Session 34").
 //
 // What it gives is mesh::PrebuiltIncidence's contract:
 //  - start, incident: per vertex, its triangles in ascending order (the
