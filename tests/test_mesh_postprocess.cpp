@@ -807,6 +807,20 @@ TEST(MeshCleanup, RandomPinchesNeverOpenTheMesh) {
               (unsigned long long)collapses);
 }
 
+// Two clean-ups of one mesh did the same.
+void expect_same_counts(const nbmc::mesh::CleanupResult& a, const nbmc::mesh::CleanupResult& b) {
+  EXPECT_EQ(a.collapses, b.collapses);
+  EXPECT_EQ(a.flips, b.flips);
+  EXPECT_EQ(a.moves, b.moves);
+  EXPECT_EQ(a.cuts, b.cuts);
+  EXPECT_EQ(a.small_component_triangles, b.small_component_triangles);
+  EXPECT_EQ(a.degenerate_component_triangles, b.degenerate_component_triangles);
+  EXPECT_EQ(a.removed_triangles, b.removed_triangles);
+  EXPECT_EQ(a.removed_vertices, b.removed_vertices);
+  EXPECT_EQ(a.bad_before, b.bad_before);
+  EXPECT_EQ(a.bad_after, b.bad_after);
+}
+
 // An icosphere (of level 4: 5,120 triangles) with 24 vertices split into
 // clusters of nearly coincident vertices (10^-7 to 10^-4 apart) and 1,500
 // random needles and caps: well over 1,000 degenerate and sliver triangles.
@@ -902,12 +916,7 @@ TEST(MeshCleanup, ParallelRepairsMatchSerial) {
     EXPECT_EQ(m.t, serial.t) << threads << " threads, " << prefix << " per round";
     EXPECT_EQ(m.p, serial.p) << threads << " threads, " << prefix << " per round";
     EXPECT_EQ(m.n, serial.n) << threads << " threads, " << prefix << " per round";
-    EXPECT_EQ(r.collapses, r1.collapses);
-    EXPECT_EQ(r.flips, r1.flips);
-    EXPECT_EQ(r.moves, r1.moves);
-    EXPECT_EQ(r.cuts, r1.cuts);
-    EXPECT_EQ(r.bad_after, r1.bad_after);
-    EXPECT_EQ(r.removed_triangles, r1.removed_triangles);
+    expect_same_counts(r, r1);
   }
   {
     nbmc::mesh::CleanupResult r;
@@ -1020,12 +1029,7 @@ void expect_prebuilt_incidence(const TestMesh& in) {
   const nbmc::mesh::CleanupResult r0 = nbmc::mesh::cleanup_mesh(pp, plain.n, plain.t, 0.05);
   const nbmc::mesh::CleanupResult r1 = nbmc::mesh::cleanup_mesh(pw, with.n, with.t, 0.05, &inc);
   EXPECT_TRUE(inc.empty());  // (taken)
-  EXPECT_EQ(r0.bad_before, r1.bad_before);
-  EXPECT_EQ(r0.bad_after, r1.bad_after);
-  EXPECT_EQ(r0.collapses, r1.collapses);
-  EXPECT_EQ(r0.flips, r1.flips);
-  EXPECT_EQ(r0.moves, r1.moves);
-  EXPECT_EQ(r0.cuts, r1.cuts);
+  expect_same_counts(r0, r1);
   EXPECT_TRUE(pp == pw);
   EXPECT_TRUE(plain.t == with.t);
   EXPECT_GT(r0.collapses + r0.flips + r0.moves, 100u);

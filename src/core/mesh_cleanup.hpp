@@ -305,9 +305,7 @@ class Cleaner {
           ++t;
         }
       });
-      for (const auto& q : bad) initial_bad_.insert(initial_bad_.end(), q.begin(), q.end());
-      std::sort(initial_bad_.begin(), initial_bad_.end());
-      has_initial_bad_ = true;
+      set_initial_bad(bad);
       start_ = std::move(prebuilt->start);
       incident_ = std::move(prebuilt->incident);
       prebuilt->clear();
@@ -371,9 +369,7 @@ class Cleaner {
           add_if_bad(std::uint32_t(t), bad[k]);
         }
       });
-      for (const auto& q : bad) initial_bad_.insert(initial_bad_.end(), q.begin(), q.end());
-      std::sort(initial_bad_.begin(), initial_bad_.end());
-      has_initial_bad_ = true;
+      set_initial_bad(bad);
       host_trace("clean-up: incidence corners", nt);
       // (start_ unwritten: each thread clears its own range of it.)
       start_.resize(nv + 1);
@@ -438,6 +434,12 @@ class Cleaner {
     if (c) out.emplace_back(-c, s.sin_min_angle, t);
   }
 
+  // The constructor's scan: its threads' lists, as one sorted list.
+  void set_initial_bad(const std::vector<BadList>& parts) {
+    for (const auto& q : parts) initial_bad_.insert(initial_bad_.end(), q.begin(), q.end());
+    std::sort(initial_bad_.begin(), initial_bad_.end());
+    has_initial_bad_ = true;
+  }
   // The constructor's scan (the same list as bad_triangles() before any
   // repair), once; then bad_triangles().
   BadList initial_bad_triangles() {
