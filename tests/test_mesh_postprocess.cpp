@@ -972,7 +972,7 @@ nbmc::mesh::PrebuiltIncidence kokkos_incidence(const std::vector<Real>& p, const
   nbmc::mesh::PrebuiltIncidence inc;
   inc.start.resize(nv + 1);
   inc.incident.resize(3 * nt);
-  inc.maybe_bad.resize((nt + 31) / 32);
+  inc.maybe_bad.resize(nbmc::mesh::PrebuiltIncidence::bit_words(nt));
   Kokkos::View<std::uint32_t*, Mem, Unmanaged> start(inc.start.data(), inc.start.size()),
       incident(inc.incident.data(), inc.incident.size()), bits(inc.maybe_bad.data(), inc.maybe_bad.size());
   nbmc::Details::build_prebuilt_incidence<Exec, Real>(

@@ -56,20 +56,17 @@ struct MeshBoxReduce {
     }
     b.not_finite = 0;
   }
-  KOKKOS_INLINE_FUNCTION void join(value_type& d, const value_type& s) const {
+  // (Kokkos joins volatile values on some paths, plain ones on others.)
+  template <class D, class S>
+  KOKKOS_INLINE_FUNCTION static void merge(D& d, S& s) {
     for (int a = 0; a < 3; ++a) {
       d.lo[a] = s.lo[a] < d.lo[a] ? s.lo[a] : d.lo[a];
       d.hi[a] = s.hi[a] > d.hi[a] ? s.hi[a] : d.hi[a];
     }
     d.not_finite |= s.not_finite;
   }
-  KOKKOS_INLINE_FUNCTION void join(volatile value_type& d, const volatile value_type& s) const {
-    for (int a = 0; a < 3; ++a) {
-      d.lo[a] = s.lo[a] < d.lo[a] ? s.lo[a] : d.lo[a];
-      d.hi[a] = s.hi[a] > d.hi[a] ? s.hi[a] : d.hi[a];
-    }
-    d.not_finite |= s.not_finite;
-  }
+  KOKKOS_INLINE_FUNCTION void join(value_type& d, const value_type& s) const { merge(d, s); }
+  KOKKOS_INLINE_FUNCTION void join(volatile value_type& d, const volatile value_type& s) const { merge(d, s); }
   KOKKOS_INLINE_FUNCTION void operator()(const std::size_t v, value_type& b) const {
     for (int a = 0; a < 3; ++a) {
       const double x = double(pos(3 * v + a));

@@ -482,7 +482,7 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
   // it counts twice, on the device (with its fill cursors) and the host.)
   const std::uint64_t mesh_bytes = r.vertices * 3 * (pos_size + (p.normals ? sizeof(float) : 0)) +
                                    r.triangles * 3 * sizeof(std::uint32_t);
-  const std::uint64_t prebuilt_words = (r.vertices + 1) + 3 * r.triangles + (r.triangles + 31) / 32;
+  const std::uint64_t prebuilt_words = mesh::PrebuiltIncidence::words(r.vertices, r.triangles);
   const bool prebuilt = is_cuda && p.prebuilt_incidence && !region_in && !mesh_on_device && r.triangles > 0 &&
                         3 * r.triangles <= std::numeric_limits<std::uint32_t>::max() &&  // (32-bit offsets)
                         (!tracker.budget || tracker.current.load() + mesh_bytes +
@@ -567,7 +567,7 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
         const std::size_t nv = r.vertices, nt = r.triangles;
         Buffer<std::uint32_t, MemSpace> dstart(tracker, "incidence::start", prebuilt ? nv + 1 : 0);
         Buffer<std::uint32_t, MemSpace> dinc(tracker, "incidence::incident", prebuilt ? 3 * nt : 0);
-        Buffer<std::uint32_t, MemSpace> dbits(tracker, "incidence::maybe_bad", prebuilt ? (nt + 31) / 32 : 0);
+        Buffer<std::uint32_t, MemSpace> dbits(tracker, "incidence::maybe_bad", prebuilt ? mesh::PrebuiltIncidence::bit_words(nt) : 0);
         if (prebuilt) {
           build_prebuilt_incidence<ExecSpace, Real>(space, tracker, dpos.view(), dtri.view(), nv, nt, dstart.view(),
                                                     dinc.view(), dbits.view());

@@ -25,15 +25,15 @@ struct PrebuiltIncidence {
   // degenerate area (relative to the positions' bounding box); the
   // clean-up classifies exactly these.
   Indices maybe_bad;
+  // maybe_bad's words for nt triangles; the words of all three arrays.
+  static std::uint64_t bit_words(std::uint64_t nt) { return (nt + 31) / 32; }
+  static std::uint64_t words(std::uint64_t nv, std::uint64_t nt) { return (nv + 1) + 3 * nt + bit_words(nt); }
   bool empty() const { return start.empty(); }
   // Whether it can be the incidence of a mesh of nv vertices and nt
   // triangles (the sizes; the content is the builder's contract).
   bool fits(std::size_t nv, std::size_t nt) const {
     return start.size() == nv + 1 && start[nv] == 3 * nt && incident.size() == 3 * nt &&
-           maybe_bad.size() == (nt + 31) / 32;
-  }
-  std::uint64_t bytes() const {
-    return (std::uint64_t(start.size()) + incident.size() + maybe_bad.size()) * sizeof(std::uint32_t);
+           maybe_bad.size() == bit_words(nt);
   }
   void clear() { *this = PrebuiltIncidence(); }
 };
