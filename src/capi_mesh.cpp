@@ -48,12 +48,15 @@ namespace {
 // it runs: the step's estimate (core/mesh_memory.hpp) and the mesh it works
 // on (the host mesh, and for a mesh in GPU memory its device arrays too).
 // Over the budget it throws NBMC_ERROR_MEMORY_BUDGET before the step
-// touches the mesh (the reconstruction then returns no mesh at all).
+// touches the mesh (the reconstruction then returns no mesh at all); a
+// mesh of more than max_triangles, which the step's 32-bit list offsets
+// cannot address, NBMC_ERROR_DOMAIN_TOO_LARGE (core/mesh_memory.hpp).
 class StepMemory {
  public:
   StepMemory(MemoryTracker& tracker, std::uint64_t step_bytes, std::uint64_t mesh_bytes, const char* step,
-             const char* turn_off, std::uint64_t nv, std::uint64_t nt)
+             const char* turn_off, std::uint64_t nv, std::uint64_t nt, std::uint64_t max_triangles)
       : t_(tracker), bytes_(step_bytes + mesh_bytes) {
+    mesh::require_addressable(step, turn_off, nv, nt, max_triangles);
     const std::uint64_t in_use = t_.current.load();
     if (t_.budget && in_use + bytes_ > t_.budget) {
       const double mib = 1.0 / (1024.0 * 1024.0);
@@ -95,7 +98,7 @@ void postprocess_positions(const nbmc_params& params, PosVec& positions, HostMes
   auto clean = [&](bool first) {
     const auto c = counts();
     const StepMemory mem(tracker, mesh::cleanup_bytes(c.first, c.second), held(), "the mesh clean-up",
-                         "nbmc_params.cleanup = 0; CLI --no-cleanup", c.first, c.second);
+                         "nbmc_params.cleanup = 0; CLI --no-cleanup", c.first, c.second, mesh::cleanup_max_triangles);
     // (The first run on the pipeline's mesh takes its incidence, when the
     // pipeline built one; the result is the same.)
     const mesh::CleanupResult r =
@@ -127,7 +130,7 @@ void postprocess_positions(const nbmc_params& params, PosVec& positions, HostMes
       const bool feature = params.smooth_weighting == NBMC_SMOOTH_FEATURE;
       const StepMemory mem(tracker, mesh::smooth_bytes(c.first, c.second, feature && fp ? fp->count : 0), held(),
                            "the mesh smoothing", "nbmc_params.smooth_iterations = 0; CLI --smooth 0", c.first,
-                           c.second);
+                           c.second, mesh::smooth_max_triangles);
       std::vector<double> weights;
       if (feature) {
         if (!fp || !fp->xyz)
@@ -151,7 +154,8 @@ void postprocess_positions(const nbmc_params& params, PosVec& positions, HostMes
   if (params.decimate_fraction < 1) {
     const auto c = counts();
     const StepMemory mem(tracker, mesh::decimate_bytes(c.first, c.second), held(), "the mesh decimation",
-                         "nbmc_params.decimate_fraction = 1; CLI: no --decimate", c.first, c.second);
+                         "nbmc_params.decimate_fraction = 1; CLI: no --decimate", c.first, c.second,
+                         mesh::check_max_triangles);
     const mesh::DecimateResult d = mesh::decimate_mesh(positions, m.normals, m.triangles, params.decimate_fraction);
     ps.decimate_collapses = d.collapses;
   }
@@ -232,6 +236,8 @@ int32_t nbmc_mesh_check(const nbmc_mesh* m, nbmc_mesh_check_result* out) {
   if (!m || !out || out->struct_size < sizeof(nbmc_mesh_check_result)) return NBMC_ERROR_INVALID_ARGUMENT;
   try {
     const nbmc::HostMesh& h = m->mesh;
+    nbmc::mesh::require_addressable("the mesh check", "do not call nbmc_mesh_check; CLI: no --check", h.vertex_count(),
+                              h.triangle_count(), nbmc::mesh::check_max_triangles);
     nbmc::HostMesh copy;  // a device mesh, brought to the host
     if (h.on_device) {
       copy.positions.resize(3 * h.vertex_count());

@@ -435,6 +435,38 @@ TEST(MeshCleanupCapi, CountsSummedOverBothRuns) {
               (unsigned long long)st2.cleanup_flips, (unsigned long long)st2.cleanup_collapses);
 }
 
+// Each post-processing step's largest mesh is the largest triangle count
+// whose list entries (3 per triangle for the clean-up's and the check's
+// incidence, 6 for the smoothing's neighbour lists) fit in 32-bit offsets;
+// at it the step runs, one triangle more gives DOMAIN_TOO_LARGE with a
+// message naming the step, the counts, the limit and how to turn it off
+// (src/capi_mesh.cpp asks before each step: such meshes, of billions of
+// triangles, cannot be made in a test).
+TEST(MeshPostprocessLimits, StepsRefuseMeshesTheirOffsetsCannotAddress) {
+  namespace mesh = nbmc::mesh;
+  const std::uint64_t u32 = 0xffffffffu;
+  const std::pair<std::uint64_t, std::uint64_t> limits[] = {
+      {mesh::cleanup_max_triangles, 3}, {mesh::check_max_triangles, 3}, {mesh::smooth_max_triangles, 6}};
+  for (const auto& l : limits) {
+    EXPECT_LE(l.second * l.first, u32);
+    EXPECT_GT(l.second * (l.first + 1), u32);
+  }
+  EXPECT_EQ(mesh::cleanup_max_triangles, 1431655765u);
+  EXPECT_EQ(mesh::smooth_max_triangles, 715827882u);
+  EXPECT_NO_THROW(mesh::require_addressable("the mesh clean-up", "CLI --no-cleanup", 7, mesh::cleanup_max_triangles,
+                                            mesh::cleanup_max_triangles));
+  try {
+    mesh::require_addressable("the mesh smoothing", "CLI --smooth 0", 7, mesh::smooth_max_triangles + 1,
+                              mesh::smooth_max_triangles);
+    ADD_FAILURE() << "a mesh beyond the smoothing's limit was accepted";
+  } catch (const nbmc::Error& e) {
+    EXPECT_EQ(e.status, NBMC_ERROR_DOMAIN_TOO_LARGE);
+    const std::string m = e.what();
+    for (const char* part : {"the mesh smoothing", "7 vertices", "715827883 triangles", "at most 715827882", "--smooth 0"})
+      EXPECT_NE(m.find(part), std::string::npos) << "\"" << part << "\" not in: " << m;
+  }
+}
+
 // The post-processing counts against the memory budget: a budget that admits
 // the reconstruction (its measured peak without post-processing) but not
 // the clean-up's estimate plus the mesh fails with MEMORY_BUDGET naming the

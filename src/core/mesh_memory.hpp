@@ -19,7 +19,10 @@
 // with the implementations.
 #pragma once
 
+#include "params.hpp"
+
 #include <cstdint>
+#include <cstdio>
 #include <tuple>
 
 namespace nbmc {
@@ -87,6 +90,32 @@ inline std::uint64_t smooth_bytes(std::uint64_t nv, std::uint64_t nt, std::uint6
 //     each, sized as 6 per triangle).
 inline std::uint64_t decimate_bytes(std::uint64_t nv, std::uint64_t nt) {
   return (nv + 1) * (11 * 8 + 4 + 2 + 24 + 32 + 1 + 2 * 4 + 4) + nt * (1 + 2 * 3 * 4 + 3 * 16 + 4 + 3 * 4 + 6 * 16);
+}
+
+// The largest mesh each step can address, in triangles: the lists of
+// triangles (or neighbours) around the vertices are offset with 32-bit
+// integers, so their entries in all must stay below 2^32: 3 per triangle
+// (the clean-up's incidence, the check's, which the decimation runs too),
+// 6 per triangle (the smoothing's neighbour lists before their
+// duplicates go). The reconstruction itself stops at 2^32 - 1 triangles
+// (32-bit offsets); the C API refuses a larger mesh's step with
+// NBMC_ERROR_DOMAIN_TOO_LARGE before it runs (src/capi_mesh.cpp).
+constexpr std::uint64_t kMaxListEntries = 0xffffffffu;
+constexpr std::uint64_t cleanup_max_triangles = kMaxListEntries / 3;   // 1,431,655,765
+constexpr std::uint64_t check_max_triangles = kMaxListEntries / 3;     // (and the decimation's)
+constexpr std::uint64_t smooth_max_triangles = kMaxListEntries / 6;    // 715,827,882
+
+// Throws NBMC_ERROR_DOMAIN_TOO_LARGE when a step (its name; how to turn it
+// off) cannot address a mesh of nt triangles (at most max_triangles).
+inline void require_addressable(const char* step, const char* turn_off, std::uint64_t nv, std::uint64_t nt,
+                                std::uint64_t max_triangles) {
+  if (nt <= max_triangles) return;
+  char msg[512];
+  std::snprintf(msg, sizeof msg,
+                "%s of %llu vertices and %llu triangles is not possible: its 32-bit list offsets address at most "
+                "%llu triangles; turn it off (%s), or use a coarser cell or a subset of the particles",
+                step, (unsigned long long)nv, (unsigned long long)nt, (unsigned long long)max_triangles, turn_off);
+  throw Error(NBMC_ERROR_DOMAIN_TOO_LARGE, msg);
 }
 
 }  // namespace mesh
