@@ -104,6 +104,14 @@ double* prepare_host_particles(nbmc_context& ctx, std::size_t n);
 void pin_host_particles(nbmc_context& ctx);
 // Copies the arrays of a device mesh into host buffers (any may be NULL).
 void download_mesh(const HostMesh& m, float* positions, float* normals, std::uint32_t* triangles);
+// A device mesh (NBMC_MEMORY_DEVICE) for its post-processing on the host:
+// copied into h's vectors (sized here) through the pinned staging ring, with,
+// when `incidence`, the clean-up's incidence built on the GPU into
+// h.incidence (left out where the memory budget would not hold it); and the
+// post-processed h copied back into m's device arrays (the counts only
+// shrink). On the host threads of core/parallel.hpp (any calling thread).
+void download_mesh_for_postprocess(const HostMesh& m, HostMesh& h, bool incidence, MemoryTracker& tracker);
+void upload_mesh_after_postprocess(HostMesh& m, const HostMesh& h);
 // Copies count particles (3 doubles each) from the CUDA device to the host.
 void download_particles(const void* device_xyz, std::size_t count, double* host);
 // Replaces a host mesh by a copy in one device allocation (NBMC_MEMORY_DEVICE).

@@ -14,10 +14,6 @@
 #include "core/mesh_smooth.hpp"
 #include "core/trace.hpp"
 
-#if defined(KOKKOS_ENABLE_CUDA)
-#include <cuda_runtime.h>
-#endif
-
 #include <chrono>
 #include <cmath>
 #include <cstdio>
@@ -167,36 +163,20 @@ void postprocess_host(const nbmc_params& params, HostMesh& m, mesh::PostprocessS
   else postprocess_positions(params, m.positions, m, ps, fp, cell, tracker, device_bytes);
 }
 
-// A mesh left in GPU memory: copied to the host, post-processed there, and
-// copied back into its own device arrays (the counts only shrink).
+// A mesh left in GPU memory: copied to the host (with the clean-up's
+// incidence built on the GPU), post-processed there, and copied back into
+// its own device arrays (the counts only shrink).
 void postprocess_device(const nbmc_params& params, HostMesh& m, mesh::PostprocessStats& ps,
                         const FeatureParticles* fp, double cell, MemoryTracker& tracker) {
   if (m.triangle_count() == 0) return;
   const std::uint64_t device_bytes =
       mesh::mesh_bytes(m.vertex_count(), m.triangle_count(), false, m.d_normals != nullptr);
   HostMesh h;
-  h.positions.resize(3 * m.vertex_count());
-  h.normals.resize(m.d_normals ? h.positions.size() : 0);
-  h.triangles.resize(3 * m.triangle_count());
-  download_mesh(m, h.positions.data(), h.normals.empty() ? nullptr : h.normals.data(), h.triangles.data());
+  download_mesh_for_postprocess(m, h, params.cleanup != 0, tracker);
   host_trace("post-processing: download", m.triangle_count());
   postprocess_host(params, h, ps, fp, cell, tracker, device_bytes);
-#if defined(KOKKOS_ENABLE_CUDA)
-  auto put = [](void* dst, const void* src, std::size_t bytes, const char* what) {
-    if (bytes && cudaMemcpy(dst, src, bytes, cudaMemcpyHostToDevice) != cudaSuccess) {
-      cudaGetLastError();
-      throw Error(NBMC_ERROR_INTERNAL, std::string("copying the post-processed mesh's ") + what + " to the GPU failed");
-    }
-  };
-  put(m.d_positions, h.positions.data(), h.positions.size() * sizeof(float), "positions");
-  if (m.d_normals) put(m.d_normals, h.normals.data(), h.normals.size() * sizeof(float), "normals");
-  put(m.d_triangles, h.triangles.data(), h.triangles.size() * sizeof(std::uint32_t), "triangles");
+  upload_mesh_after_postprocess(m, h);
   host_trace("post-processing: upload", h.triangles.size() / 3);
-  m.d_vertices = h.positions.size() / 3;
-  m.d_triangles_count = h.triangles.size() / 3;
-#else
-  throw Error(NBMC_ERROR_BACKEND_UNAVAILABLE, "the CUDA backend is not compiled in");
-#endif
 }
 
 }  // namespace

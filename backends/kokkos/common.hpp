@@ -285,11 +285,27 @@ struct DownloadSegment {
   const void* device;
   std::size_t bytes;
 };
+// Copies `bytes` on the host threads: kokkos_host_copy on Kokkos' host
+// space's (only on the thread that initialised Kokkos: the pipeline's).
+using HostCopy = void (*)(char* dst, const char* src, std::size_t bytes);
+void kokkos_host_copy(char* dst, const char* src, std::size_t bytes);
 // Copies the segments from device to (pageable, possibly untouched) host
 // memory after the work queued on `space`: through a pinned staging ring,
 // the GPU's copy of one chunk overlapping the host threads' copy of the
 // previous one (pipeline_cuda.cpp).
-void download_segments(const Kokkos::Cuda& space, const DownloadSegment* segments, std::size_t n);
+void download_segments(const Kokkos::Cuda& space, const DownloadSegment* segments, std::size_t n,
+                       HostCopy copy = kokkos_host_copy);
+// One host array to copy into device memory.
+struct UploadSegment {
+  void* device;
+  const void* host;
+  std::size_t bytes;
+};
+// Copies the segments from (pageable) host to device memory through the
+// same ring, the host threads' copy of one chunk into it overlapping the
+// GPU's copy of the previous one; returns when the GPU has them all.
+void upload_segments(const Kokkos::Cuda& space, const UploadSegment* segments, std::size_t n,
+                     HostCopy copy = kokkos_host_copy);
 #endif
 
 // Exclusive prefix sums of count(i), i < n, into offsets (a view of uint32 or

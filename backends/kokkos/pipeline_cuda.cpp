@@ -5,6 +5,8 @@
 #include "../../src/backends.hpp"
 #include "attributes.hpp"
 #include "pipeline.hpp"
+#include "../../src/core/mesh_memory.hpp"
+#include "../../src/core/parallel.hpp"
 
 #if defined(KOKKOS_ENABLE_CUDA)
 #include <cub/device/device_radix_sort.cuh>
@@ -16,6 +18,7 @@
 #include <chrono>
 #include <cstdio>
 #include <cstring>
+#include <functional>
 #include <limits>
 #include <mutex>
 #include <sstream>
@@ -159,11 +162,10 @@ void device_pool_free(void* p) noexcept {
 // would compete with them for the cores (an H100 machine, the 1.65 M
 // frame's mesh at r/2: 6-9 ms on other threads, 2.7-3.2 ms on these;
 // bench/RESULTS.md, "Session 24").
-void download_segments(const Kokkos::Cuda& space, const DownloadSegment* segments, std::size_t n) {
-  using HostExec = Kokkos::DefaultHostExecutionSpace;
-  const cudaStream_t stream = space.cuda_stream();
-  Staging& st = staging();
-  std::lock_guard<std::mutex> lock(st.m);
+namespace {
+// The staging ring, made on first use (under st.m); false where pinning or
+// its events failed (then plain copies).
+bool staging_ready(Staging& st) {
   if (!st.tried) {
     st.tried = true;
     void* p = nullptr;
@@ -180,7 +182,62 @@ void download_segments(const Kokkos::Cuda& space, const DownloadSegment* segment
     }
     cudaGetLastError();  // (a failure above leaves plain copies)
   }
-  if (st.buffer == nullptr) {
+  return st.buffer != nullptr;
+}
+
+// One chunk of a segment: at most kStagingChunk bytes.
+struct Chunk {
+  char* host;
+  char* device;
+  std::size_t bytes;
+};
+std::vector<Chunk> staging_chunks(std::size_t n, const std::function<void(std::size_t, char*&, char*&, std::size_t&)>& seg) {
+  std::vector<Chunk> chunks;
+  for (std::size_t k = 0; k < n; ++k) {
+    char *host = nullptr, *device = nullptr;
+    std::size_t bytes = 0;
+    seg(k, host, device, bytes);
+    for (std::size_t at = 0; at < bytes; at += kStagingChunk)
+      chunks.push_back({host + at, device + at, std::min(kStagingChunk, bytes - at)});
+  }
+  return chunks;
+}
+
+// On an error, nothing may still be copying through the ring when its lock
+// is released.
+struct Drain {
+  cudaStream_t stream;
+  bool done = false;
+  ~Drain() {
+    if (!done && cudaStreamSynchronize(stream) != cudaSuccess) cudaGetLastError();
+  }
+};
+}  // namespace
+
+void kokkos_host_copy(char* dst, const char* src, std::size_t bytes) {
+  using HostExec = Kokkos::DefaultHostExecutionSpace;
+  constexpr std::size_t part = std::size_t(256) << 10;
+  Kokkos::parallel_for(
+      "nbmc::mesh::host_copy", Kokkos::RangePolicy<HostExec>(0, (bytes + part - 1) / part),
+      [=](const std::size_t q) { std::memcpy(dst + q * part, src + q * part, std::min(part, bytes - q * part)); });
+  HostExec().fence();
+}
+
+// A pageable copy from the device runs at about a sixth of a pinned one
+// (40 MB of mesh: 5.5 ms on an H100 machine, with the first touch of the
+// fresh host pages) and faults the pages in on the calling thread. Here the
+// GPU copies 4 MiB chunks into pinned memory while the host threads move the
+// previous chunk on to its destination, faulting its pages in in parallel.
+// The pipeline's host threads are Kokkos' (OpenMP, kokkos_host_copy): they
+// have just run the pipeline's host steps and spin for a while after each;
+// starting other threads now would compete with them for the cores (an H100
+// machine, the 1.65 M frame's mesh at r/2: 6-9 ms on other threads, 2.7-3.2
+// ms on these; bench/RESULTS.md, "Session 24").
+void download_segments(const Kokkos::Cuda& space, const DownloadSegment* segments, std::size_t n, HostCopy copy) {
+  const cudaStream_t stream = space.cuda_stream();
+  Staging& st = staging();
+  std::lock_guard<std::mutex> lock(st.m);
+  if (!staging_ready(st)) {
     for (std::size_t k = 0; k < n; ++k)
       if (segments[k].bytes)
         cuda_check(cudaMemcpyAsync(segments[k].host, segments[k].device, segments[k].bytes, cudaMemcpyDeviceToHost,
@@ -189,25 +246,12 @@ void download_segments(const Kokkos::Cuda& space, const DownloadSegment* segment
     cuda_check(cudaStreamSynchronize(stream), "mesh download");
     return;
   }
-  struct Chunk {
-    char* host;
-    const char* device;
-    std::size_t bytes;
-  };
-  std::vector<Chunk> chunks;
-  for (std::size_t k = 0; k < n; ++k)
-    for (std::size_t at = 0; at < segments[k].bytes; at += kStagingChunk)
-      chunks.push_back({static_cast<char*>(segments[k].host) + at, static_cast<const char*>(segments[k].device) + at,
-                        std::min(kStagingChunk, segments[k].bytes - at)});
-  // On an error, nothing may still be copying into the ring when the lock
-  // is released.
-  struct Drain {
-    cudaStream_t stream;
-    bool done = false;
-    ~Drain() {
-      if (!done && cudaStreamSynchronize(stream) != cudaSuccess) cudaGetLastError();
-    }
-  } drain{stream};
+  const std::vector<Chunk> chunks = staging_chunks(n, [&](std::size_t k, char*& h, char*& d, std::size_t& b) {
+    h = static_cast<char*>(segments[k].host);
+    d = const_cast<char*>(static_cast<const char*>(segments[k].device));
+    b = segments[k].bytes;
+  });
+  Drain drain{stream};
   auto issue = [&](std::size_t i) {
     char* slot = st.buffer + (i % kStagingSlots) * kStagingChunk;
     cuda_check(cudaMemcpyAsync(slot, chunks[i].device, chunks[i].bytes, cudaMemcpyDeviceToHost, stream),
@@ -224,13 +268,7 @@ void download_segments(const Kokkos::Cuda& space, const DownloadSegment* segment
     const clock::time_point t0 = timed ? clock::now() : clock::time_point();
     cuda_check(cudaEventSynchronize(st.copied[i % kStagingSlots]), "mesh download");
     const clock::time_point t1 = timed ? clock::now() : clock::time_point();
-    const char* slot = st.buffer + (i % kStagingSlots) * kStagingChunk;
-    const Chunk c = chunks[i];
-    constexpr std::size_t part = std::size_t(256) << 10;
-    Kokkos::parallel_for(
-        "nbmc::mesh::download", Kokkos::RangePolicy<HostExec>(0, (c.bytes + part - 1) / part),
-        [=](const std::size_t q) { std::memcpy(c.host + q * part, slot + q * part, std::min(part, c.bytes - q * part)); });
-    HostExec().fence();
+    copy(chunks[i].host, st.buffer + (i % kStagingSlots) * kStagingChunk, chunks[i].bytes);
     if (timed) {
       waited += std::chrono::duration<double, std::milli>(t1 - t0).count();
       copied += std::chrono::duration<double, std::milli>(clock::now() - t1).count();
@@ -241,6 +279,39 @@ void download_segments(const Kokkos::Cuda& space, const DownloadSegment* segment
   if (timed)
     std::fprintf(stderr, "[nbmc trace] download: %zu chunks of %zu MiB, waited for the GPU %.3f ms, host copies %.3f ms\n",
                  chunks.size(), kStagingChunk >> 20, waited, copied);
+}
+
+// The other way: the host threads copy a chunk into a slot of the ring while
+// the GPU copies the previous one from the other.
+void upload_segments(const Kokkos::Cuda& space, const UploadSegment* segments, std::size_t n, HostCopy copy) {
+  const cudaStream_t stream = space.cuda_stream();
+  Staging& st = staging();
+  std::lock_guard<std::mutex> lock(st.m);
+  if (!staging_ready(st)) {
+    for (std::size_t k = 0; k < n; ++k)
+      if (segments[k].bytes)
+        cuda_check(cudaMemcpyAsync(segments[k].device, segments[k].host, segments[k].bytes, cudaMemcpyHostToDevice,
+                                   stream),
+                   "mesh upload");
+    cuda_check(cudaStreamSynchronize(stream), "mesh upload");
+    return;
+  }
+  const std::vector<Chunk> chunks = staging_chunks(n, [&](std::size_t k, char*& h, char*& d, std::size_t& b) {
+    h = const_cast<char*>(static_cast<const char*>(segments[k].host));
+    d = static_cast<char*>(segments[k].device);
+    b = segments[k].bytes;
+  });
+  Drain drain{stream};
+  for (std::size_t i = 0; i < chunks.size(); ++i) {
+    const int s = int(i % kStagingSlots);
+    char* slot = st.buffer + std::size_t(s) * kStagingChunk;
+    if (i >= std::size_t(kStagingSlots)) cuda_check(cudaEventSynchronize(st.copied[s]), "mesh upload");
+    copy(slot, chunks[i].host, chunks[i].bytes);
+    cuda_check(cudaMemcpyAsync(chunks[i].device, slot, chunks[i].bytes, cudaMemcpyHostToDevice, stream), "mesh upload");
+    cuda_check(cudaEventRecord(st.copied[s], stream), "mesh upload");
+  }
+  cuda_check(cudaStreamSynchronize(stream), "mesh upload");
+  drain.done = true;
 }
 
 void device_sort_pairs(const Kokkos::Cuda& space, MemoryTracker& tracker, std::uint64_t* keys_in,
@@ -425,6 +496,85 @@ void download_mesh(const HostMesh& m, float* positions, float* normals, std::uin
                "mesh triangles");
 #else
   (void)m; (void)positions; (void)normals; (void)triangles;
+  throw Error(7, "the CUDA backend is not compiled in");
+#endif
+}
+
+#if defined(KOKKOS_ENABLE_CUDA)
+namespace {
+// Copies bytes from src to dst on the host threads (core/parallel.hpp: the
+// context's OpenMP threads on nbmc's Kokkos thread, else nbmc's pool), in
+// parts of 256 KiB: a fresh destination's pages are faulted in in parallel.
+void copy_on_host_threads(char* dst, const char* src, std::size_t bytes) {
+  constexpr std::size_t part = std::size_t(256) << 10;
+  const std::size_t parts = (bytes + part - 1) / part;
+  for_chunks(parts, chunk_count(parts, 1), [&](std::size_t, std::size_t b, std::size_t e) {
+    for (std::size_t q = b; q < e; ++q) std::memcpy(dst + q * part, src + q * part, std::min(part, bytes - q * part));
+  });
+}
+}  // namespace
+#endif
+
+void download_mesh_for_postprocess(const HostMesh& m, HostMesh& h, bool incidence, MemoryTracker& tracker) {
+#if defined(KOKKOS_ENABLE_CUDA)
+  struct Trim {
+    ~Trim() { trim_device_pool(); }
+  } trim;  // (the incidence's buffers)
+  const std::size_t nv = m.d_vertices, nt = m.d_triangles_count;
+  h.positions.resize(3 * nv);
+  h.normals.resize(m.d_normals ? 3 * nv : 0);
+  h.triangles.resize(3 * nt);
+  mesh::PrebuiltIncidence& inc = h.incidence;
+  inc.clear();
+  // (An optimisation: left out where the memory budget would not hold it
+  // on the device, with its fill cursors, and on the host.)
+  const std::uint64_t words = mesh::PrebuiltIncidence::words(nv, nt);
+  incidence = incidence && nt > 0 && 3 * std::uint64_t(nt) <= std::numeric_limits<std::uint32_t>::max() &&
+              (!tracker.budget ||
+               tracker.current.load() + mesh::mesh_bytes(nv, nt, false, m.d_normals != nullptr) +
+                       (2 * words + nv) * sizeof(std::uint32_t) <=
+                   tracker.budget);
+  const Kokkos::Cuda space;
+  using Unmanaged = Kokkos::MemoryTraits<Kokkos::Unmanaged>;
+  Details::Buffer<std::uint32_t, Kokkos::CudaSpace> dstart(tracker, "incidence::start", incidence ? nv + 1 : 0);
+  Details::Buffer<std::uint32_t, Kokkos::CudaSpace> dinc(tracker, "incidence::incident", incidence ? 3 * nt : 0);
+  Details::Buffer<std::uint32_t, Kokkos::CudaSpace> dbits(tracker, "incidence::maybe_bad",
+                                                          incidence ? mesh::PrebuiltIncidence::bit_words(nt) : 0);
+  if (incidence) {
+    const Kokkos::View<const float*, Kokkos::CudaSpace, Unmanaged> dpos(m.d_positions, 3 * nv);
+    const Kokkos::View<const std::uint32_t*, Kokkos::CudaSpace, Unmanaged> dtri(m.d_triangles, 3 * nt);
+    Details::build_prebuilt_incidence<Kokkos::Cuda, float>(space, tracker, dpos, dtri, nv, nt, dstart.view(),
+                                                           dinc.view(), dbits.view());
+    inc.start.resize(nv + 1);
+    inc.incident.resize(3 * nt);
+    inc.maybe_bad.resize(mesh::PrebuiltIncidence::bit_words(nt));
+    host_trace("post-processing: incidence on the device", nt);
+  }
+  const Details::DownloadSegment segments[] = {
+      {h.positions.data(), m.d_positions, h.positions.size() * sizeof(float)},
+      {h.normals.data(), m.d_normals, h.normals.size() * sizeof(float)},
+      {h.triangles.data(), m.d_triangles, h.triangles.size() * sizeof(std::uint32_t)},
+      {inc.start.data(), dstart.data(), inc.start.size() * sizeof(std::uint32_t)},
+      {inc.incident.data(), dinc.data(), inc.incident.size() * sizeof(std::uint32_t)},
+      {inc.maybe_bad.data(), dbits.data(), inc.maybe_bad.size() * sizeof(std::uint32_t)}};
+  Details::download_segments(space, segments, sizeof(segments) / sizeof(segments[0]), copy_on_host_threads);
+#else
+  (void)m; (void)h; (void)incidence; (void)tracker;
+  throw Error(7, "the CUDA backend is not compiled in");
+#endif
+}
+
+void upload_mesh_after_postprocess(HostMesh& m, const HostMesh& h) {
+#if defined(KOKKOS_ENABLE_CUDA)
+  const Details::UploadSegment segments[] = {
+      {m.d_positions, h.positions.data(), h.positions.size() * sizeof(float)},
+      {m.d_normals, h.normals.data(), m.d_normals ? h.normals.size() * sizeof(float) : 0},
+      {m.d_triangles, h.triangles.data(), h.triangles.size() * sizeof(std::uint32_t)}};
+  Details::upload_segments(Kokkos::Cuda(), segments, sizeof(segments) / sizeof(segments[0]), copy_on_host_threads);
+  m.d_vertices = h.positions.size() / 3;
+  m.d_triangles_count = h.triangles.size() / 3;
+#else
+  (void)m; (void)h;
   throw Error(7, "the CUDA backend is not compiled in");
 #endif
 }
