@@ -879,10 +879,12 @@ void reconstruct_collective(nbmc_context& ctx, const nbmc_params& full, const nb
   // 9. Clean-up and smoothing work on whole meshes: on the root's stitched
   //    mesh; pieces stay as marching cubes made them (their shared vertices
   //    must stay shared). Agreed, as the attributes need every rank next.
+  //    On nbmc's Kokkos thread, as for one process: a mesh in GPU memory
+  //    gets its clean-up's adjacency from the GPU.
   ctx.postprocess = nbmc::mesh::PostprocessStats();
   step(c, [&] {
     if (output == NBMC__OUTPUT_GATHER && c.rank() == root)
-      ctx.postprocess = postprocess_mesh(full, mesh, frame, ctx.memory);
+      run_on_kokkos_thread(ctx, [&] { ctx.postprocess = postprocess_mesh(full, mesh, frame, ctx.memory); });
     else if (output == NBMC__OUTPUT_PIECES)
       ctx.postprocess.raw_triangles = ctx.postprocess.pre_decimation_triangles = mesh.triangle_count();
   });
