@@ -31,9 +31,12 @@
 #include "common.hpp"
 
 #include "../../src/core/mesh_check.hpp"  // kSinOneDegree, kDegenerateAreaFraction
+#include "../../src/core/mesh_incidence.hpp"
 
 #include <cmath>
 #include <cstdint>
+#include <limits>
+#include <new>
 #include <type_traits>
 
 namespace nbmc {
@@ -162,6 +165,51 @@ void build_prebuilt_incidence(const ExecSpace& space, MemoryTracker& tracker,
         if (bad) Kokkos::atomic_fetch_or(&bits(t / 32), std::uint32_t(1) << (t % 32));
       });
 }
+
+// build_prebuilt_incidence for a mesh in device memory, with the device
+// buffers it fills and the host vectors (inc) sized for their download;
+// then download start, incident and bits into inc's vectors. An
+// optimisation: where the device or the host has no room for it
+// (OUT_OF_MEMORY, bad_alloc) build() builds nothing, returns false and
+// leaves inc empty (the clean-up then builds its own).
+template <class ExecSpace>
+struct DeviceIncidence {
+  using MemSpace = typename ExecSpace::memory_space;
+  Buffer<std::uint32_t, MemSpace> start, incident, bits;
+  // Whether to build it for a mesh of nv vertices and nt triangles (32-bit
+  // offsets) that takes mesh_bytes in host memory: not where the memory
+  // budget would not hold it on the device (with its fill cursors) and on
+  // the host besides the mesh.
+  static bool wanted(const MemoryTracker& tracker, std::uint64_t mesh_bytes, std::uint64_t nv, std::uint64_t nt) {
+    return nt > 0 && 3 * nt <= std::numeric_limits<std::uint32_t>::max() &&
+           (!tracker.budget || tracker.current.load() + mesh_bytes +
+                                       (2 * mesh::PrebuiltIncidence::words(nv, nt) + nv) * sizeof(std::uint32_t) <=
+                                   tracker.budget);
+  }
+  template <class Real>
+  bool build(const ExecSpace& space, MemoryTracker& tracker, const Kokkos::View<const Real*, MemSpace>& pos,
+             const Kokkos::View<const std::uint32_t*, MemSpace>& tri, std::size_t nv, std::size_t nt,
+             mesh::PrebuiltIncidence& inc) {
+    inc.clear();
+    try {
+      start = Buffer<std::uint32_t, MemSpace>(tracker, "incidence::start", nv + 1);
+      incident = Buffer<std::uint32_t, MemSpace>(tracker, "incidence::incident", 3 * nt);
+      bits = Buffer<std::uint32_t, MemSpace>(tracker, "incidence::maybe_bad", mesh::PrebuiltIncidence::bit_words(nt));
+      build_prebuilt_incidence<ExecSpace, Real>(space, tracker, pos, tri, nv, nt, start.view(), incident.view(),
+                                                bits.view());
+      inc.start.resize(nv + 1);
+      inc.incident.resize(3 * nt);
+      inc.maybe_bad.resize(mesh::PrebuiltIncidence::bit_words(nt));
+      return true;
+    } catch (const Error& e) {
+      if (e.status != 6 /*NBMC_ERROR_OUT_OF_MEMORY*/) throw;
+    } catch (const std::bad_alloc&) {
+    }
+    start.release(), incident.release(), bits.release();
+    inc.clear();
+    return false;
+  }
+};
 
 }  // namespace Details
 }  // namespace nbmc

@@ -482,13 +482,10 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
   // it counts twice, on the device (with its fill cursors) and the host.)
   const std::uint64_t mesh_bytes = r.vertices * 3 * (pos_size + (p.normals ? sizeof(float) : 0)) +
                                    r.triangles * 3 * sizeof(std::uint32_t);
-  const std::uint64_t prebuilt_words = mesh::PrebuiltIncidence::words(r.vertices, r.triangles);
-  const bool prebuilt = is_cuda && p.prebuilt_incidence && !region_in && !mesh_on_device && r.triangles > 0 &&
-                        3 * r.triangles <= std::numeric_limits<std::uint32_t>::max() &&  // (32-bit offsets)
-                        (!tracker.budget || tracker.current.load() + mesh_bytes +
-                                                    (2 * prebuilt_words + r.vertices) * sizeof(std::uint32_t) <=
-                                                tracker.budget);
-  const std::uint64_t out_bytes = mesh_bytes + (prebuilt ? prebuilt_words * sizeof(std::uint32_t) : 0);
+  const bool prebuilt = is_cuda && p.prebuilt_incidence && !region_in && !mesh_on_device &&
+                        DeviceIncidence<ExecSpace>::wanted(tracker, mesh_bytes, r.vertices, r.triangles);
+  const std::uint64_t out_bytes =
+      mesh_bytes + (prebuilt ? mesh::PrebuiltIncidence::words(r.vertices, r.triangles) * sizeof(std::uint32_t) : 0);
   tracker.require(out_bytes, "the mesh");
   if (!mesh_on_device) {
     mesh.f64 = p.double_positions;
@@ -564,18 +561,9 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
 #if defined(KOKKOS_ENABLE_CUDA)
       if constexpr (std::is_same<ExecSpace, Kokkos::Cuda>::value) {
         mesh::PrebuiltIncidence& inc = mesh.incidence;
-        const std::size_t nv = r.vertices, nt = r.triangles;
-        Buffer<std::uint32_t, MemSpace> dstart(tracker, "incidence::start", prebuilt ? nv + 1 : 0);
-        Buffer<std::uint32_t, MemSpace> dinc(tracker, "incidence::incident", prebuilt ? 3 * nt : 0);
-        Buffer<std::uint32_t, MemSpace> dbits(tracker, "incidence::maybe_bad", prebuilt ? mesh::PrebuiltIncidence::bit_words(nt) : 0);
-        if (prebuilt) {
-          build_prebuilt_incidence<ExecSpace, Real>(space, tracker, dpos.view(), dtri.view(), nv, nt, dstart.view(),
-                                                    dinc.view(), dbits.view());
-          inc.start.resize(dstart.view().extent(0));
-          inc.incident.resize(dinc.view().extent(0));
-          inc.maybe_bad.resize(dbits.view().extent(0));
-          trace("incidence on the device", nt);
-        }
+        DeviceIncidence<ExecSpace> di;
+        if (prebuilt && di.template build<Real>(space, tracker, dpos.view(), dtri.view(), r.vertices, r.triangles, inc))
+          trace("incidence on the device", r.triangles);
         const DownloadSegment segments[] = {
             {hpos.data(), dpos.data(), hpos.extent(0) * sizeof(Real)},
             {hnrm.data(), dnrm.data(), hnrm.extent(0) * sizeof(float)},
@@ -583,9 +571,9 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
             {hvkeys.data(), dvkeys.data(), hvkeys.extent(0) * sizeof(std::uint64_t)},
             {haxes.data(), daxes.data(), haxes.extent(0) * sizeof(std::uint8_t)},
             {htkeys.data(), dtkeys.data(), htkeys.extent(0) * sizeof(std::uint64_t)},
-            {inc.start.data(), dstart.data(), inc.start.size() * sizeof(std::uint32_t)},
-            {inc.incident.data(), dinc.data(), inc.incident.size() * sizeof(std::uint32_t)},
-            {inc.maybe_bad.data(), dbits.data(), inc.maybe_bad.size() * sizeof(std::uint32_t)}};
+            {inc.start.data(), di.start.data(), inc.start.size() * sizeof(std::uint32_t)},
+            {inc.incident.data(), di.incident.data(), inc.incident.size() * sizeof(std::uint32_t)},
+            {inc.maybe_bad.data(), di.bits.data(), inc.maybe_bad.size() * sizeof(std::uint32_t)}};
         download_segments(space, segments, sizeof(segments) / sizeof(segments[0]));
         return;
       }

@@ -526,37 +526,21 @@ void download_mesh_for_postprocess(const HostMesh& m, HostMesh& h, bool incidenc
   h.triangles.resize(3 * nt);
   mesh::PrebuiltIncidence& inc = h.incidence;
   inc.clear();
-  // (An optimisation: left out where the memory budget would not hold it
-  // on the device, with its fill cursors, and on the host.)
-  const std::uint64_t words = mesh::PrebuiltIncidence::words(nv, nt);
-  incidence = incidence && nt > 0 && 3 * std::uint64_t(nt) <= std::numeric_limits<std::uint32_t>::max() &&
-              (!tracker.budget ||
-               tracker.current.load() + mesh::mesh_bytes(nv, nt, false, m.d_normals != nullptr) +
-                       (2 * words + nv) * sizeof(std::uint32_t) <=
-                   tracker.budget);
   const Kokkos::Cuda space;
-  using Unmanaged = Kokkos::MemoryTraits<Kokkos::Unmanaged>;
-  Details::Buffer<std::uint32_t, Kokkos::CudaSpace> dstart(tracker, "incidence::start", incidence ? nv + 1 : 0);
-  Details::Buffer<std::uint32_t, Kokkos::CudaSpace> dinc(tracker, "incidence::incident", incidence ? 3 * nt : 0);
-  Details::Buffer<std::uint32_t, Kokkos::CudaSpace> dbits(tracker, "incidence::maybe_bad",
-                                                          incidence ? mesh::PrebuiltIncidence::bit_words(nt) : 0);
-  if (incidence) {
-    const Kokkos::View<const float*, Kokkos::CudaSpace, Unmanaged> dpos(m.d_positions, 3 * nv);
-    const Kokkos::View<const std::uint32_t*, Kokkos::CudaSpace, Unmanaged> dtri(m.d_triangles, 3 * nt);
-    Details::build_prebuilt_incidence<Kokkos::Cuda, float>(space, tracker, dpos, dtri, nv, nt, dstart.view(),
-                                                           dinc.view(), dbits.view());
-    inc.start.resize(nv + 1);
-    inc.incident.resize(3 * nt);
-    inc.maybe_bad.resize(mesh::PrebuiltIncidence::bit_words(nt));
+  using Incidence = Details::DeviceIncidence<Kokkos::Cuda>;
+  Incidence di;
+  if (incidence &&
+      Incidence::wanted(tracker, mesh::mesh_bytes(nv, nt, false, m.d_normals != nullptr), nv, nt) &&
+      di.build<float>(space, tracker, Kokkos::View<const float*, Kokkos::CudaSpace>(m.d_positions, 3 * nv),
+                      Kokkos::View<const std::uint32_t*, Kokkos::CudaSpace>(m.d_triangles, 3 * nt), nv, nt, inc))
     host_trace("post-processing: incidence on the device", nt);
-  }
   const Details::DownloadSegment segments[] = {
       {h.positions.data(), m.d_positions, h.positions.size() * sizeof(float)},
       {h.normals.data(), m.d_normals, h.normals.size() * sizeof(float)},
       {h.triangles.data(), m.d_triangles, h.triangles.size() * sizeof(std::uint32_t)},
-      {inc.start.data(), dstart.data(), inc.start.size() * sizeof(std::uint32_t)},
-      {inc.incident.data(), dinc.data(), inc.incident.size() * sizeof(std::uint32_t)},
-      {inc.maybe_bad.data(), dbits.data(), inc.maybe_bad.size() * sizeof(std::uint32_t)}};
+      {inc.start.data(), di.start.data(), inc.start.size() * sizeof(std::uint32_t)},
+      {inc.incident.data(), di.incident.data(), inc.incident.size() * sizeof(std::uint32_t)},
+      {inc.maybe_bad.data(), di.bits.data(), inc.maybe_bad.size() * sizeof(std::uint32_t)}};
   Details::download_segments(space, segments, sizeof(segments) / sizeof(segments[0]), copy_on_host_threads);
 #else
   (void)m; (void)h; (void)incidence; (void)tracker;

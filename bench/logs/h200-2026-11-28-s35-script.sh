@@ -1,0 +1,49 @@
+#!/usr/bin/env bash
+# Session 35 device runs. new = working tree, old = out/dev/old.tar (be5fddc).
+set -uo pipefail
+R=$PWD; O=${OUT:-/tmp/o}; L=/tmp/L; mkdir -p $O $L
+export PATH=/usr/local/cuda/bin:$PATH
+mkdir -p ~/.cache/nbmc/src && cp -rn out/dev/kk/* ~/.cache/nbmc/src/
+D=$R/out/dev/data; BIG=$D/xyz/cbd1654k_t040_1654104.xyz
+N=$R/build-cuda
+t0=$(date +%s)
+for step in "$@"; do case $step in
+build)
+  NBMC_GPU_CHECK_STEPS=build scripts/gpu_check.sh $D $L/gc > $L/build.txt 2>&1 || { tail -40 $L/build.txt $L/gc/build.log | grep -v "^ *$" | tail -40; exit 1; }
+  echo "new built in $(( $(date +%s) - t0 )) s" ;;
+oldbg)  # after build: Kokkos is in the cache
+  mkdir -p out/oldsrc && tar -xf out/dev/old.tar -C out/oldsrc
+  (cd out/oldsrc && NBMC_CUDA_CMAKE_ARGS="-DNBMC_BUILD_TESTS=OFF" NBMC_JOBS=6 scripts/setup.sh --cuda-only > $L/old-build.txt 2>&1; echo "old build rc $? at $(( $(date +%s) - t0 )) s") &
+  OLDPID=$! ;;
+check)
+  { echo "== equivalence (new)"; NBMC_CHECK_BAND=1 $N/tests/gpu/nbmc_cuda_equivalence $D 2>&1 | tail -80; } > $O/equivalence.txt
+  tail -1 $O/equivalence.txt; grep FAIL $O/equivalence.txt | head
+  NBMC_GPU_CHECK_STEPS="pointers subdomains" scripts/gpu_check.sh $D $L/gc2 > $O/pointers-subdomains.txt 2>&1; echo "pointers+subdomains rc $?"
+  grep -i "fail\|DIFFERENT" $O/pointers-subdomains.txt | head
+  echo "check done at $(( $(date +%s) - t0 )) s" ;;
+trace)
+  for v in new old; do B=$N; [ $v = old ] && B=$R/out/oldsrc/build-cuda
+    NBMC_TRACE=1 $B/bench/nbmc_bench $BIG --spacing 0.00484 --backend cuda --device-resident --repeat 3 > $O/trace-dev-$v.txt 2>&1
+    echo "# $v"; grep -h "incidence\|clean-up: \|download\|upload\|post-processing\|RESULT" $O/trace-dev-$v.txt | tail -14 | cut -c1-200
+  done
+  echo "trace done at $(( $(date +%s) - t0 )) s" ;;
+waitold)
+  [ -n "${OLDPID:-}" ] && wait $OLDPID; OLDPID=""
+  echo "old waited at $(( $(date +%s) - t0 )) s" ;;
+bench)
+  [ -n "${OLDPID:-}" ] && wait $OLDPID
+  OB=$R/out/oldsrc/build-cuda
+  {
+  for round in 1 2 3; do
+    for v in old new; do B=$N; [ $v = old ] && B=$OB
+      for args in "--backend cuda --device-resident --repeat 5" "--backend cuda --repeat 5" "--backend cuda --device-resident --no-cleanup --repeat 5"; do
+        echo "# ${args// /_} $v r$round"; $B/bench/nbmc_bench $BIG --spacing 0.00484 $args 2>&1 | grep RESULT
+      done
+    done
+    args="--backend openmp --repeat 2"; echo "# ${args// /_} new r$round"; $N/bench/nbmc_bench $BIG --spacing 0.00484 $args 2>&1 | grep RESULT
+  done
+  } > $O/bench.txt 2>&1
+  grep -A1 "^# " $O/bench.txt | grep -o "^# .*\|total=[0-9.]*\| postprocess=[0-9.]*" | paste -sd' ' | sed 's/# /\n/g'
+  echo "bench done at $(( $(date +%s) - t0 )) s" ;;
+esac; done
+echo "total $(( $(date +%s) - t0 )) s"
