@@ -21,6 +21,14 @@ check)
   NBMC_GPU_CHECK_STEPS="pointers subdomains" scripts/gpu_check.sh $D $L/gc2 > $O/pointers-subdomains.txt 2>&1; echo "pointers+subdomains rc $?"
   grep -i "fail\|DIFFERENT" $O/pointers-subdomains.txt | head
   echo "check done at $(( $(date +%s) - t0 )) s" ;;
+sanit)
+  NBMC_GPU_CHECK_STEPS="sanitizers" scripts/gpu_check.sh $D $L/gc3 > $O/sanitizers.txt 2>&1; echo "sanitizers rc $?"
+  grep -iE "error summary|errors|hazard" $O/sanitizers.txt | head -12
+  echo "sanitizers done at $(( $(date +%s) - t0 )) s" ;;
+mpi)
+  NBMC_GPU_CHECK_STEPS="mpi" scripts/gpu_check.sh $D $L/gc4 > $O/mpi.txt 2>&1; echo "mpi rc $?"
+  grep -iE "identical|DIFFERENT|total_seconds" $O/mpi.txt | head -12
+  echo "mpi done at $(( $(date +%s) - t0 )) s" ;;
 trace)
   for v in new old; do B=$N; [ $v = old ] && B=$R/out/oldsrc/build-cuda
     NBMC_TRACE=1 $B/bench/nbmc_bench $BIG --spacing 0.00484 --backend cuda --device-resident --repeat 3 > $O/trace-dev-$v.txt 2>&1
