@@ -18,7 +18,6 @@
 #include <chrono>
 #include <cstdio>
 #include <cstring>
-#include <functional>
 #include <limits>
 #include <mutex>
 #include <sstream>
@@ -185,21 +184,31 @@ bool staging_ready(Staging& st) {
   return st.buffer != nullptr;
 }
 
-// One chunk of a segment: at most kStagingChunk bytes.
+// A host and a device array of `bytes` (a segment), or a piece of one.
 struct Chunk {
   char* host;
   char* device;
   std::size_t bytes;
 };
-std::vector<Chunk> staging_chunks(std::size_t n, const std::function<void(std::size_t, char*&, char*&, std::size_t&)>& seg) {
+// The segments (DownloadSegment or UploadSegment) cut into the ring's chunks
+// (kStagingChunk bytes at most). Or, where the ring could not be made, each
+// segment copied directly (`kind`) and waited for, and no chunk.
+template <class Segment>
+std::vector<Chunk> ring_chunks(Staging& st, cudaStream_t stream, const Segment* segments, std::size_t n,
+                               cudaMemcpyKind kind, const char* what) {
+  auto ptr = [](const void* p) { return const_cast<char*>(static_cast<const char*>(p)); };
   std::vector<Chunk> chunks;
+  const bool ring = staging_ready(st);
   for (std::size_t k = 0; k < n; ++k) {
-    char *host = nullptr, *device = nullptr;
-    std::size_t bytes = 0;
-    seg(k, host, device, bytes);
-    for (std::size_t at = 0; at < bytes; at += kStagingChunk)
-      chunks.push_back({host + at, device + at, std::min(kStagingChunk, bytes - at)});
+    const Chunk c{ptr(segments[k].host), ptr(segments[k].device), segments[k].bytes};
+    if (!ring && c.bytes)
+      cuda_check(kind == cudaMemcpyDeviceToHost ? cudaMemcpyAsync(c.host, c.device, c.bytes, kind, stream)
+                                                : cudaMemcpyAsync(c.device, c.host, c.bytes, kind, stream),
+                 what);
+    for (std::size_t at = 0; ring && at < c.bytes; at += kStagingChunk)
+      chunks.push_back({c.host + at, c.device + at, std::min(kStagingChunk, c.bytes - at)});
   }
+  if (!ring) cuda_check(cudaStreamSynchronize(stream), what);
   return chunks;
 }
 
@@ -237,20 +246,8 @@ void download_segments(const Kokkos::Cuda& space, const DownloadSegment* segment
   const cudaStream_t stream = space.cuda_stream();
   Staging& st = staging();
   std::lock_guard<std::mutex> lock(st.m);
-  if (!staging_ready(st)) {
-    for (std::size_t k = 0; k < n; ++k)
-      if (segments[k].bytes)
-        cuda_check(cudaMemcpyAsync(segments[k].host, segments[k].device, segments[k].bytes, cudaMemcpyDeviceToHost,
-                                   stream),
-                   "mesh download");
-    cuda_check(cudaStreamSynchronize(stream), "mesh download");
-    return;
-  }
-  const std::vector<Chunk> chunks = staging_chunks(n, [&](std::size_t k, char*& h, char*& d, std::size_t& b) {
-    h = static_cast<char*>(segments[k].host);
-    d = const_cast<char*>(static_cast<const char*>(segments[k].device));
-    b = segments[k].bytes;
-  });
+  const std::vector<Chunk> chunks = ring_chunks(st, stream, segments, n, cudaMemcpyDeviceToHost, "mesh download");
+  if (chunks.empty()) return;  // (copied directly, or nothing to copy)
   Drain drain{stream};
   auto issue = [&](std::size_t i) {
     char* slot = st.buffer + (i % kStagingSlots) * kStagingChunk;
@@ -287,20 +284,8 @@ void upload_segments(const Kokkos::Cuda& space, const UploadSegment* segments, s
   const cudaStream_t stream = space.cuda_stream();
   Staging& st = staging();
   std::lock_guard<std::mutex> lock(st.m);
-  if (!staging_ready(st)) {
-    for (std::size_t k = 0; k < n; ++k)
-      if (segments[k].bytes)
-        cuda_check(cudaMemcpyAsync(segments[k].device, segments[k].host, segments[k].bytes, cudaMemcpyHostToDevice,
-                                   stream),
-                   "mesh upload");
-    cuda_check(cudaStreamSynchronize(stream), "mesh upload");
-    return;
-  }
-  const std::vector<Chunk> chunks = staging_chunks(n, [&](std::size_t k, char*& h, char*& d, std::size_t& b) {
-    h = const_cast<char*>(static_cast<const char*>(segments[k].host));
-    d = static_cast<char*>(segments[k].device);
-    b = segments[k].bytes;
-  });
+  const std::vector<Chunk> chunks = ring_chunks(st, stream, segments, n, cudaMemcpyHostToDevice, "mesh upload");
+  if (chunks.empty()) return;
   Drain drain{stream};
   for (std::size_t i = 0; i < chunks.size(); ++i) {
     const int s = int(i % kStagingSlots);
