@@ -29,6 +29,15 @@ mpi)
   NBMC_GPU_CHECK_STEPS="mpi" scripts/gpu_check.sh $D $L/gc4 > $O/mpi.txt 2>&1; echo "mpi rc $?"
   grep -iE "identical|DIFFERENT|total_seconds" $O/mpi.txt | head -12
   echo "mpi done at $(( $(date +%s) - t0 )) s" ;;
+tracenew)
+  for a in "" "--device-resident"; do
+    NBMC_TRACE=1 $N/bench/nbmc_bench $BIG --spacing 0.00484 --backend cuda $a --repeat 3 > $O/trace-new$a.txt 2>&1
+    echo "# new $a"; grep -h "incidence\|clean-up: \|download\|upload\|post-processing\|stage done .*n=6" $O/trace-new$a.txt | tail -12 | cut -c1-160
+  done
+  for r in 1 2 3; do for a in "" "--device-resident"; do
+    echo "# new $a r$r $(($N/bench/nbmc_bench $BIG --spacing 0.00484 --backend cuda $a --repeat 5 2>&1 | grep RESULT) | grep -o 'total=[0-9.]*\| postprocess=[0-9.]*' | paste -sd' ')"
+  done; done | tee $O/bench-new.txt
+  echo "tracenew done at $(( $(date +%s) - t0 )) s" ;;
 trace)
   for v in new old; do B=$N; [ $v = old ] && B=$R/out/oldsrc/build-cuda
     NBMC_TRACE=1 $B/bench/nbmc_bench $BIG --spacing 0.00484 --backend cuda --device-resident --repeat 3 > $O/trace-dev-$v.txt 2>&1
