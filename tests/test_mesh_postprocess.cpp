@@ -1071,6 +1071,51 @@ TEST(MeshCleanup, PrebuiltIncidenceIsTheCleanersOwn) {
   }
 }
 
+// DeviceIncidence (the GPU's, here on the host backend): built, it is the
+// incidence above; with no room for it (a budget below its arrays, or below
+// them and the builder's scratch) it is left out: false, nothing sized,
+// every byte given back, so that the caller's run goes on without it.
+TEST(MeshCleanup, DeviceIncidenceLeftOutWithoutRoom) {
+  using Exec = Kokkos::DefaultHostExecutionSpace;
+  using Mem = Exec::memory_space;
+  const TestMesh sphere = pinched_sphere();
+  const std::size_t nv = sphere.p.size() / 3, nt = sphere.t.size() / 3;
+  const Kokkos::View<const float*, Mem> pos(sphere.p.data(), sphere.p.size());
+  const Kokkos::View<const std::uint32_t*, Mem> tri(sphere.t.data(), sphere.t.size());
+  const nbmc::mesh::PrebuiltIncidence want = kokkos_incidence(sphere.p, sphere.t);
+  {
+    nbmc::MemoryTracker tracker;
+    EXPECT_TRUE(nbmc::Details::DeviceIncidence<Exec>::wanted(tracker, 0, nv, nt));
+    nbmc::Details::DeviceIncidence<Exec> di;
+    nbmc::mesh::PrebuiltIncidence inc;
+    ASSERT_TRUE(di.build<float>(Exec(), tracker, pos, tri, nv, nt, inc));
+    Exec().fence();
+    // Sized for the download, which fills them.
+    ASSERT_TRUE(inc.start.size() == nv + 1 && inc.incident.size() == 3 * nt &&
+                inc.maybe_bad.size() == nbmc::mesh::PrebuiltIncidence::bit_words(nt));
+    std::copy(di.start.data(), di.start.data() + nv + 1, inc.start.begin());
+    std::copy(di.incident.data(), di.incident.data() + 3 * nt, inc.incident.begin());
+    std::copy(di.bits.data(), di.bits.data() + inc.maybe_bad.size(), inc.maybe_bad.begin());
+    EXPECT_TRUE(inc.start == want.start && inc.incident == want.incident && inc.maybe_bad == want.maybe_bad);
+  }
+  // Budgets: none of its arrays fits; a part of them; all three but not the
+  // fill cursors build_prebuilt_incidence then asks for.
+  const std::uint64_t bytes = nbmc::mesh::PrebuiltIncidence::words(nv, nt) * sizeof(std::uint32_t);
+  for (std::uint64_t budget : {std::uint64_t(16), bytes / 2, bytes + 4 * nv - 4}) {
+    nbmc::MemoryTracker tracker;
+    tracker.budget = budget;
+    EXPECT_FALSE(nbmc::Details::DeviceIncidence<Exec>::wanted(tracker, 0, nv, nt)) << budget;
+    nbmc::Details::DeviceIncidence<Exec> di;
+    nbmc::mesh::PrebuiltIncidence inc;
+    EXPECT_FALSE(di.build<float>(Exec(), tracker, pos, tri, nv, nt, inc)) << budget;
+    EXPECT_TRUE(inc.empty() && inc.incident.empty() && inc.maybe_bad.empty());
+    EXPECT_EQ(di.start.size() + di.incident.size() + di.bits.size(), 0u);
+    EXPECT_EQ(tracker.current.load(), 0u);
+  }
+  // A mesh of no triangles is never wanted.
+  EXPECT_FALSE(nbmc::Details::DeviceIncidence<Exec>::wanted(nbmc::MemoryTracker(), 0, nv, 0));
+}
+
 // Taubin smoothing: a sphere keeps its size (its vertices stay within 1% of
 // the radius), normals become the unit face normals; a droplet of a few
 // vertices, which lambda|mu would shrink to a point, keeps its volume.

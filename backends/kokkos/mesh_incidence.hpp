@@ -170,8 +170,9 @@ void build_prebuilt_incidence(const ExecSpace& space, MemoryTracker& tracker,
 // buffers it fills and the host vectors (inc) sized for their download;
 // then download start, incident and bits into inc's vectors. An
 // optimisation: where the device or the host has no room for it
-// (OUT_OF_MEMORY, bad_alloc) build() builds nothing, returns false and
-// leaves inc empty (the clean-up then builds its own).
+// (OUT_OF_MEMORY, bad_alloc, or the memory budget: wanted() leaves out its
+// small scratch) build() builds nothing, returns false and leaves inc empty
+// (the clean-up then builds its own).
 template <class ExecSpace>
 struct DeviceIncidence {
   using MemSpace = typename ExecSpace::memory_space;
@@ -202,7 +203,7 @@ struct DeviceIncidence {
       inc.maybe_bad.resize(mesh::PrebuiltIncidence::bit_words(nt));
       return true;
     } catch (const Error& e) {
-      if (e.status != 6 /*NBMC_ERROR_OUT_OF_MEMORY*/) throw;
+      if (e.status != 6 /*NBMC_ERROR_OUT_OF_MEMORY*/ && e.status != 10 /*NBMC_ERROR_MEMORY_BUDGET*/) throw;
     } catch (const std::bad_alloc&) {
     }
     start.release(), incident.release(), bits.release();
