@@ -112,6 +112,12 @@ void download_mesh(const HostMesh& m, float* positions, float* normals, std::uin
 // shrink). On the host threads of core/parallel.hpp (any calling thread).
 void download_mesh_for_postprocess(const HostMesh& m, HostMesh& h, bool incidence, MemoryTracker& tracker);
 void upload_mesh_after_postprocess(HostMesh& m, const HostMesh& h);
+// The same after a clean-up that left the compaction to its caller
+// (core/mesh_cleanup.hpp: h with the input's sizes, one alive flag per
+// triangle): the GPU compacts, into m's arrays, exactly as compact_mesh
+// would have. False (m untouched) where the GPU or the memory budget has no
+// room for the uncompacted copy; the caller then compacts on the host.
+bool upload_mesh_and_compact(HostMesh& m, const HostMesh& h, const mesh::AliveFlags& alive, MemoryTracker& tracker);
 // Copies count particles (3 doubles each) from the CUDA device to the host.
 void download_particles(const void* device_xyz, std::size_t count, double* host);
 // Replaces a host mesh by a copy in one device allocation (NBMC_MEMORY_DEVICE).

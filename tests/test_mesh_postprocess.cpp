@@ -864,6 +864,57 @@ TestMesh pinched_sphere(int levels = 4) {
   return sphere;
 }
 
+// A clean-up that leaves the compaction to its caller (a device mesh's: the
+// GPU compacts it, as compact_mesh does) hands over arrays of the input's
+// sizes and one flag per triangle; compacted, they are exactly the mesh and
+// normals of a clean-up that compacts itself. On the pinched sphere (moves,
+// flips, collapses, cuts: triangles and vertices removed) and on a sphere
+// with a speck of degenerate triangles (a component removed).
+TEST(MeshCleanup, CompactionLeftToTheCallerGivesTheSameMesh) {
+  auto with_normals = [](TestMesh m) {
+    m.n.resize(m.p.size());
+    for (std::size_t i = 0; i < m.p.size(); ++i) m.n[i] = 0.25f * m.p[i] + float(i % 7);
+    return m;
+  };
+  TestMesh speck = icosphere(2);
+  {
+    const std::uint32_t base = std::uint32_t(speck.p.size() / 3);
+    const float e = 1e-6f;
+    const float dirs[6][3] = {{1, 0, 0}, {-1, 0, 0}, {0, 1, 0}, {0, -1, 0}, {0, 0, 1}, {0, 0, -1}};
+    for (const auto& d : dirs)
+      for (int a = 0; a < 3; ++a) speck.p.push_back((a == 0 ? 3.f : 0.f) + e * d[a]);
+    const std::uint32_t oct[8][3] = {{0, 2, 4}, {2, 1, 4}, {1, 3, 4}, {3, 0, 4},
+                                     {2, 0, 5}, {1, 2, 5}, {3, 1, 5}, {0, 3, 5}};
+    for (const auto& f : oct) speck.t.insert(speck.t.end(), {base + f[0], base + f[1], base + f[2]});
+  }
+  for (const TestMesh& input : {with_normals(pinched_sphere()), with_normals(speck)}) {
+    TestMesh own = input, left = input;
+    const auto a = nbmc::mesh::cleanup_mesh(own.p, own.n, own.t);
+    nbmc::mesh::AliveFlags alive;
+    const auto b = nbmc::mesh::cleanup_mesh(left.p, left.n, left.t, 0, nullptr, &alive);
+    ASSERT_GT(a.removed_triangles, 0u);
+    ASSERT_GT(a.removed_vertices, 0u);
+    EXPECT_EQ(b.removed_triangles, 0u);
+    EXPECT_EQ(b.removed_vertices, 0u);
+    ASSERT_EQ(left.p.size(), input.p.size());
+    ASSERT_EQ(left.n.size(), input.n.size());
+    ASSERT_EQ(left.t.size(), input.t.size());
+    ASSERT_EQ(alive.size(), input.t.size() / 3);
+    const auto kept = nbmc::mesh::compact_mesh(left.p.data(), left.n.data(), left.p.size() / 3, left.t.data(),
+                                               left.t.size() / 3, alive);
+    EXPECT_EQ(left.p.size() / 3 - kept.first, a.removed_vertices);
+    EXPECT_EQ(left.t.size() / 3 - kept.second, a.removed_triangles);
+    left.p.resize(3 * kept.first);
+    left.n.resize(3 * kept.first);
+    left.t.resize(3 * kept.second);
+    EXPECT_EQ(left.p, own.p);
+    EXPECT_EQ(left.n, own.n);
+    EXPECT_EQ(left.t, own.t);
+    EXPECT_EQ(a.collapses, b.collapses);
+    EXPECT_EQ(a.bad_after, b.bad_after);
+  }
+}
+
 // The repairs on several host threads (deterministic reservations) give
 // exactly the serial repairs' mesh: a sphere with many pinches side by side
 // (needles, caps, pinched holes with and without a cap, so that moves,

@@ -548,6 +548,108 @@ void upload_mesh_after_postprocess(HostMesh& m, const HostMesh& h) {
 #endif
 }
 
+bool upload_mesh_and_compact(HostMesh& m, const HostMesh& h, const mesh::AliveFlags& alive, MemoryTracker& tracker) {
+#if defined(KOKKOS_ENABLE_CUDA)
+  const std::size_t nv = h.positions.size() / 3, nt = h.triangles.size() / 3;
+  const bool normals = m.d_normals != nullptr;
+  if (nv != m.d_vertices || nt != m.d_triangles_count || alive.size() != nt || nt == 0 ||
+      h.normals.size() != (normals ? 3 * nv : 0))
+    return false;
+  const Kokkos::Cuda space;
+  using Range = Kokkos::RangePolicy<Kokkos::Cuda>;
+  using Details::Buffer;
+  // The mesh as the clean-up left it (and its flags) into buffers of their
+  // own; then compacted into m's arrays, in the host's order (compact_mesh
+  // in core/mesh_check.hpp: kept triangles in their order, the vertices
+  // they use in theirs).
+  Buffer<float, Kokkos::CudaSpace> pos, nor;
+  Buffer<std::uint32_t, Kokkos::CudaSpace> tri, vdst, tdst;
+  Buffer<std::uint8_t, Kokkos::CudaSpace> keep;
+  try {
+    pos = Buffer<float, Kokkos::CudaSpace>(tracker, "compaction::positions", 3 * nv);
+    if (normals) nor = Buffer<float, Kokkos::CudaSpace>(tracker, "compaction::normals", 3 * nv);
+    tri = Buffer<std::uint32_t, Kokkos::CudaSpace>(tracker, "compaction::triangles", 3 * nt);
+    keep = Buffer<std::uint8_t, Kokkos::CudaSpace>(tracker, "compaction::alive", nt);
+    vdst = Buffer<std::uint32_t, Kokkos::CudaSpace>(tracker, "compaction::vertex_places", nv + 1, true);
+    tdst = Buffer<std::uint32_t, Kokkos::CudaSpace>(tracker, "compaction::triangle_places", nt + 1);
+  } catch (const Error& e) {
+    if (e.status != 6 /*NBMC_ERROR_OUT_OF_MEMORY*/ && e.status != 10 /*NBMC_ERROR_MEMORY_BUDGET*/) throw;
+    return false;
+  } catch (const std::bad_alloc&) {
+    return false;
+  }
+  host_trace("post-processing: compaction's device buffers", nt);
+  const Details::UploadSegment segments[] = {
+      {pos.data(), h.positions.data(), 3 * nv * sizeof(float)},
+      {nor.data(), h.normals.data(), normals ? 3 * nv * sizeof(float) : 0},
+      {tri.data(), h.triangles.data(), 3 * nt * sizeof(std::uint32_t)},
+      {keep.data(), alive.data(), nt}};
+  Details::upload_segments(space, segments, sizeof(segments) / sizeof(segments[0]), copy_on_host_threads);
+  host_trace("post-processing: upload (uncompacted)", nt);
+  // Flags (1: used by a kept triangle; 1: kept), then their exclusive sums:
+  // each kept item's new place, and in the last entry how many are kept.
+  {
+    const std::uint8_t* k = keep.data();
+    const std::uint32_t* t = tri.data();
+    std::uint32_t* vd = vdst.data();
+    std::uint32_t* td = tdst.data();
+    Kokkos::parallel_for(
+        "nbmc::compaction::flags", Range(space, 0, nt + 1), KOKKOS_LAMBDA(const std::size_t i) {
+          if (i == nt) {
+            td[i] = 0;
+            return;
+          }
+          td[i] = k[i] ? 1u : 0u;
+          if (k[i])
+            for (int c = 0; c < 3; ++c) vd[t[3 * i + c]] = 1u;  // (the same value from every writer)
+        });
+  }
+  Details::device_exclusive_sum(space, tracker, vdst.data(), nv + 1);
+  Details::device_exclusive_sum(space, tracker, tdst.data(), nt + 1);
+  {
+    const float* p = pos.data();
+    const float* n = nor.data();
+    const std::uint32_t* vd = vdst.data();
+    float* dp = m.d_positions;
+    float* dn = m.d_normals;
+    Kokkos::parallel_for(
+        "nbmc::compaction::vertices", Range(space, 0, nv), KOKKOS_LAMBDA(const std::size_t v) {
+          const std::uint32_t d = vd[v];
+          if (vd[v + 1] == d) return;  // (not used)
+          for (int a = 0; a < 3; ++a) dp[3 * std::size_t(d) + a] = p[3 * v + a];
+          if (n)
+            for (int a = 0; a < 3; ++a) dn[3 * std::size_t(d) + a] = n[3 * v + a];
+        });
+    const std::uint32_t* t = tri.data();
+    const std::uint32_t* td = tdst.data();
+    std::uint32_t* dt = m.d_triangles;
+    Kokkos::parallel_for(
+        "nbmc::compaction::triangles", Range(space, 0, nt), KOKKOS_LAMBDA(const std::size_t i) {
+          const std::uint32_t d = td[i];
+          if (td[i + 1] == d) return;  // (removed)
+          for (int c = 0; c < 3; ++c) dt[3 * std::size_t(d) + c] = vd[t[3 * i + c]];
+        });
+  }
+  {
+    const cudaError_t e = cudaGetLastError();
+    if (e != cudaSuccess) cuda_fail(e, "mesh compaction");
+  }
+  std::uint32_t kept_v = 0, kept_t = 0;  // (the copies wait for the kernels)
+  cuda_check(cudaMemcpyAsync(&kept_v, vdst.data() + nv, sizeof kept_v, cudaMemcpyDeviceToHost, space.cuda_stream()),
+             "mesh compaction");
+  cuda_check(cudaMemcpyAsync(&kept_t, tdst.data() + nt, sizeof kept_t, cudaMemcpyDeviceToHost, space.cuda_stream()),
+             "mesh compaction");
+  space.fence();
+  host_trace("post-processing: compaction on the device", kept_t);
+  m.d_vertices = kept_v;
+  m.d_triangles_count = kept_t;
+  return true;
+#else
+  (void)m; (void)h; (void)alive; (void)tracker;
+  throw Error(7, "the CUDA backend is not compiled in");
+#endif
+}
+
 void download_particles(const void* device_xyz, std::size_t count, double* host) {
 #if defined(KOKKOS_ENABLE_CUDA)
   if (count)

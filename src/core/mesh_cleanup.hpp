@@ -1030,6 +1030,9 @@ class Cleaner {
   // Writes the surviving triangles and vertices back, compacted; returns the
   // new counts.
   std::pair<std::size_t, std::size_t> compact() { return compact_mesh(P_, N_, nv_, T_, nt_, alive_); }
+  // ... or hands the triangles' alive flags (1: kept) to whoever compacts
+  // the mesh instead; the Cleaner is done with them.
+  AliveFlags take_alive() { return std::move(alive_own_); }
 
  private:
   static constexpr std::uint32_t kNone = 0xffffffffu;
@@ -2778,9 +2781,16 @@ class Cleaner {
 // kSmallComponentCells cells are removed (0: never).
 // prebuilt: this mesh's incidence, built where it was made (may be null;
 // taken when its sizes fit: see mesh_incidence.hpp); the result is the same.
+// alive (may be null): the compaction is left to the caller, which gets one
+// flag per triangle (1: kept; the kept vertices are those the kept
+// triangles use) and arrays of the input's sizes, with the repairs'
+// positions, normals and triangles; the result's removed_vertices and
+// removed_triangles are then 0 (compact_mesh, or a copy of it elsewhere
+// with the same order, gives the mesh cleanup_mesh would have returned).
 template <class PosVec, class NormalVec, class IndexVec>
 CleanupResult cleanup_mesh(PosVec& positions, NormalVec& normals, IndexVec& triangles, double cell = 0,
-                           PrebuiltIncidence* prebuilt = nullptr) {
+                           PrebuiltIncidence* prebuilt = nullptr,
+                           AliveFlags* alive = nullptr) {
   CleanupResult r;
   const std::size_t nv = positions.size() / 3, nt = triangles.size() / 3;
   if (nt == 0) return r;
@@ -2848,6 +2858,10 @@ CleanupResult cleanup_mesh(PosVec& positions, NormalVec& normals, IndexVec& tria
   r.flips = c.flips;
   r.moves = c.moves;
   host_trace("clean-up: noise components", bad.size());
+  if (alive) {
+    *alive = c.take_alive();
+    return r;
+  }
   const auto counts = c.compact();
   host_trace("clean-up: compaction", counts.second);
   positions.resize(3 * counts.first);

@@ -15,6 +15,10 @@
 namespace nbmc {
 namespace mesh {
 
+// One flag per triangle (1: kept): cleanup_mesh's output (mesh_cleanup.hpp)
+// when its caller compacts the mesh itself (a device mesh: on the GPU).
+using AliveFlags = std::vector<std::uint8_t, NoInitAllocator<std::uint8_t>>;
+
 struct PrebuiltIncidence {
   using Indices = std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>>;
   // Per vertex v, its triangles in ascending order: incident[start[v] ..
