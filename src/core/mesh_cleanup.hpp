@@ -689,7 +689,15 @@ class Cleaner {
       return finish(repaired);
     }
     const std::uint64_t saved[4] = {collapses, flips, moves, cuts};
-    const std::size_t saved_vertices = changed_vertices_.size(), saved_triangles = changed_triangles_.size();
+    // The lists of the triangles added to vertices (add_incidence, between
+    // rounds on the main thread), allocated here on all host threads rather
+    // than by the first round's merge on the main thread alone.
+    if (extra_head_.empty()) {
+      extra_head_.resize(nv_);  // (unwritten: NoInitAllocator)
+      for_chunks(nv_, chunk_count(nv_, 65536), [&](std::size_t, std::size_t b, std::size_t e) {
+        std::fill(extra_head_.begin() + b, extra_head_.begin() + e, kNone);
+      });
+    }
     if (!slots_ || std::uint64_t(stamp_base_) + n + 2 >= kNone) {
       if (!slots_) slots_.reset(new Slot[nv_]);
       stamp_base_ = 0;
@@ -711,6 +719,8 @@ class Cleaner {
       k.collapses = k.flips = k.moves = k.cuts = 0;
       k.repaired_ = 0;
       k.skipped_ = k.skip_mismatches_ = 0;
+      k.log_.clear();
+      k.round_ends_.clear();
     }
     const std::size_t prefix = (hooks.prefix_per_thread > 0 ? hooks.prefix_per_thread : kPrefixPerThread) * threads;
     std::vector<std::uint32_t> cur, next;  // places in `bad`, ascending
@@ -726,7 +736,6 @@ class Cleaner {
     bool done = false;
     std::exception_ptr error;
     std::mutex error_mutex;
-    std::vector<Undo> pass_log;
     std::uint64_t repaired = 0, rounds = 0, lost = 0;
     SpinBarrier barrier(threads);
     // (NBMC_TRACE: the main thread's time in each step of the rounds.)
@@ -829,8 +838,11 @@ class Cleaner {
         barrier.wait();
         step(4);
         if (w != 0) continue;
-        // The main thread: take the workers' results, then the next round
-        // (done after a failure too, so that no thread waits for ever).
+        // The main thread: take the workers' counts and new incidences, then
+        // the next round (done after a failure too, so that no thread waits
+        // for ever). Their changed lists wait for the end of the pass (the
+        // next pass' list is sorted), their undo logs stay theirs (each
+        // round's end marked: see below).
         guarded([&] {
           ++rounds;
           if (rounds == hooks.undo_after_round) violation = true;
@@ -842,14 +854,9 @@ class Cleaner {
             o.repaired_ = 0;
             skipped_ += o.skipped_, skip_mismatches += o.skip_mismatches_;
             o.skipped_ = o.skip_mismatches_ = 0;
-            changed_vertices_.insert(changed_vertices_.end(), o.changed_vertices_.begin(), o.changed_vertices_.end());
-            changed_triangles_.insert(changed_triangles_.end(), o.changed_triangles_.begin(), o.changed_triangles_.end());
-            o.changed_vertices_.clear();
-            o.changed_triangles_.clear();
             for (const auto& e : o.pending_incidence_) add_incidence(e.first, e.second);
             o.pending_incidence_.clear();
-            pass_log.insert(pass_log.end(), o.log_.begin(), o.log_.end());
-            o.log_.clear();
+            o.round_ends_.push_back(o.log_.size());
           }
           if (violation) return;
           next.clear();
@@ -865,12 +872,35 @@ class Cleaner {
         step(3);
       }
     });
-    if (error) std::rethrow_exception(error);
+    auto clear_workers = [&] {
+      for (std::size_t k = 0; k < threads; ++k) {
+        Cleaner& o = *workers_[k];
+        o.log_.clear();
+        o.round_ends_.clear();
+        o.changed_vertices_.clear();
+        o.changed_triangles_.clear();
+      }
+    };
+    if (error) {
+      clear_workers();
+      std::rethrow_exception(error);
+    }
+    if (!violation)
+      for (std::size_t k = 0; k < threads; ++k) {
+        const Cleaner& o = *workers_[k];
+        changed_vertices_.insert(changed_vertices_.end(), o.changed_vertices_.begin(), o.changed_vertices_.end());
+        changed_triangles_.insert(changed_triangles_.end(), o.changed_triangles_.begin(), o.changed_triangles_.end());
+      }
     if (violation) {
-      undo(pass_log);
+      // The rounds undone last first; within a round, each worker's entries
+      // last first, the workers in any order: a round's committed repairs
+      // wrote only within their own regions, which were disjoint.
+      for (std::size_t r = workers_[0]->round_ends_.size(); r-- > 0;)
+        for (std::size_t k = 0; k < threads; ++k) {
+          const Cleaner& o = *workers_[k];
+          undo(o.log_, r > 0 ? o.round_ends_[r - 1] : 0, o.round_ends_[r]);
+        }
       collapses = saved[0], flips = saved[1], moves = saved[2], cuts = saved[3];
-      changed_vertices_.resize(saved_vertices);
-      changed_triangles_.resize(saved_triangles);
       repaired = 0;
       skipped_ = skip_mismatches_ = 0;
       // (The undone repairs' times stay on their vertices: later than any
@@ -2677,9 +2707,10 @@ class Cleaner {
   // Puts back what the entries of `log` (in the order written) changed.
   // (Entries a worker added to extra_ stay: fan() skips a triangle that no
   // longer holds the vertex, and one that does is in the vertex's lists.)
-  void undo(const std::vector<Undo>& log) {
-    for (auto it = log.rbegin(); it != log.rend(); ++it) {
-      const Undo& u = *it;
+  // Undoes log[begin, end), last entry first.
+  void undo(const std::vector<Undo>& log, std::size_t begin, std::size_t end) {
+    for (std::size_t k = end; k-- > begin;) {
+      const Undo& u = log[k];
       const std::size_t i = u.i;
       switch (u.kind) {
         case Undo::Position:
@@ -2725,7 +2756,7 @@ class Cleaner {
   using Extra = std::vector<std::pair<std::uint32_t, std::uint32_t>>;
   Bytes alive_own_, irregular_own_;
   Indices start_own_, next_own_, tail_own_, incident_own_;
-  std::vector<std::uint32_t> extra_head_own_;
+  Indices extra_head_own_;
   Extra extra_own_;
   Bytes& alive_ = alive_own_;
   Bytes& irregular_ = irregular_own_;
@@ -2733,7 +2764,7 @@ class Cleaner {
   Indices& next_ = next_own_;
   Indices& tail_ = tail_own_;
   Indices& incident_ = incident_own_;
-  std::vector<std::uint32_t>& extra_head_ = extra_head_own_;  // per vertex, into extra_ (after flips)
+  Indices& extra_head_ = extra_head_own_;  // per vertex, into extra_ (after flips)
   Extra& extra_ = extra_own_;                                 // (triangle, next entry)
   double degenerate_double_area_ = 0;
   // The constructor's scan (initial_bad_triangles).
@@ -2766,6 +2797,8 @@ class Cleaner {
   bool worker_ = false;
   std::vector<Undo> log_;
   std::vector<std::pair<std::uint32_t, std::uint32_t>> pending_incidence_;
+  // A worker's log_ sizes at the end of each round of a parallel pass.
+  std::vector<std::size_t> round_ends_;
   std::uint64_t repaired_ = 0;
   // The main Cleaner's: its workers, the reservations (per vertex, the
   // first item of the round whose region holds it; kNone: none) and the
