@@ -110,6 +110,9 @@ void download_mesh(const HostMesh& m, float* positions, float* normals, std::uin
 // h.incidence (left out where the memory budget would not hold it); and the
 // post-processed h copied back into m's device arrays (the counts only
 // shrink). On the host threads of core/parallel.hpp (any calling thread).
+// The download leaves the memory of its device buffers in nbmc's device pool
+// for the upload's: release_device_pool() after the upload (and on every
+// way out) gives it back to the driver (a no-op without CUDA).
 void download_mesh_for_postprocess(const HostMesh& m, HostMesh& h, bool incidence, MemoryTracker& tracker);
 void upload_mesh_after_postprocess(HostMesh& m, const HostMesh& h);
 // The same after a clean-up that left the compaction to its caller
@@ -118,6 +121,7 @@ void upload_mesh_after_postprocess(HostMesh& m, const HostMesh& h);
 // would have. False (m untouched) where the GPU or the memory budget has no
 // room for the uncompacted copy; the caller then compacts on the host.
 bool upload_mesh_and_compact(HostMesh& m, const HostMesh& h, const mesh::AliveFlags& alive, MemoryTracker& tracker);
+void release_device_pool();
 // Copies count particles (3 doubles each) from the CUDA device to the host.
 void download_particles(const void* device_xyz, std::size_t count, double* host);
 // Replaces a host mesh by a copy in one device allocation (NBMC_MEMORY_DEVICE).

@@ -179,6 +179,9 @@ void postprocess_device(const nbmc_params& params, HostMesh& m, mesh::Postproces
   if (m.triangle_count() == 0) return;
   const std::uint64_t device_bytes =
       mesh::mesh_bytes(m.vertex_count(), m.triangle_count(), false, m.d_normals != nullptr);
+  struct Release {
+    ~Release() { release_device_pool(); }
+  } release;  // (after the upload, and on every way out: see download_mesh_for_postprocess)
   HostMesh h;
   download_mesh_for_postprocess(m, h, params.cleanup != 0, tracker);
   host_trace("post-processing: download", m.triangle_count());

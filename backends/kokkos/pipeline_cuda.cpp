@@ -500,11 +500,17 @@ void copy_on_host_threads(char* dst, const char* src, std::size_t bytes) {
 }  // namespace
 #endif
 
+void release_device_pool() {
+#if defined(KOKKOS_ENABLE_CUDA)
+  trim_device_pool();
+#endif
+}
+
 void download_mesh_for_postprocess(const HostMesh& m, HostMesh& h, bool incidence, MemoryTracker& tracker) {
 #if defined(KOKKOS_ENABLE_CUDA)
-  struct Trim {
-    ~Trim() { trim_device_pool(); }
-  } trim;  // (the incidence's buffers)
+  // (The incidence's buffers go back to nbmc's device pool, which keeps them
+  // for the compaction's after the host's clean-up: the caller releases it,
+  // release_device_pool.)
   const std::size_t nv = m.d_vertices, nt = m.d_triangles_count;
   h.positions.resize(3 * nv);
   h.normals.resize(m.d_normals ? 3 * nv : 0);
