@@ -52,6 +52,14 @@ split)
   NBMC_TRACE=1 $N/bench/nbmc_bench $BIG --spacing 0.00484 --backend cuda --device-resident --subdomains 2x2x2 --repeat 2 > $O/trace-split-new.txt 2>&1
   grep -h "upload\|post-processing" $O/trace-split-new.txt | tail -6 | cut -c1-160
   echo "split done at $(( $(date +%s) - t0 )) s" ;;
+trace8)
+  [ -n "${OLDPID:-}" ] && wait $OLDPID; OLDPID=""
+  for v in new old; do B=$N; [ $v = old ] && B=$R/out/oldsrc/build-cuda
+    NBMC_TRACE=1 $B/bench/nbmc_bench $BIG --spacing 0.00484 --backend cuda --device-resident --repeat 8 > $O/trace8-dev-$v.txt 2>&1
+    echo "# $v"; grep -h "upload\|compaction\|clean-up rounds" $O/trace8-dev-$v.txt | grep -v "upload: " | awk '{printf "%s ", $0; if (/upload/ && !/buffers/) print ""}' | grep -o "rounds:.*merge [0-9.]*\|compaction  *n=[0-9]* *[0-9.]* ms\|device buffers n=[0-9]* *[0-9.]* ms\|upload[^n]*n=[0-9]* *[0-9.]* ms\|on the device n=[0-9]* *[0-9.]* ms" | paste -sd' ' | sed 's/ rounds/\nrounds/g' | cut -c1-330
+    grep RESULT $O/trace8-dev-$v.txt | grep -o "total=[0-9.]*\| postprocess=[0-9.]*" | paste -sd' '
+  done
+  echo "trace8 done at $(( $(date +%s) - t0 )) s" ;;
 waitold)
   [ -n "${OLDPID:-}" ] && wait $OLDPID; OLDPID=""
   echo "old waited at $(( $(date +%s) - t0 )) s" ;;
