@@ -1,8 +1,9 @@
 // SPDX-License-Identifier: MIT
 // The mesh post-processing section of include/nbmc.h: nbmc_mesh_check, and
-// the clean-up / smoothing hook of nbmc_context_reconstruct. Everything runs
-// on the host, serially, for every backend (device meshes are copied to the
-// host and back).
+// the clean-up / smoothing hook of nbmc_context_reconstruct. The steps run
+// on the host (on its threads where they are parallel), for every backend:
+// device meshes are copied to the host and back, and compacted on the GPU
+// after a clean-up that is the last step (postprocess_device).
 #include "capi_mesh.hpp"
 
 #include "backends.hpp"
