@@ -929,6 +929,10 @@ TEST(MeshCleanup, ParallelRepairsMatchSerial) {
   const TestMesh sphere = pinched_sphere();
   const CheckResult before = sphere.check();
   ASSERT_GT(before.degenerate_triangles + before.sliver_triangles, 1000u);
+  // What the lists after the passes looked at (the list before, the changed
+  // vertices and triangles): at any thread count the serial run's (a
+  // parallel pass' changes are taken once, by the pass after it).
+  std::uint64_t looked_at = 0;
   auto clean = [&](std::size_t threads, std::size_t undo_after_round, std::size_t prefix,
                    nbmc::mesh::CleanupResult& r, bool check_skips = false) {
     TestMesh m = sphere;
@@ -950,10 +954,13 @@ TEST(MeshCleanup, ParallelRepairsMatchSerial) {
     repair_pass_hooks().writes_outside = done.writes_outside;
     repair_pass_hooks().skipped = done.skipped;
     repair_pass_hooks().skip_mismatches = done.skip_mismatches;
+    looked_at = done.looked_at - saved.looked_at;
     return m;
   };
   nbmc::mesh::CleanupResult r1;
   const TestMesh serial = clean(1, 0, 0, r1);
+  const std::uint64_t serial_looked_at = looked_at;
+  EXPECT_GT(serial_looked_at, 0u);
   EXPECT_GT(r1.moves, 0u);
   EXPECT_GT(r1.flips, 0u);
   EXPECT_GT(r1.collapses, 0u);
@@ -967,6 +974,7 @@ TEST(MeshCleanup, ParallelRepairsMatchSerial) {
     EXPECT_EQ(m.t, serial.t) << threads << " threads, " << prefix << " per round";
     EXPECT_EQ(m.p, serial.p) << threads << " threads, " << prefix << " per round";
     EXPECT_EQ(m.n, serial.n) << threads << " threads, " << prefix << " per round";
+    EXPECT_EQ(looked_at, serial_looked_at) << threads << " threads, " << prefix << " per round";
     expect_same_counts(r, r1);
   }
   {
@@ -975,6 +983,7 @@ TEST(MeshCleanup, ParallelRepairsMatchSerial) {
     EXPECT_EQ(m.t, serial.t);
     EXPECT_EQ(m.p, serial.p);
     EXPECT_EQ(m.n, serial.n);
+    EXPECT_EQ(looked_at, serial_looked_at);
     EXPECT_EQ(r.collapses + r.flips + r.moves + r.cuts, r1.collapses + r1.flips + r1.moves + r1.cuts);
   }
   // Skipped retries (a triangle whose repair failed, nothing in its region

@@ -204,6 +204,10 @@ struct RepairPassHooks {
   // in skip_mismatches if that succeeds (it must never).
   bool check_skips = false;
   std::uint64_t skipped = 0, skip_mismatches = 0;
+  // Entries bad_triangles_after looked at while min_items > 0 (added to):
+  // the list before, the changed vertices and triangles; the same at any
+  // thread count.
+  std::uint64_t looked_at = 0;
 };
 inline RepairPassHooks& repair_pass_hooks() {
   static RepairPassHooks hooks;
@@ -510,6 +514,7 @@ class Cleaner {
     const std::size_t nb = before.size(), ncv = changed_vertices_.size(), nct = changed_triangles_.size();
     const std::size_t total = nb + ncv + nct;
     const std::size_t min_items = repair_pass_hooks().min_items;
+    if (min_items > 0) repair_pass_hooks().looked_at += total;  // (a test's, as in repair_pass)
     const std::size_t chunks = chunk_count(total, min_items > 0 ? min_items : kListMinItems);
     if (chunks > 1) {
       std::vector<BadList> part(chunks);
@@ -891,7 +896,7 @@ class Cleaner {
         changed_vertices_.insert(changed_vertices_.end(), o.changed_vertices_.begin(), o.changed_vertices_.end());
         changed_triangles_.insert(changed_triangles_.end(), o.changed_triangles_.begin(), o.changed_triangles_.end());
       }
-    if (violation) {
+    else {
       // The rounds undone last first; within a round, each worker's entries
       // last first, the workers in any order: a round's committed repairs
       // wrote only within their own regions, which were disjoint.
@@ -900,6 +905,10 @@ class Cleaner {
           const Cleaner& o = *workers_[k];
           undo(o.log_, r > 0 ? o.round_ends_[r - 1] : 0, o.round_ends_[r]);
         }
+    }
+    // (Taken or undone: a later pass' workers start empty.)
+    clear_workers();
+    if (violation) {
       collapses = saved[0], flips = saved[1], moves = saved[2], cuts = saved[3];
       repaired = 0;
       skipped_ = skip_mismatches_ = 0;
