@@ -951,6 +951,7 @@ TEST(MeshCleanup, ParallelRepairsMatchSerial) {
     repair_pass_hooks().parallel_passes = done.parallel_passes;
     repair_pass_hooks().rounds = done.rounds;
     repair_pass_hooks().lost = done.lost;
+    repair_pass_hooks().kept_regions = done.kept_regions;
     repair_pass_hooks().writes_outside = done.writes_outside;
     repair_pass_hooks().skipped = done.skipped;
     repair_pass_hooks().skip_mismatches = done.skip_mismatches;
@@ -1005,13 +1006,15 @@ TEST(MeshCleanup, ParallelRepairsMatchSerial) {
   EXPECT_GT(h.parallel_passes, at_start.parallel_passes);
   EXPECT_GT(h.rounds, h.parallel_passes);
   EXPECT_GT(h.lost, at_start.lost);
+  EXPECT_GT(h.kept_regions, at_start.kept_regions);  // (losers' regions taken to the next round)
   EXPECT_EQ(h.writes_outside, at_start.writes_outside);
   std::printf("parallel repairs: %llu bad triangles, %llu moves, %llu flips, %llu collapses, %llu cuts; "
-              "%llu parallel passes, %llu rounds, %llu lost; %llu retries skipped\n",
+              "%llu parallel passes, %llu rounds, %llu lost (%llu regions kept); %llu retries skipped\n",
               (unsigned long long)(before.degenerate_triangles + before.sliver_triangles),
               (unsigned long long)r1.moves, (unsigned long long)r1.flips, (unsigned long long)r1.collapses,
               (unsigned long long)r1.cuts, (unsigned long long)(h.parallel_passes - at_start.parallel_passes),
               (unsigned long long)(h.rounds - at_start.rounds), (unsigned long long)(h.lost - at_start.lost),
+              (unsigned long long)(h.kept_regions - at_start.kept_regions),
               (unsigned long long)(h.skipped - at_start.skipped));
 }
 

@@ -117,7 +117,8 @@
 // its place in the list; an item holding its whole region commits, in
 // parallel with the other such items, and the others wait for the next
 // round, so each item runs after every earlier item whose region meets
-// its own. A stamp per vertex (the last item that committed with it in its
+// its own (a waiting item keeps its region unless an item that wrote
+// something committed beside it). A stamp per vertex (the last item that committed with it in its
 // region) catches a region that grew, after a later item committed beside
 // it, into that item's; the pass is then undone (per-thread undo logs) and
 // run serially. A vertex's list of triangles may still name one that a
@@ -197,8 +198,8 @@ struct RepairPassHooks {
   bool check_writes = false;
   std::uint64_t writes_outside = 0;
   // What the parallel passes did while min_items > 0 (added to): passes,
-  // rounds, items that lost.
-  std::uint64_t parallel_passes = 0, rounds = 0, lost = 0;
+  // rounds, items that lost, lost items' regions kept for the next round.
+  std::uint64_t parallel_passes = 0, rounds = 0, lost = 0, kept_regions = 0;
   // Items skipped because their earlier failure must repeat (added to,
   // always). With check_skips, such an item is repaired anyway and counted
   // in skip_mismatches if that succeeds (it must never).
@@ -703,18 +704,21 @@ class Cleaner {
         std::fill(extra_head_.begin() + b, extra_head_.begin() + e, kNone);
       });
     }
-    if (!slots_ || std::uint64_t(stamp_base_) + n + 2 >= kNone) {
+    // (A pass has at most n rounds: each round's first item wins.)
+    if (!slots_ || std::uint64_t(stamp_base_) + n + 2 >= kNone || std::uint64_t(round_base_) + n + 2 >= kNone) {
       if (!slots_) slots_.reset(new Slot[nv_]);
-      stamp_base_ = 0;
+      stamp_base_ = round_base_ = 0;
       for_chunks(nv_, chunk_count(nv_, 65536), [&](std::size_t, std::size_t b, std::size_t e) {
         for (std::size_t x = b; x < e; ++x) {
           slots_[x].reserve.store(kNone, std::memory_order_relaxed);
           slots_[x].stamp = 0;
+          slots_[x].wrote = 0;
         }
       });
     }
     const std::uint32_t base = stamp_base_ + 1;  // item i's stamp: base + i
     stamp_base_ = base + std::uint32_t(n);
+    std::uint32_t round_id = round_base_ + 1;  // the current round's (slots_' wrote)
     while (workers_.size() < threads) workers_.emplace_back(new Cleaner(*this, WorkerTag{}));
     for (std::size_t w = 0; w < threads; ++w) {
       Cleaner& k = *workers_[w];
@@ -730,7 +734,14 @@ class Cleaner {
     const std::size_t prefix = (hooks.prefix_per_thread > 0 ? hooks.prefix_per_thread : kPrefixPerThread) * threads;
     std::vector<std::uint32_t> cur, next;  // places in `bad`, ascending
     std::vector<std::vector<std::uint32_t>> reg(prefix);
-    std::vector<std::uint8_t> win(prefix);
+    // carried[i]: reg[i] is the region item cur[i] found in the round
+    // before, when it lost. It is still its region unless an item that
+    // wrote something committed in that round with a vertex of it in its
+    // own region (slots_' wrote): region() reads only the positions, the
+    // triangles and the lists of its vertices' fans, and a repair writes
+    // only within its own region (every write touches a vertex of it).
+    std::vector<std::uint8_t> win(prefix), carried(prefix, 0);
+    std::atomic<std::uint64_t> reused{0};
     std::size_t fresh = 0;  // the first item not yet in a round
     auto refill = [&] {
       while (cur.size() < prefix && fresh < n) cur.push_back(std::uint32_t(fresh++));
@@ -794,9 +805,20 @@ class Cleaner {
         if (done) return;
         // Reserve.
         guarded([&] {
+          std::uint64_t kept = 0;
           each_item(cursor_a.get(), [&](std::size_t i) {
             const std::uint32_t pos = cur[i];
-            me.region(std::get<2>(bad[pos]), reg[i]);
+            bool find = true;
+            if (carried[i]) {
+              find = false;
+              for (std::uint32_t x : reg[i])
+                if (slots_[x].wrote == round_id - 1) {
+                  find = true;
+                  break;
+                }
+              kept += find ? 0 : 1;
+            }
+            if (find) me.region(std::get<2>(bad[pos]), reg[i]);
             for (std::uint32_t x : reg[i]) {
               std::atomic<std::uint32_t>& r = slots_[x].reserve;
               std::uint32_t old = r.load(std::memory_order_relaxed);
@@ -804,6 +826,7 @@ class Cleaner {
               }
             }
           });
+          if (kept > 0) reused.fetch_add(kept, std::memory_order_relaxed);
         });
         step(0);
         barrier.wait();
@@ -826,7 +849,11 @@ class Cleaner {
             if (violation.load(std::memory_order_relaxed)) return;  // (the pass is undone)
             const std::size_t logged = me.log_.size();
             me.repaired_ += attempt(me, pos, &reg[i]) ? 1 : 0;
-            for (std::uint32_t x : reg[i]) slots_[x].stamp = stamp;
+            const bool wrote = me.log_.size() > logged;
+            for (std::uint32_t x : reg[i]) {
+              slots_[x].stamp = stamp;
+              if (wrote) slots_[x].wrote = round_id;
+            }
             if (hooks.check_writes) writes_outside += me.writes_outside(reg[i], logged);
           });
         });
@@ -866,10 +893,16 @@ class Cleaner {
           if (violation) return;
           next.clear();
           for (std::size_t i = 0; i < cur.size(); ++i)
-            if (!win[i]) next.push_back(cur[i]);
+            if (!win[i]) {  // (the losers first, in order, with their regions)
+              std::swap(reg[next.size()], reg[i]);
+              carried[next.size()] = 1;
+              next.push_back(cur[i]);
+            }
           lost += next.size();
+          std::fill(carried.begin() + next.size(), carried.end(), std::uint8_t(0));
           cur.swap(next);
           refill();
+          ++round_id;
           done = cur.empty();
           reset_cursors();
         });
@@ -877,6 +910,7 @@ class Cleaner {
         step(3);
       }
     });
+    round_base_ = round_id;
     auto clear_workers = [&] {
       for (std::size_t k = 0; k < threads; ++k) {
         Cleaner& o = *workers_[k];
@@ -922,13 +956,15 @@ class Cleaner {
       ++h.parallel_passes;
       h.rounds += rounds;
       h.lost += lost;
+      h.kept_regions += reused.load();
       h.writes_outside += writes_outside;
     }
     if (host_trace_on()) {
       std::fprintf(stderr,
-                   "[nbmc trace] clean-up rounds: items=%zu threads=%zu rounds=%llu lost=%llu (%.1f%%)%s; main "
-                   "thread: reserve %.3f, commit %.3f, release %.3f, merge %.3f, waiting %.3f ms\n",
+                   "[nbmc trace] clean-up rounds: items=%zu threads=%zu rounds=%llu lost=%llu (%.1f%%, regions kept "
+                   "%llu)%s; main thread: reserve %.3f, commit %.3f, release %.3f, merge %.3f, waiting %.3f ms\n",
                    n, threads, (unsigned long long)rounds, (unsigned long long)lost, 100.0 * double(lost) / double(n),
+                   (unsigned long long)reused.load(),
                    violation ? " (undone, run serially)" : "", step_ms[0],
                    step_ms[1], step_ms[2], step_ms[3], step_ms[4]);
     }
@@ -2827,12 +2863,14 @@ class Cleaner {
   std::vector<std::pair<std::uint32_t, std::uint32_t>> failed_;
   int failed_key_ = -1;
   std::uint64_t skipped_ = 0, skip_mismatches_ = 0;
+  // ... and the last round (round_base_ + its number) in which an item
+  // that wrote something committed with the vertex in its region.
   struct Slot {
     std::atomic<std::uint32_t> reserve;
-    std::uint32_t stamp;
+    std::uint32_t stamp, wrote;
   };
-  std::unique_ptr<Slot[]> slots_;  // per vertex (one cache line for both)
-  std::uint32_t stamp_base_ = 0;
+  std::unique_ptr<Slot[]> slots_;  // per vertex (one cache line for all three)
+  std::uint32_t stamp_base_ = 0, round_base_ = 0;
 };
 
 }  // namespace detail
