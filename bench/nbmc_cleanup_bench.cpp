@@ -6,9 +6,12 @@
 // triangles: the same on every thread count). With NBMC_TRACE=1 the
 // clean-up's stages and passes are traced.
 //
-//   nbmc_cleanup_bench RAW.ply CELL THREADS [K]
+//   nbmc_cleanup_bench RAW.ply CELL THREADS [K] [left]
 //
 // CELL: the marching-cubes cell edge (the small-component test's; 0: none).
+// left: as for a mesh in GPU memory, the clean-up leaves the compaction to
+// its caller and lists what it wrote (cleanup_mesh's `alive` and `changed`);
+// the compaction (compact_mesh, untimed) then gives the same hash.
 #include "core/mesh_cleanup.hpp"
 #include "io/mesh.hpp"
 
@@ -35,13 +38,14 @@ double cpu_seconds() {
 
 int main(int argc, char** argv) {
   if (argc < 4) {
-    std::fprintf(stderr, "usage: nbmc_cleanup_bench RAW.ply CELL THREADS [K]\n");
+    std::fprintf(stderr, "usage: nbmc_cleanup_bench RAW.ply CELL THREADS [K] [left]\n");
     return 2;
   }
   const nbmc::io::Mesh m = nbmc::io::read_mesh_ply(argv[1]);
   const double cell = std::atof(argv[2]);
   const std::size_t threads = std::size_t(std::atol(argv[3]));
   const int repeat = argc > 4 ? std::atoi(argv[4]) : 3;
+  const bool left = argc > 5 && std::strcmp(argv[5], "left") == 0;
   const nbmc::ScopedHostThreads limit(threads);
   for (int r = 0; r < repeat; ++r) {
     std::vector<float> p = m.positions, normals = m.normals;
@@ -49,10 +53,21 @@ int main(int argc, char** argv) {
     const long f0 = minor_faults();
     const double c0 = cpu_seconds();
     const auto w0 = std::chrono::steady_clock::now();
-    const nbmc::mesh::CleanupResult c = nbmc::mesh::cleanup_mesh(p, normals, t, cell);
+    nbmc::mesh::AliveFlags alive;
+    nbmc::mesh::ChangedEntries changed;
+    const nbmc::mesh::CleanupResult c =
+        nbmc::mesh::cleanup_mesh(p, normals, t, cell, nullptr, left ? &alive : nullptr, left ? &changed : nullptr);
     const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - w0).count();
     const double cpu = cpu_seconds() - c0;
     const long faults = minor_faults() - f0;
+    if (left) {
+      const auto kept = nbmc::mesh::compact_mesh(p.data(), normals.empty() ? nullptr : normals.data(), p.size() / 3,
+                                                 t.data(), t.size() / 3, alive);
+      p.resize(3 * kept.first);
+      if (!normals.empty()) normals.resize(3 * kept.first);
+      t.resize(3 * kept.second);
+      std::printf("changed: %zu vertices, %zu triangles\n", changed.vertices.size(), changed.triangles.size());
+    }
     std::uint64_t h = 1469598103934665603ull;  // FNV-1a over the positions' bits and the indices
     for (float x : p) {
       std::uint32_t b;

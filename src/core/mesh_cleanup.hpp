@@ -243,11 +243,18 @@ class Cleaner {
  public:
   // prebuilt: the incidence and the maybe-bad bits of this mesh, built
   // where it was made (mesh_incidence.hpp; may be null). Taken (moved
-  // from) when its sizes fit the mesh.
+  // from) when its sizes fit the mesh. track_changes: keep what the repairs
+  // write (changed_entries).
   Cleaner(Real* positions, float* normals, std::size_t nv, std::uint32_t* tri, std::size_t nt,
-          PrebuiltIncidence* prebuilt = nullptr)
+          PrebuiltIncidence* prebuilt = nullptr, bool track_changes = false)
       : P_(positions), N_(normals), nv_(nv), T_(tri), nt_(nt), alive_own_(nt), irregular_own_(nv), next_own_(nv),
         tail_own_(nv), expanded_(nv) {
+    if (track_changes) {  // (unwritten: cleared below with the other arrays)
+      vchanged_own_.resize(nv);
+      tchanged_own_.resize(nt);
+      vchanged_ = vchanged_own_.data();
+      tchanged_ = tchanged_own_.data();
+    }
     // The per-triangle and per-vertex arrays are left unwritten by their
     // allocation and filled here on all host threads: the kernel maps (and
     // clears) a fresh array's pages when they are first written, a few
@@ -265,6 +272,7 @@ class Cleaner {
         irregular_[v] = kFanUnknown;  // (found when first asked: irregular())
         expanded_[v] = 0;
       }
+      if (vchanged_) std::fill(vchanged_ + b, vchanged_ + e, std::uint8_t(0));
       // As bounding_extent: every chunk starts from vertex 0 (so a NaN
       // coordinate is ignored, or not, exactly as in its serial loop).
       if (nv == 0) return;  // (one empty chunk; no vertex 0 to read)
@@ -298,6 +306,7 @@ class Cleaner {
       for_chunks(nt, tparts, [&](std::size_t k, std::size_t b, std::size_t e) {
         std::fill(alive_.begin() + b, alive_.begin() + e, std::uint8_t(1));
         std::fill(state_.begin() + b, state_.begin() + e, kUnseen);
+        if (tchanged_) std::fill(tchanged_ + b, tchanged_ + e, std::uint8_t(0));
         for (std::size_t t = b; t < e;) {  // (the set bits of [b, e), a word at a time)
           const std::uint32_t w = bits[t >> 5] >> (t & 31);
           if (w == 0) {
@@ -360,6 +369,7 @@ class Cleaner {
       for_chunks(nt, tparts, [&](std::size_t k, std::size_t b, std::size_t e) {
         std::fill(alive_.begin() + b, alive_.begin() + e, std::uint8_t(1));
         std::fill(state_.begin() + b, state_.begin() + e, kUnseen);
+        if (tchanged_) std::fill(tchanged_ + b, tchanged_ + e, std::uint8_t(0));
         if (sorted) {
           std::vector<std::size_t> w(parts);
           for (std::size_t r = 0; r < parts; ++r) w[r] = at[r * tparts + k];
@@ -418,7 +428,7 @@ class Cleaner {
       : P_(m.P_), N_(m.N_), nv_(m.nv_), T_(m.T_), nt_(m.nt_), alive_(m.alive_own_), irregular_(m.irregular_own_),
         start_(m.start_own_), next_(m.next_own_), tail_(m.tail_own_), incident_(m.incident_own_),
         extra_head_(m.extra_head_own_), extra_(m.extra_own_), degenerate_double_area_(m.degenerate_double_area_),
-        worker_(true), mod_(m.mod_own_) {}
+        worker_(true), mod_(m.mod_own_), vchanged_(m.vchanged_), tchanged_(m.tchanged_) {}
 
   std::uint64_t collapses = 0, flips = 0, moves = 0, cuts = 0;
   // Largest turn of a triangle's normal a repair may cause (cosine).
@@ -1144,6 +1154,17 @@ class Cleaner {
   // ... or hands the triangles' alive flags (1: kept) to whoever compacts
   // the mesh instead; the Cleaner is done with them.
   AliveFlags take_alive() { return std::move(alive_own_); }
+  // What the repairs wrote (with track_changes; else nothing): each entry
+  // once, in no particular order (each Cleaner's in the order of its first
+  // writes).
+  void changed_entries(ChangedEntries& out) const {
+    out.vertices = vlist_;
+    out.triangles = tlist_;
+    for (const auto& w : workers_) {
+      out.vertices.insert(out.vertices.end(), w->vlist_.begin(), w->vlist_.end());
+      out.triangles.insert(out.triangles.end(), w->tlist_.begin(), w->tlist_.end());
+    }
+  }
 
  private:
   static constexpr std::uint32_t kNone = 0xffffffffu;
@@ -2761,15 +2782,33 @@ class Cleaner {
   void touch_triangle(std::uint32_t t) {
     for (int k = 0; k < 3; ++k) touch(T_[3 * std::size_t(t) + k]);
   }
+  // The first write of a vertex's position or normal, or of a triangle's
+  // vertices (with track_changes): flagged and listed by the Cleaner that
+  // writes it (a round's regions are disjoint: no other writes it then).
+  void changed_vertex(std::uint32_t v) {
+    if (vchanged_ && !vchanged_[v]) {
+      vchanged_[v] = 1;
+      vlist_.push_back(v);
+    }
+  }
+  void changed_triangle(std::uint32_t t) {
+    if (tchanged_ && !tchanged_[t]) {
+      tchanged_[t] = 1;
+      tlist_.push_back(t);
+    }
+  }
   void log_position(std::uint32_t v) {
+    changed_vertex(v);
     touch(v);
     if (worker_) log_.push_back({Undo::Position, v, {double(P_[3 * std::size_t(v)]), double(P_[3 * std::size_t(v) + 1]), double(P_[3 * std::size_t(v) + 2])}});
   }
   void log_normal(std::uint32_t v) {
+    changed_vertex(v);
     touch(v);
     if (worker_) log_.push_back({Undo::Normal, v, {double(N_[3 * std::size_t(v)]), double(N_[3 * std::size_t(v) + 1]), double(N_[3 * std::size_t(v) + 2])}});
   }
   void log_triangle(std::uint32_t t) {
+    changed_triangle(t);
     touch_triangle(t);
     if (worker_) log_.push_back({Undo::Triangle, t, {double(T_[3 * std::size_t(t)]), double(T_[3 * std::size_t(t) + 1]), double(T_[3 * std::size_t(t) + 2])}});
   }
@@ -2916,6 +2955,13 @@ class Cleaner {
   std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>> mod_own_;
   std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>>& mod_ = mod_own_;
   std::uint32_t now_ = 0, time_next_ = 1;
+  // With track_changes: per vertex, its position or normal was written; per
+  // triangle, its vertices were (the main Cleaner's flags, null: not kept);
+  // and each Cleaner's list of what it flagged.
+  std::vector<std::uint8_t, NoInitAllocator<std::uint8_t>> vchanged_own_, tchanged_own_;
+  std::uint8_t* vchanged_ = nullptr;
+  std::uint8_t* tchanged_ = nullptr;
+  std::vector<std::uint32_t> vlist_, tlist_;
   std::vector<std::uint32_t> outcome_, region_;
   std::vector<std::pair<std::uint32_t, std::uint32_t>> failed_;
   int failed_key_ = -1;
@@ -2946,17 +2992,19 @@ class Cleaner {
 // positions, normals and triangles; the result's removed_vertices and
 // removed_triangles are then 0 (compact_mesh, or a copy of it elsewhere
 // with the same order, gives the mesh cleanup_mesh would have returned).
+// changed (may be null; only with alive): what the clean-up wrote, for a
+// caller that holds the input elsewhere and copies back only that.
 template <class PosVec, class NormalVec, class IndexVec>
 CleanupResult cleanup_mesh(PosVec& positions, NormalVec& normals, IndexVec& triangles, double cell = 0,
                            PrebuiltIncidence* prebuilt = nullptr,
-                           AliveFlags* alive = nullptr) {
+                           AliveFlags* alive = nullptr, ChangedEntries* changed = nullptr) {
   CleanupResult r;
   const std::size_t nv = positions.size() / 3, nt = triangles.size() / 3;
   if (nt == 0) return r;
   const bool has_normals = !normals.empty() && normals.size() == positions.size();
   host_trace("clean-up: start", nt);
   detail::Cleaner<typename PosVec::value_type> c(positions.data(), has_normals ? normals.data() : nullptr, nv, triangles.data(), nt,
-                                                 prebuilt);
+                                                 prebuilt, alive && changed);
   // Passes until nothing more can be repaired; then again with a looser
   // limit on the normals' turn for what is left (folds stay excluded);
   // then, for what is still left, with the last resorts (collapses that
@@ -3018,6 +3066,10 @@ CleanupResult cleanup_mesh(PosVec& positions, NormalVec& normals, IndexVec& tria
   r.moves = c.moves;
   host_trace("clean-up: noise components", bad.size());
   if (alive) {
+    if (changed) {
+      c.changed_entries(*changed);
+      host_trace("clean-up: changed entries", changed->vertices.size() + changed->triangles.size());
+    }
     *alive = c.take_alive();
     return r;
   }

@@ -18,6 +18,16 @@ namespace mesh {
 // One flag per triangle (1: kept): cleanup_mesh's output (mesh_cleanup.hpp)
 // when its caller compacts the mesh itself (a device mesh: on the GPU).
 using AliveFlags = std::vector<std::uint8_t, NoInitAllocator<std::uint8_t>>;
+// What a clean-up that leaves the compaction to its caller wrote
+// (mesh_cleanup.hpp, cleanup_mesh's `changed`), each entry once, in no
+// particular order: the vertices whose position or normal it wrote and the
+// triangles whose vertices it wrote.
+// Everything else is as it was (every write of a repair goes through the
+// Cleaner's log_ functions, which set the flags these lists are made of); a
+// write that was undone stays listed.
+struct ChangedEntries {
+  std::vector<std::uint32_t> vertices, triangles;
+};
 
 struct PrebuiltIncidence {
   using Indices = std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>>;
