@@ -120,7 +120,11 @@ void upload_mesh_after_postprocess(HostMesh& m, const HostMesh& h);
 // triangle): the GPU compacts, into m's arrays, exactly as compact_mesh
 // would have. False (m untouched) where the GPU or the memory budget has no
 // room for the uncompacted copy; the caller then compacts on the host.
-bool upload_mesh_and_compact(HostMesh& m, const HostMesh& h, const mesh::AliveFlags& alive, MemoryTracker& tracker);
+// changed (may be null): what the clean-up wrote (cleanup_mesh's
+// `changed`); m's arrays still hold the mesh h was downloaded from, so only
+// those entries and the flags are copied.
+bool upload_mesh_and_compact(HostMesh& m, const HostMesh& h, const mesh::AliveFlags& alive,
+                             const mesh::ChangedEntries* changed, MemoryTracker& tracker);
 void release_device_pool();
 // Copies count particles (3 doubles each) from the CUDA device to the host.
 void download_particles(const void* device_xyz, std::size_t count, double* host);
