@@ -59,6 +59,17 @@ benchdr)
   } > $O/benchdr.txt 2>&1
   grep -A1 "^# " $O/benchdr.txt | grep -o "^# .*\|total=[0-9.]*\| postprocess=[0-9.]*" | paste -sd' ' | sed 's/# /\n/g'
   echo "benchdr done at $(( $(date +%s) - t0 )) s" ;;
+scaling)  # the clean-up alone on the host threads: raw meshes, 1-16 threads
+  for m in ssp07 yt10; do
+    $N/src/cli/nbmc reconstruct $BIG --spacing 0.00484 --backend cuda --method $m --no-cleanup -o /tmp/raw-$m.ply > /dev/null 2>&1 || echo "raw $m failed"
+    for t in 1 2 4 8 16; do
+      NBMC_TRACE=1 $N/bench/nbmc_cleanup_bench /tmp/raw-$m.ply 0.00242 $t 3 > $L/scal-$m-$t.txt 2>&1
+      echo "# $m threads=$t $(grep CLEANUP $L/scal-$m-$t.txt | grep -o 'wall=[0-9.]*' | paste -sd' ') $(grep 'clean-up: repairs' $L/scal-$m-$t.txt | tail -1 | grep -o '[0-9.]* ms')"
+      awk '/clean-up: start/{b=""} /clean-up rounds|clean-up pass|clean-up: [a-z]/{b=b $0 "\n"} END{printf "%s", b}' $L/scal-$m-$t.txt | cut -c1-200
+    done
+  done > $O/scaling.txt 2>&1
+  grep "^#\|items=9772\|items=15851" $O/scaling.txt | cut -c1-220
+  echo "scaling done at $(( $(date +%s) - t0 )) s" ;;
 bench)
   {
   for round in 1 2 3; do
