@@ -915,68 +915,6 @@ TEST(MeshCleanup, CompactionLeftToTheCallerGivesTheSameMesh) {
   }
 }
 
-// A clean-up whose caller compacts (a device mesh) can also list what it
-// wrote (cleanup_mesh's `changed`): every vertex and triangle it leaves
-// different from the input is listed (once), so that the input with
-// only those entries copied over, then compacted, is the mesh of a clean-up
-// that compacts itself. Serially and with parallel passes (their workers
-// write the flags too), once with a pass undone (its writes stay listed).
-TEST(MeshCleanup, ChangedEntriesListEverythingTheCleanUpWrote) {
-  using nbmc::mesh::detail::repair_pass_hooks;
-  TestMesh input = pinched_sphere();
-  input.n.resize(input.p.size());
-  for (std::size_t i = 0; i < input.p.size(); ++i) input.n[i] = 0.25f * input.p[i] + float(i % 7);
-  TestMesh own = input;
-  nbmc::mesh::cleanup_mesh(own.p, own.n, own.t, 0.05);
-  const std::size_t nv = input.p.size() / 3, nt = input.t.size() / 3;
-  const std::size_t runs[][2] = {{1, 0}, {3, 0}, {8, 0}, {4, 2}};  // threads, pass undone after this round
-  for (const auto& run : runs) {
-    const auto saved = repair_pass_hooks();
-    repair_pass_hooks().min_items = 4;
-    repair_pass_hooks().undo_after_round = run[1];
-    TestMesh left = input;
-    nbmc::mesh::AliveFlags alive;
-    nbmc::mesh::ChangedEntries changed;
-    {
-      nbmc::ScopedHostThreads limit(run[0]);
-      nbmc::mesh::cleanup_mesh(left.p, left.n, left.t, 0.05, nullptr, &alive, &changed);
-    }
-    const auto done = repair_pass_hooks();
-    repair_pass_hooks() = saved;
-    if (run[0] > 1) EXPECT_GT(done.parallel_passes, saved.parallel_passes) << run[0] << " threads";
-    std::vector<std::uint32_t> cv = changed.vertices, ct = changed.triangles;
-    ASSERT_FALSE(cv.empty());
-    ASSERT_FALSE(ct.empty());
-    EXPECT_LT(cv.size(), nv);
-    EXPECT_LT(ct.size(), nt);
-    std::sort(cv.begin(), cv.end());
-    std::sort(ct.begin(), ct.end());
-    EXPECT_TRUE(std::adjacent_find(cv.begin(), cv.end()) == cv.end()) << "a vertex listed twice";
-    EXPECT_TRUE(std::adjacent_find(ct.begin(), ct.end()) == ct.end()) << "a triangle listed twice";
-    ASSERT_LT(cv.back(), nv);
-    ASSERT_LT(ct.back(), nt);
-    // The input, with the listed entries copied over from the clean-up's.
-    TestMesh copied = input;
-    for (const std::uint32_t v : cv)
-      for (int a = 0; a < 3; ++a) {
-        copied.p[3 * std::size_t(v) + a] = left.p[3 * std::size_t(v) + a];
-        copied.n[3 * std::size_t(v) + a] = left.n[3 * std::size_t(v) + a];
-      }
-    for (const std::uint32_t t : ct)
-      for (int c = 0; c < 3; ++c) copied.t[3 * std::size_t(t) + c] = left.t[3 * std::size_t(t) + c];
-    EXPECT_EQ(copied.p, left.p) << run[0] << " threads";
-    EXPECT_EQ(copied.n, left.n) << run[0] << " threads";
-    EXPECT_EQ(copied.t, left.t) << run[0] << " threads";
-    const auto kept = nbmc::mesh::compact_mesh(copied.p.data(), copied.n.data(), nv, copied.t.data(), nt, alive);
-    copied.p.resize(3 * kept.first);
-    copied.n.resize(3 * kept.first);
-    copied.t.resize(3 * kept.second);
-    EXPECT_EQ(copied.p, own.p) << run[0] << " threads";
-    EXPECT_EQ(copied.n, own.n) << run[0] << " threads";
-    EXPECT_EQ(copied.t, own.t) << run[0] << " threads";
-  }
-}
-
 // The repairs on several host threads (deterministic reservations) give
 // exactly the serial repairs' mesh: a sphere with many pinches side by side
 // (needles, caps, pinched holes with and without a cap, so that moves,
@@ -1193,6 +1131,73 @@ TEST(MeshCleanup, PrebuiltIncidenceIsTheCleanersOwn) {
     std::size_t set = 0;
     for (std::size_t t = 0; t < nt; ++t) set += (inc.maybe_bad[t / 32] >> (t % 32)) & 1u;
     EXPECT_EQ(set, nt);
+  }
+}
+
+// A clean-up whose caller compacts (a device mesh) can also list what it
+// wrote (cleanup_mesh's `changed`): every vertex and triangle it leaves
+// different from the input is listed (once), so that the input with
+// only those entries copied over, then compacted, is the mesh of a clean-up
+// that compacts itself. Serially and with parallel passes (their workers
+// write the flags too), once with a pass undone (its writes stay listed),
+// and from a prebuilt incidence (the flags cleared in its own loop).
+TEST(MeshCleanup, ChangedEntriesListEverythingTheCleanUpWrote) {
+  using nbmc::mesh::detail::repair_pass_hooks;
+  TestMesh input = pinched_sphere();
+  input.n.resize(input.p.size());
+  for (std::size_t i = 0; i < input.p.size(); ++i) input.n[i] = 0.25f * input.p[i] + float(i % 7);
+  TestMesh own = input;
+  nbmc::mesh::cleanup_mesh(own.p, own.n, own.t, 0.05);
+  const std::size_t nv = input.p.size() / 3, nt = input.t.size() / 3;
+  // threads, pass undone after this round, prebuilt incidence
+  const std::size_t runs[][3] = {{1, 0, 0}, {3, 0, 0}, {8, 0, 0}, {4, 2, 0}, {1, 0, 1}, {3, 0, 1}};
+  for (const auto& run : runs) {
+    const auto saved = repair_pass_hooks();
+    repair_pass_hooks().min_items = 4;
+    repair_pass_hooks().undo_after_round = run[1];
+    TestMesh left = input;
+    nbmc::mesh::AliveFlags alive;
+    nbmc::mesh::ChangedEntries changed;
+    nbmc::mesh::PrebuiltIncidence inc;
+    if (run[2]) inc = kokkos_incidence(input.p, input.t);
+    {
+      nbmc::ScopedHostThreads limit(run[0]);
+      nbmc::mesh::cleanup_mesh(left.p, left.n, left.t, 0.05, run[2] ? &inc : nullptr, &alive, &changed);
+    }
+    if (run[2]) EXPECT_TRUE(inc.empty());  // (taken)
+    const auto done = repair_pass_hooks();
+    repair_pass_hooks() = saved;
+    if (run[0] > 1) EXPECT_GT(done.parallel_passes, saved.parallel_passes) << run[0] << " threads";
+    std::vector<std::uint32_t> cv = changed.vertices, ct = changed.triangles;
+    ASSERT_FALSE(cv.empty());
+    ASSERT_FALSE(ct.empty());
+    EXPECT_LT(cv.size(), nv);
+    EXPECT_LT(ct.size(), nt);
+    std::sort(cv.begin(), cv.end());
+    std::sort(ct.begin(), ct.end());
+    EXPECT_TRUE(std::adjacent_find(cv.begin(), cv.end()) == cv.end()) << "a vertex listed twice";
+    EXPECT_TRUE(std::adjacent_find(ct.begin(), ct.end()) == ct.end()) << "a triangle listed twice";
+    ASSERT_LT(cv.back(), nv);
+    ASSERT_LT(ct.back(), nt);
+    // The input, with the listed entries copied over from the clean-up's.
+    TestMesh copied = input;
+    for (const std::uint32_t v : cv)
+      for (int a = 0; a < 3; ++a) {
+        copied.p[3 * std::size_t(v) + a] = left.p[3 * std::size_t(v) + a];
+        copied.n[3 * std::size_t(v) + a] = left.n[3 * std::size_t(v) + a];
+      }
+    for (const std::uint32_t t : ct)
+      for (int c = 0; c < 3; ++c) copied.t[3 * std::size_t(t) + c] = left.t[3 * std::size_t(t) + c];
+    EXPECT_EQ(copied.p, left.p) << run[0] << " threads";
+    EXPECT_EQ(copied.n, left.n) << run[0] << " threads";
+    EXPECT_EQ(copied.t, left.t) << run[0] << " threads";
+    const auto kept = nbmc::mesh::compact_mesh(copied.p.data(), copied.n.data(), nv, copied.t.data(), nt, alive);
+    copied.p.resize(3 * kept.first);
+    copied.n.resize(3 * kept.first);
+    copied.t.resize(3 * kept.second);
+    EXPECT_EQ(copied.p, own.p) << run[0] << " threads";
+    EXPECT_EQ(copied.n, own.n) << run[0] << " threads";
+    EXPECT_EQ(copied.t, own.t) << run[0] << " threads";
   }
 }
 
