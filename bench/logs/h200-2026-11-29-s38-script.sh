@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # Session 38 device runs. Call 1-2: new = 7f44178 (session 37's clean-up
 # changes), old = 783f214 (session 37's start). Call 3-4: new = the working
-# tree (the sparse upload), old = 7f44178. old = out/dev/old.tgz.
+# tree (the sparse upload), old = 7f44178. Call 5: the clean-up on 1-16
+# host threads (new only). Call 6: new = bc38d37 (regions unsorted), old =
+# b254cd7. old = out/dev/old.tgz.
 set -uo pipefail
 R=$PWD; O=${OUT:-/tmp/o}; L=/tmp/L; mkdir -p $O $L
 export PATH=/usr/local/cuda/bin:$PATH
@@ -70,6 +72,19 @@ scaling)  # the clean-up alone on the host threads: raw meshes, 1-16 threads
   done > $O/scaling.txt 2>&1
   grep "^#\|items=9772\|items=15851" $O/scaling.txt | cut -c1-220
   echo "scaling done at $(( $(date +%s) - t0 )) s" ;;
+scalold)  # first passes, new and old, on the raw meshes of `scaling` (made by new)
+  for m in ssp07 yt10; do
+    [ -f /tmp/raw-$m.ply ] || $N/src/cli/nbmc reconstruct $BIG --spacing 0.00484 --backend cuda --method $m --no-cleanup -o /tmp/raw-$m.ply > /dev/null 2>&1
+    for round in 1 2; do for v in new old; do B=$N; [ $v = old ] && B=$OB
+      for t in 4 16; do
+        NBMC_TRACE=1 $B/bench/nbmc_cleanup_bench /tmp/raw-$m.ply 0.00242 $t 4 > $L/so.txt 2>&1
+        echo "# $m $v r$round threads=$t $(grep CLEANUP $L/so.txt | grep -o 'wall=[0-9.]*\|hash=[0-9a-f]*' | paste -sd' ')"
+        grep "items=9772\|items=15851" $L/so.txt | grep -o "reserve [0-9.]*\|commit [0-9.]*\|repaired=[0-9]* [0-9.]* ms" | paste -sd' '
+      done
+    done; done
+  done > $O/scalold.txt 2>&1
+  cat $O/scalold.txt | cut -c1-400
+  echo "scalold done at $(( $(date +%s) - t0 )) s" ;;
 bench)
   {
   for round in 1 2 3; do
