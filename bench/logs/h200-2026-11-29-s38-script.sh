@@ -85,6 +85,11 @@ scalold)  # first passes, new and old, on the raw meshes of `scaling` (made by n
   done > $O/scalold.txt 2>&1
   cat $O/scalold.txt | cut -c1-400
   echo "scalold done at $(( $(date +%s) - t0 )) s" ;;
+hostmesh)  # new only: the host-mesh path, defaults
+  for round in 1 2 3; do for args in "--backend cuda --repeat 5" "--backend cuda --device-resident --repeat 5"; do
+    echo "# ${args// /_} new r$round $($N/bench/nbmc_bench $BIG --spacing 0.00484 $args 2>&1 | grep RESULT | grep -o 'total=[0-9.]*\| postprocess=[0-9.]*' | paste -sd' ')"
+  done; done | tee $O/hostmesh.txt
+  echo "hostmesh done at $(( $(date +%s) - t0 )) s" ;;
 bench)
   {
   for round in 1 2 3; do
