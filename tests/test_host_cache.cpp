@@ -5,6 +5,7 @@
 
 #include "../src/core/params.hpp"
 
+#include <cstdint>
 #include <cstdlib>
 #include <thread>
 #include <vector>
@@ -101,9 +102,94 @@ TEST(HostCache, NoInitVectorsOfANextFrameReuseTheBlock) {
   EXPECT_EQ(c.kept_bytes(), 24 * MiB);
   std::vector<float, nbmc::NoInitAllocator<float>> next(5 * MiB + 12345);  // a little smaller
   EXPECT_EQ(next.data(), first);
-  std::vector<float, nbmc::NoInitAllocator<float>> small(1000);  // below 16 MiB: the plain allocator
+  std::vector<float, nbmc::NoInitAllocator<float>> small(1000);  // below 4 MiB: the plain allocator
   EXPECT_NE(small.data(), first);
   next.clear();
   next.shrink_to_fit();
   c.release();
+}
+
+namespace {
+// Fake page-locking for the cache's pinning (the CUDA backend passes
+// cudaHostRegister and cudaHostUnregister).
+std::vector<void*> g_pinned, g_unpinned;
+bool g_pin_works = true;
+bool fake_pin(void* p, std::size_t) {
+  if (!g_pin_works) return false;
+  g_pinned.push_back(p);
+  return true;
+}
+void fake_unpin(void* p) { g_unpinned.push_back(p); }
+}  // namespace
+
+TEST(HostCache, BlocksArePageLockedFromTheirSecondUseAndUnlockedBeforeTheyAreFreed) {
+  if (!HostBlockCache::pinning_enabled()) GTEST_SKIP() << "cache or pinning off";
+  HostBlockCache& c = HostBlockCache::instance();
+  c.release();
+  g_pinned.clear();
+  g_unpinned.clear();
+  g_pin_works = true;
+  char* a = static_cast<char*>(c.allocate(20 * MiB));
+  EXPECT_EQ(reinterpret_cast<std::uintptr_t>(a) % 4096, 0u);  // whole pages
+  a[0] = 1;
+  // A fresh block: not locked (its pages may not be there yet).
+  EXPECT_FALSE(c.pin_for_device(a, 20 * MiB, fake_pin, fake_unpin));
+  EXPECT_TRUE(g_pinned.empty());
+  c.deallocate(a);
+  char* b = static_cast<char*>(c.allocate(20 * MiB));  // its second use
+  ASSERT_EQ(b, a);
+  // Not for a range it does not hold, nor for a pointer it did not hand out.
+  EXPECT_FALSE(c.pin_for_device(b, 20 * MiB + 4096, fake_pin, fake_unpin));
+  EXPECT_FALSE(c.pin_for_device(b + 4096, MiB, fake_pin, fake_unpin));
+  EXPECT_TRUE(g_pinned.empty());
+  EXPECT_TRUE(c.pin_for_device(b, 20 * MiB, fake_pin, fake_unpin));
+  EXPECT_TRUE(c.pin_for_device(b, 10 * MiB, fake_pin, fake_unpin));  // locked already: not again
+  ASSERT_EQ(g_pinned.size(), 1u);
+  EXPECT_EQ(g_pinned[0], static_cast<void*>(b));
+  EXPECT_EQ(c.pinned_bytes(), 20 * MiB);
+  // Kept locked in the cache, and still locked when handed out again.
+  c.deallocate(b);
+  EXPECT_TRUE(g_unpinned.empty());
+  char* d = static_cast<char*>(c.allocate(18 * MiB));
+  ASSERT_EQ(d, a);
+  EXPECT_TRUE(c.pin_for_device(d, 18 * MiB, fake_pin, fake_unpin));
+  EXPECT_EQ(g_pinned.size(), 1u);
+  c.deallocate(d);
+  // release() unlocks it before freeing it.
+  c.release();
+  ASSERT_EQ(g_unpinned.size(), 1u);
+  EXPECT_EQ(g_unpinned[0], static_cast<void*>(a));
+  EXPECT_EQ(c.pinned_bytes(), 0u);
+}
+
+TEST(HostCache, ALockedBlockLeavingAFullCacheIsUnlockedAndAFailedLockIsNoLock) {
+  if (!HostBlockCache::pinning_enabled()) GTEST_SKIP() << "cache or pinning off";
+  HostBlockCache& c = HostBlockCache::instance();
+  c.release();
+  g_pinned.clear();
+  g_unpinned.clear();
+  const std::size_t block = 64 * MiB;
+  g_pin_works = false;
+  void* f = c.allocate(block);
+  c.deallocate(f);
+  f = c.allocate(block);
+  EXPECT_FALSE(c.pin_for_device(f, block, fake_pin, fake_unpin));  // the lock failed: the ring's copies
+  EXPECT_EQ(c.pinned_bytes(), 0u);
+  c.deallocate(f);
+  g_pin_works = true;
+  void* p = c.allocate(block);
+  ASSERT_EQ(p, f);
+  EXPECT_TRUE(c.pin_for_device(p, block, fake_pin, fake_unpin));
+  c.deallocate(p);  // the oldest kept block now
+  // Fill the cache with other blocks (address space only): the locked one
+  // leaves first, unlocked before it is freed.
+  std::vector<void*> others;
+  for (std::size_t i = 0; i < HostBlockCache::kCapacity / block; ++i) others.push_back(c.allocate(block + 4096 * (i + 1)));
+  EXPECT_TRUE(g_unpinned.empty());  // (the requests took no kept block: each a little larger)
+  for (void* o : others) c.deallocate(o);
+  ASSERT_EQ(g_unpinned.size(), 1u);
+  EXPECT_EQ(g_unpinned[0], p);
+  EXPECT_EQ(c.pinned_bytes(), 0u);
+  c.release();
+  EXPECT_EQ(g_unpinned.size(), 1u);
 }

@@ -242,13 +242,39 @@ void kokkos_host_copy(char* dst, const char* src, std::size_t bytes) {
 // starting other threads now would compete with them for the cores (an H100
 // machine, the 1.65 M frame's mesh at r/2: 6-9 ms on other threads, 2.7-3.2
 // ms on these; bench/RESULTS.md, "Session 24").
+//
+// A destination that is a page-locked block of the host cache (or becomes
+// one now: HostBlockCache::pin_for_device, a block's second use) gets the
+// GPU's copy directly, queued before the ring's chunks: a sequence's later
+// meshes skip the host threads' copies.
 void download_segments(const Kokkos::Cuda& space, const DownloadSegment* segments, std::size_t n, HostCopy copy) {
   const cudaStream_t stream = space.cuda_stream();
   Staging& st = staging();
   std::lock_guard<std::mutex> lock(st.m);
-  const std::vector<Chunk> chunks = ring_chunks(st, stream, segments, n, cudaMemcpyDeviceToHost, "mesh download");
-  if (chunks.empty()) return;  // (copied directly, or nothing to copy)
   Drain drain{stream};
+  std::vector<DownloadSegment> rest;
+  rest.reserve(n);
+  std::size_t direct = 0, direct_bytes = 0;
+  for (std::size_t k = 0; k < n; ++k) {
+    const DownloadSegment& c = segments[k];
+    if (c.bytes && HostBlockCache::instance().pin_for_device(c.host, c.bytes, cuda_pin, cuda_unpin)) {
+      cuda_check(cudaMemcpyAsync(c.host, c.device, c.bytes, cudaMemcpyDeviceToHost, stream), "mesh download");
+      ++direct;
+      direct_bytes += c.bytes;
+    } else {
+      rest.push_back(c);
+    }
+  }
+  const std::vector<Chunk> chunks =
+      ring_chunks(st, stream, rest.data(), rest.size(), cudaMemcpyDeviceToHost, "mesh download");
+  if (chunks.empty()) {  // (copied directly, or nothing to copy)
+    if (direct) cuda_check(cudaStreamSynchronize(stream), "mesh download");
+    drain.done = true;
+    if (direct && host_trace_on())
+      std::fprintf(stderr, "[nbmc trace] download: %zu page-locked destinations (%.1f MiB) copied directly\n", direct,
+                   double(direct_bytes) / double(1 << 20));
+    return;
+  }
   auto issue = [&](std::size_t i) {
     char* slot = st.buffer + (i % kStagingSlots) * kStagingChunk;
     cuda_check(cudaMemcpyAsync(slot, chunks[i].device, chunks[i].bytes, cudaMemcpyDeviceToHost, stream),
@@ -274,8 +300,10 @@ void download_segments(const Kokkos::Cuda& space, const DownloadSegment* segment
   }
   drain.done = true;
   if (timed)
-    std::fprintf(stderr, "[nbmc trace] download: %zu chunks of %zu MiB, waited for the GPU %.3f ms, host copies %.3f ms\n",
-                 chunks.size(), kStagingChunk >> 20, waited, copied);
+    std::fprintf(stderr,
+                 "[nbmc trace] download: %zu page-locked destinations (%.1f MiB) copied directly, %zu chunks of %zu "
+                 "MiB, waited for the GPU %.3f ms, host copies %.3f ms\n",
+                 direct, double(direct_bytes) / double(1 << 20), chunks.size(), kStagingChunk >> 20, waited, copied);
 }
 
 // The other way: the host threads copy a chunk into a slot of the ring while

@@ -30,8 +30,9 @@ struct Error : std::runtime_error {
 // A std::allocator that leaves new elements uninitialised, for large arrays
 // whose every element is written right after (particle uploads, meshes): no
 // zeroing pass, and the pages are first touched where they are filled.
-// Blocks of 16 MiB or more come from HostBlockCache (host_cache.hpp), which
-// keeps freed ones, already faulted in, for the next frame.
+// Blocks of 4 MiB or more (HostBlockCache::kMinBytes) come from
+// HostBlockCache (host_cache.hpp), which keeps freed ones, already faulted
+// in, for the next frame.
 template <class T>
 struct NoInitAllocator : std::allocator<T> {
   template <class U>

@@ -6,7 +6,8 @@
 //    and copied to the host it equals the host mesh bit for bit; it can be
 //    written to a file and outlives its context;
 //  - errors: a host pointer, a misaligned stride, NaN on the device, the
-//    device calls on a CPU backend.
+//    device calls on a CPU backend;
+//  - a sequence's meshes downloaded into page-locked blocks equal the first.
 //   nbmc_cuda_device_pointers [DATA_DIR]
 #include "gpu_support.hpp"
 
@@ -287,6 +288,56 @@ void reuse() {
     nbmc_mesh_destroy(b);
   }
 }
+
+// A sequence's meshes: from the second reconstruction on, the host cache's
+// blocks that the mesh download writes are page-locked and the GPU copies
+// straight into them (core/host_cache.hpp, pin_for_device). Every mesh of
+// the sequence equals the first (copied through the staging ring) bit for
+// bit, host and device meshes, with and without the clean-up; a later raw
+// mesh's triangles lie in page-locked memory (the direct copies ran).
+void pinned_downloads(const Points& pts, double spacing) {
+  const std::size_t n = pts.size() / 3;
+  for (int cleanup = 0; cleanup <= 1; ++cleanup) {
+    nbmc_params prm = params(spacing);
+    prm.cell_size = 0.5;
+    prm.cleanup = cleanup;
+    Ctx seq(NBMC_BACKEND_CUDA);
+    if (nbmc_context_set_particles_f64(seq.c, pts.data(), n, 0) != NBMC_OK) {
+      check(false, std::string("pinned downloads: upload: ") + nbmc_context_last_error(seq.c));
+      return;
+    }
+    Mesh first;
+    bool locked = false;
+    for (int k = 0; k < 6; ++k) {
+      const bool on_device = k >= 4;
+      if (nbmc_context_set_mesh_memory(seq.c, on_device ? NBMC_MEMORY_DEVICE : NBMC_MEMORY_HOST) != NBMC_OK) break;
+      nbmc_mesh* m = nullptr;
+      const int32_t s = nbmc_context_reconstruct(seq.c, &prm, &m);
+      if (s != NBMC_OK) {
+        check(false, std::string("pinned downloads: reconstruction: ") + nbmc_context_last_error(seq.c));
+        nbmc_mesh_destroy(m);
+        return;
+      }
+      const Mesh h = host_copy(m);
+      if (k == 0) {
+        first = h;
+      } else {
+        check(same(h, first), "pinned downloads (clean-up " + std::to_string(cleanup) + "): mesh " +
+                                  std::to_string(k + 1) + (on_device ? " (device)" : " (host)") +
+                                  " equals the first bit for bit (" + std::to_string(first.triangle_count()) +
+                                  " triangles)");
+      }
+      cudaPointerAttributes a;
+      if (!on_device && k >= 2 && nbmc_mesh_triangles(m) &&
+          cudaPointerGetAttributes(&a, nbmc_mesh_triangles(m)) == cudaSuccess && a.type == cudaMemoryTypeHost)
+        locked = true;
+      cudaGetLastError();
+      nbmc_mesh_destroy(m);
+    }
+    if (cleanup == 0)
+      check(locked, "pinned downloads: a later raw mesh's triangles were copied into page-locked memory");
+  }
+}
 }  // namespace
 
 int main(int argc, char** argv) {
@@ -304,7 +355,9 @@ int main(int argc, char** argv) {
   const std::string dir = argc > 1 ? argv[1] : "../shared/data";
   const std::string big = dir + "/xyz/cbd1654k_t040_1654104.xyz";
   if (std::ifstream(big).good()) {
-    run("cbd1654k, cell r", read_xyz(big), 0.00484, 1.0);
+    const Points frame = read_xyz(big);
+    run("cbd1654k, cell r", frame, 0.00484, 1.0);
+    pinned_downloads(frame, 0.00484);
   } else {
     std::printf("skip %s (not found)\n", big.c_str());
   }
