@@ -726,7 +726,7 @@ class Cleaner {
     }
     // (A pass has at most n rounds: each round's first item wins.)
     if (!slots_ || std::uint64_t(stamp_base_) + n + 2 >= kNone || std::uint64_t(round_base_) + n + 2 >= kNone) {
-      if (!slots_) slots_.reset(new Slot[nv_]);
+      if (!slots_) slots_ = NoInitArray<Slot>(nv_);  // (every field written below)
       stamp_base_ = round_base_ = 0;
       for_chunks(nv_, chunk_count(nv_, 65536), [&](std::size_t, std::size_t b, std::size_t e) {
         for (std::size_t x = b; x < e; ++x) {
@@ -2970,7 +2970,7 @@ class Cleaner {
     std::atomic<std::uint32_t> reserve;
     std::uint32_t stamp, wrote;
   };
-  std::unique_ptr<Slot[]> slots_;  // per vertex (one cache line for all three)
+  NoInitArray<Slot> slots_;  // per vertex (one cache line for all three)
   std::uint32_t stamp_base_ = 0, round_base_ = 0;
 };
 
