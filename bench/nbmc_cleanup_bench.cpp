@@ -75,6 +75,10 @@ int main(int argc, char** argv) {
       h = (h ^ b) * 1099511628211ull;
     }
     for (std::uint32_t v : t) h = (h ^ v) * 1099511628211ull;
+    std::printf("repairs: %llu moves, %llu flips, %llu collapses, %llu cuts; removed %llu triangles, %llu vertices\n",
+                (unsigned long long)c.moves, (unsigned long long)c.flips, (unsigned long long)c.collapses,
+                (unsigned long long)c.cuts, (unsigned long long)c.removed_triangles,
+                (unsigned long long)c.removed_vertices);
     std::printf("CLEANUP threads=%zu bad=%llu->%llu vertices=%zu triangles=%zu wall=%.4f cpu=%.4f faults=%ld hash=%016llx\n",
                 threads, (unsigned long long)c.bad_before, (unsigned long long)c.bad_after, p.size() / 3,
                 t.size() / 3, wall, cpu, faults, (unsigned long long)h);
