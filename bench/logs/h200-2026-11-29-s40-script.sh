@@ -1,8 +1,12 @@
 #!/usr/bin/env bash
-# Session 40 device run 1: new = the working tree (the clean-up's move
-# rounds: every bad triangle's best move found at once on the host threads,
-# the moves of non-neighbouring vertices made together, before the passes),
-# old = 531499a (session 39's end), from out/dev/old.tgz.
+# Session 40 device runs. Run 1: new = the working tree (the clean-up's
+# move rounds: every bad triangle's best move found at once on the host
+# threads, the moves of non-neighbouring vertices made together, before the
+# passes), old = 531499a (session 39's end), from out/dev/old.tgz. Run 2:
+# new = the working tree (consider_move's trials that leave the bad
+# triangle bad found before the fan's old shapes; consider_flip's shapes
+# before its fans), old = 531499a; SCAL_THREADS="1 4 16". (Run 1 kept
+# scalold's and trace6's whole traces under $O; run 2 under $L.)
 set -uo pipefail
 R=$PWD; O=${OUT:-/tmp/o}; L=/tmp/L; mkdir -p $O $L
 export PATH=/usr/local/cuda/bin:$PATH
@@ -75,12 +79,12 @@ scalold)  # the clean-up alone, new and old, on raw meshes made by new (4 and 16
   for m in ssp07 yt10; do
     [ -f /tmp/raw-$m.ply ] || $N/src/cli/nbmc reconstruct $BIG --spacing 0.00484 --backend cuda --method $m --no-cleanup -o /tmp/raw-$m.ply > /dev/null 2>&1
     for round in 1 2; do for v in new old; do B=$N; [ $v = old ] && B=$OB
-      for t in 4 16; do
+      for t in ${SCAL_THREADS:-4 16}; do
         NBMC_TRACE=1 $B/bench/nbmc_cleanup_bench /tmp/raw-$m.ply 0.00242 $t 4 > $L/so.txt 2>&1
         echo "# $m $v r$round threads=$t $(grep CLEANUP $L/so.txt | grep -o 'wall=[0-9.]*\|hash=[0-9a-f]*\|triangles=[0-9]*' | paste -sd' ')"
         grep "clean-up: moves \|clean-up: repairs \|clean-up: compaction" $L/so.txt | tail -3 | grep -o "clean-up: [a-z]*\|[0-9.]* ms" | paste -sd' '
         grep "^repairs:" $L/so.txt | tail -1
-        cat $L/so.txt >> $O/scalold-$m-$v-t$t.txt
+        cat $L/so.txt >> $L/scalold-$m-$v-t$t.txt
       done
     done; done
   done > $O/scalold.txt 2>&1
@@ -91,7 +95,7 @@ trace6)  # in the library: the clean-up's steps per frame, device-resident and h
     for args in "--backend cuda --device-resident --repeat 6" "--backend cuda --repeat 6" "--backend cuda --tile 2 --repeat 3"; do
       NBMC_TRACE=1 $B/bench/nbmc_bench $BIG --spacing 0.00484 $args > $L/tr.txt 2>&1
       echo "# $v ${args// /_}"; grep -h "clean-up: moves \|clean-up: repairs \|clean-up: compaction \|clean-up moves:" $L/tr.txt | tail -6 | cut -c1-150; grep RESULT $L/tr.txt | res
-      cat $L/tr.txt >> $O/trace6-$v.txt
+      cat $L/tr.txt >> $L/trace6-$v.txt
     done
   done > $O/trace6.txt 2>&1
   cat $O/trace6.txt

@@ -1568,10 +1568,21 @@ class Cleaner {
     d = d - dot(d, n) * n;
     // The three trial positions change the same triangles: their old shapes
     // are judged once (prepare_positions, with v's fan in fa_ already), each
-    // trial only the new ones.
-    if (!prepare_positions({v}, true)) return;
+    // trial only the new ones. A trial that leaves t bad fails first thing
+    // in judge_positions; those are found before the fan's old shapes are
+    // (most of the vertices tried cannot repair their triangle: a needle's
+    // far vertex), with the same arithmetic, so the verdicts are the same.
+    const std::uint32_t* w = T_ + 3 * std::size_t(t);
+    bool prepared = false;
     for (double f : {0.25, 0.5, 1.0}) {
-      judge_positions(t, {{v, pv + f * d}}, out);
+      const Vec3 p = pv + f * d;
+      const Vec3 pr{double(Real(p.x)), double(Real(p.y)), double(Real(p.z))};
+      Vec3 q[3];
+      for (int k = 0; k < 3; ++k) q[k] = w[k] == v ? pr : load(P_, w[k]);
+      if (triangle_class(triangle_shape(q[0], q[1], q[2]), degenerate_double_area_) != 0) continue;
+      if (!prepared && !prepare_positions({v}, true)) return;
+      prepared = true;
+      judge_positions(t, {{v, p}}, out);
       if (out.valid) return;
     }
   }
@@ -2680,11 +2691,10 @@ class Cleaner {
     if (t2 == kNone) return;
     const std::uint32_t* w = T_ + 3 * std::size_t(t2);
     const std::uint32_t d = w[0] != a && w[0] != b ? w[0] : w[1] != a && w[1] != b ? w[1] : w[2];
-    if (d == c || irregular(d)) return;
-    fan(c, fb_);
-    ring(c, fb_, rb_);
-    if (std::binary_search(rb_.begin(), rb_.end(), d)) return;  // edge c-d exists
-    if (degree(a) < 4 || degree(b) < 4) return;
+    if (d == c) return;
+    // The new triangles' shapes and turns first, then what the fans say
+    // (d regular, no edge c-d yet, a and b keep three triangles): the same
+    // verdict, and most flips fail on the shapes or the score alone.
     const Vec3 pa = load(P_, a), pb = load(P_, b), pc = load(P_, c), pd = load(P_, d);
     const Vec3 n_old = cross(pb - pa, pc - pa) + cross(pa - pb, pd - pb);
     // New triangles (c, a, d) and (c, d, b).
@@ -2696,6 +2706,11 @@ class Cleaner {
     if (dot(n1, n2) <= cos_limit * norm(n1) * norm(n2)) return;
     const double score = std::min(s1.sin_min_angle, s2.sin_min_angle);
     if (score <= best.score) return;
+    if (irregular(d)) return;
+    fan(c, fb_);
+    ring(c, fb_, rb_);
+    if (std::binary_search(rb_.begin(), rb_.end(), d)) return;  // edge c-d exists
+    if (degree(a) < 4 || degree(b) < 4) return;
     best.valid = true;
     best.kind = Candidate::Flip;
     best.score = score;
