@@ -115,16 +115,13 @@ void download_mesh(const HostMesh& m, float* positions, float* normals, std::uin
 // way out) gives it back to the driver (a no-op without CUDA).
 void download_mesh_for_postprocess(const HostMesh& m, HostMesh& h, bool incidence, MemoryTracker& tracker);
 void upload_mesh_after_postprocess(HostMesh& m, const HostMesh& h);
-// The same after a clean-up that left the compaction to its caller
-// (core/mesh_cleanup.hpp: h with the input's sizes, one alive flag per
-// triangle): the GPU compacts, into m's arrays, exactly as compact_mesh
-// would have. False (m untouched) where the GPU or the memory budget has no
-// room for the uncompacted copy; the caller then compacts on the host.
-// changed (may be null): what the clean-up wrote (cleanup_mesh's
-// `changed`); m's arrays still hold the mesh h was downloaded from, so only
-// those entries and the flags are copied.
-bool upload_mesh_and_compact(HostMesh& m, const HostMesh& h, const mesh::AliveFlags& alive,
-                             const mesh::ChangedEntries* changed, MemoryTracker& tracker);
+// The same after a clean-up that listed where its result differs from the
+// mesh m's arrays still hold (cleanup_mesh's `changed`, valid): only those
+// places are copied, and m's counts shrink to h's. False (m untouched)
+// where the GPU or the memory budget has no room for the few buffers; the
+// caller then copies the whole mesh back.
+bool upload_changed_entries(HostMesh& m, const HostMesh& h, const mesh::ChangedEntries& changed,
+                            MemoryTracker& tracker);
 void release_device_pool();
 // Copies count particles (3 doubles each) from the CUDA device to the host.
 void download_particles(const void* device_xyz, std::size_t count, double* host);

@@ -80,15 +80,14 @@ class StepMemory {
 
 // The post-processing of a mesh in host memory, on its float or double
 // positions (PosVec). device_bytes: the mesh's device arrays, when it lives
-// in GPU memory (counted with the host copy), else 0. alive (may be null):
-// where the clean-up is the last step, it leaves the compaction to the
-// caller and fills this (cleanup_mesh's `alive`); else it stays empty.
-// changed (may be null): then also what the clean-up wrote (cleanup_mesh's
-// `changed`).
+// in GPU memory (counted with the host copy), else 0. changed (may be
+// null): where the clean-up is the last step, the places where its result
+// differs from its input (cleanup_mesh's `changed`); else it stays as it
+// was (not valid).
 template <class PosVec>
 void postprocess_positions(const nbmc_params& params, PosVec& positions, HostMesh& m, mesh::PostprocessStats& ps,
                            const FeatureParticles* fp, double cell, MemoryTracker& tracker,
-                           std::uint64_t device_bytes, mesh::AliveFlags* alive, mesh::ChangedEntries* changed) {
+                           std::uint64_t device_bytes, mesh::ChangedEntries* changed) {
   const bool clean_is_last = params.smooth_iterations <= 0 && !(params.decimate_fraction < 1);
   auto counts = [&] {
     return std::make_pair(std::uint64_t(positions.size() / 3), std::uint64_t(m.triangles.size() / 3));
@@ -105,7 +104,7 @@ void postprocess_positions(const nbmc_params& params, PosVec& positions, HostMes
     // pipeline built one; the result is the same.)
     const mesh::CleanupResult r =
         mesh::cleanup_mesh(positions, m.normals, m.triangles, cell, first && !m.incidence.empty() ? &m.incidence : nullptr,
-                           first && clean_is_last ? alive : nullptr, first && clean_is_last ? changed : nullptr);
+                           first && clean_is_last ? changed : nullptr);
     m.incidence.clear();
     // After smoothing, the fairing flips (core/mesh_flip.hpp): the
     // diagonals that bend the surface least; no vertex moves. Not in the
@@ -166,20 +165,18 @@ void postprocess_positions(const nbmc_params& params, PosVec& positions, HostMes
 
 void postprocess_host(const nbmc_params& params, HostMesh& m, mesh::PostprocessStats& ps, const FeatureParticles* fp,
                       double cell, MemoryTracker& tracker, std::uint64_t device_bytes = 0,
-                      mesh::AliveFlags* alive = nullptr, mesh::ChangedEntries* changed = nullptr) {
-  if (m.f64) postprocess_positions(params, m.positions64, m, ps, fp, cell, tracker, device_bytes, alive, changed);
-  else postprocess_positions(params, m.positions, m, ps, fp, cell, tracker, device_bytes, alive, changed);
+                      mesh::ChangedEntries* changed = nullptr) {
+  if (m.f64) postprocess_positions(params, m.positions64, m, ps, fp, cell, tracker, device_bytes, changed);
+  else postprocess_positions(params, m.positions, m, ps, fp, cell, tracker, device_bytes, changed);
 }
 
 // A mesh left in GPU memory: copied to the host (with the clean-up's
 // incidence built on the GPU), post-processed there, and copied back into
 // its own device arrays (the counts only shrink). Where the clean-up is the
-// last step (the defaults), the GPU compacts its result: the host's
-// compaction of the 1.65 M frame's mesh took 2.6-3.0 ms on 16 threads
-// (bench/RESULTS.md, session 36); and only what the clean-up wrote goes
-// back, over the mesh the device arrays still hold (of that frame's 2.5 M
-// vertices and triangles, about 8,000; the upload took 3.2-3.6 ms, now 0.6
-// ms with the flags: session 38).
+// last step (the defaults), only the places where its compacted result
+// differs from the mesh the device arrays still hold go back (of the 1.65 M
+// frame's 2.5 M vertices and triangles at r/2, about 8,000: the whole
+// upload took 3.2-3.6 ms, bench/RESULTS.md sessions 38 and 39).
 void postprocess_device(const nbmc_params& params, HostMesh& m, mesh::PostprocessStats& ps,
                         const FeatureParticles* fp, double cell, MemoryTracker& tracker) {
   if (m.triangle_count() == 0) return;
@@ -191,19 +188,9 @@ void postprocess_device(const nbmc_params& params, HostMesh& m, mesh::Postproces
   HostMesh h;
   download_mesh_for_postprocess(m, h, params.cleanup != 0, tracker);
   host_trace("post-processing: download", m.triangle_count());
-  mesh::AliveFlags alive;
   mesh::ChangedEntries changed;
-  postprocess_host(params, h, ps, fp, cell, tracker, device_bytes, &alive, &changed);
-  if (!alive.empty()) {
-    if (upload_mesh_and_compact(m, h, alive, &changed, tracker)) return;
-    // (No room on the GPU for the uncompacted copy: as cleanup_mesh would.)
-    const auto kept = mesh::compact_mesh(h.positions.data(), h.normals.empty() ? nullptr : h.normals.data(),
-                                         h.positions.size() / 3, h.triangles.data(), h.triangles.size() / 3, alive);
-    h.positions.resize(3 * kept.first);
-    if (!h.normals.empty()) h.normals.resize(3 * kept.first);
-    h.triangles.resize(3 * kept.second);
-    host_trace("post-processing: compaction on the host", kept.second);
-  }
+  postprocess_host(params, h, ps, fp, cell, tracker, device_bytes, &changed);
+  if (changed.valid && upload_changed_entries(m, h, changed, tracker)) return;
   upload_mesh_after_postprocess(m, h);
   host_trace("post-processing: upload", h.triangles.size() / 3);
 }

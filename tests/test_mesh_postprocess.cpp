@@ -16,9 +16,11 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <map>
+#include <numeric>
 #include <random>
 #include <utility>
 #include <vector>
@@ -864,16 +866,38 @@ TestMesh pinched_sphere(int levels = 4) {
   return sphere;
 }
 
-// A clean-up that leaves the compaction to its caller (a device mesh's: the
-// GPU compacts it, as compact_mesh does) hands over arrays of the input's
-// sizes and one flag per triangle; compacted, they are exactly the mesh and
-// normals of a clean-up that compacts itself. On the pinched sphere (moves,
-// flips, collapses, cuts: triangles and vertices removed) and on a sphere
-// with a speck of degenerate triangles (a component removed).
-TEST(MeshCleanup, CompactionLeftToTheCallerGivesTheSameMesh) {
-  auto with_normals = [](TestMesh m) {
+// The clean-up's compaction (holes filled from the end, found from what
+// the clean-up recorded, not by reading the mesh) keeps what compact_mesh
+// keeps: the same counts, the same triangles as position triples (in
+// another order), the same vertices (position and normal); every entry
+// below the new counts that did not change stays in place; and the places
+// it reports written (with the repairs' in `changed`) include every one
+// that differs from the input. On the pinched sphere (collapses, cuts), a
+// sphere with a speck of degenerate triangles (a component removed), both
+// with vertices that no triangle uses (the input's own), shuffled (so that
+// moved vertices are named by triangles that stay in place); serially,
+// with parallel passes, and from a prebuilt incidence.
+template <class Real>
+nbmc::mesh::PrebuiltIncidence kokkos_incidence(const std::vector<Real>& p, const std::vector<std::uint32_t>& t);
+
+TEST(MeshCleanup, FillingCompactionKeepsWhatCompactMeshKeeps) {
+  using nbmc::mesh::detail::repair_pass_hooks;
+  auto prepare = [](TestMesh m, unsigned seed) {
+    // Three vertices no triangle uses, among the others; then every
+    // vertex renumbered at random (an icosphere, as a marching-cubes mesh,
+    // names its last vertices in its last triangles only).
+    for (int i = 0; i < 3; ++i)
+      for (int a = 0; a < 3; ++a) m.p.push_back(5.f + float(i) + 0.25f * float(a));
+    std::vector<std::uint32_t> perm(m.p.size() / 3);
+    std::iota(perm.begin(), perm.end(), 0u);
+    std::shuffle(perm.begin(), perm.end(), std::mt19937(seed));
+    std::vector<float> p(m.p.size());
+    for (std::size_t v = 0; v < perm.size(); ++v)
+      for (int a = 0; a < 3; ++a) p[3 * std::size_t(perm[v]) + a] = m.p[3 * v + a];
+    m.p.swap(p);
+    for (std::uint32_t& v : m.t) v = perm[v];
     m.n.resize(m.p.size());
-    for (std::size_t i = 0; i < m.p.size(); ++i) m.n[i] = 0.25f * m.p[i] + float(i % 7);
+    for (std::size_t i = 0; i < m.p.size(); ++i) m.n[i] = 0.5f * m.p[i] + float(i % 5);
     return m;
   };
   TestMesh speck = icosphere(2);
@@ -887,31 +911,80 @@ TEST(MeshCleanup, CompactionLeftToTheCallerGivesTheSameMesh) {
                                      {2, 0, 5}, {1, 2, 5}, {3, 1, 5}, {0, 3, 5}};
     for (const auto& f : oct) speck.t.insert(speck.t.end(), {base + f[0], base + f[1], base + f[2]});
   }
-  for (const TestMesh& input : {with_normals(pinched_sphere()), with_normals(speck)}) {
-    TestMesh own = input, left = input;
-    const auto a = nbmc::mesh::cleanup_mesh(own.p, own.n, own.t);
-    nbmc::mesh::AliveFlags alive;
-    const auto b = nbmc::mesh::cleanup_mesh(left.p, left.n, left.t, 0, nullptr, &alive);
-    ASSERT_GT(a.removed_triangles, 0u);
-    ASSERT_GT(a.removed_vertices, 0u);
-    EXPECT_EQ(b.removed_triangles, 0u);
-    EXPECT_EQ(b.removed_vertices, 0u);
-    ASSERT_EQ(left.p.size(), input.p.size());
-    ASSERT_EQ(left.n.size(), input.n.size());
-    ASSERT_EQ(left.t.size(), input.t.size());
-    ASSERT_EQ(alive.size(), input.t.size() / 3);
-    const auto kept = nbmc::mesh::compact_mesh(left.p.data(), left.n.data(), left.p.size() / 3, left.t.data(),
-                                               left.t.size() / 3, alive);
-    EXPECT_EQ(left.p.size() / 3 - kept.first, a.removed_vertices);
-    EXPECT_EQ(left.t.size() / 3 - kept.second, a.removed_triangles);
-    left.p.resize(3 * kept.first);
-    left.n.resize(3 * kept.first);
-    left.t.resize(3 * kept.second);
-    EXPECT_EQ(left.p, own.p);
-    EXPECT_EQ(left.n, own.n);
-    EXPECT_EQ(left.t, own.t);
-    EXPECT_EQ(a.collapses, b.collapses);
-    EXPECT_EQ(a.bad_after, b.bad_after);
+  auto triples = [](const TestMesh& m) {
+    std::vector<std::array<float, 9>> x(m.t.size() / 3);
+    for (std::size_t t = 0; t < x.size(); ++t)
+      for (int c = 0; c < 3; ++c)
+        for (int a = 0; a < 3; ++a) x[t][3 * c + a] = m.p[3 * std::size_t(m.t[3 * t + c]) + a];
+    std::sort(x.begin(), x.end());
+    return x;
+  };
+  auto vertices = [](const TestMesh& m) {
+    std::vector<std::array<float, 6>> x(m.p.size() / 3);
+    for (std::size_t v = 0; v < x.size(); ++v)
+      for (int a = 0; a < 3; ++a) x[v][a] = m.p[3 * v + a], x[v][3 + a] = m.n[3 * v + a];
+    std::sort(x.begin(), x.end());
+    return x;
+  };
+  const auto saved = repair_pass_hooks();
+  int meshes = 0;
+  for (const TestMesh& input : {prepare(pinched_sphere(), 3), prepare(speck, 5)}) {
+    ++meshes;
+    const std::size_t nv = input.p.size() / 3, nt = input.t.size() / 3;
+    TestMesh ref = input;
+    repair_pass_hooks().compact_in_order = true;
+    const auto a = nbmc::mesh::cleanup_mesh(ref.p, ref.n, ref.t, 0.05);
+    repair_pass_hooks() = saved;
+    ASSERT_GT(a.removed_triangles, 0u) << "mesh " << meshes;
+    ASSERT_GE(a.removed_vertices, 4u) << "mesh " << meshes;  // (the three unused ones, and some of the repairs')
+    for (int variant = 0; variant < 3; ++variant) {  // serial; parallel passes; a prebuilt incidence
+      const std::size_t min_items = variant == 1 ? 4 : 0;
+      repair_pass_hooks().min_items = min_items;
+      TestMesh m = input;
+      nbmc::mesh::ChangedEntries changed;
+      nbmc::mesh::CleanupResult b;
+      nbmc::mesh::PrebuiltIncidence inc;
+      if (variant == 2) inc = kokkos_incidence(input.p, input.t);
+      {
+        nbmc::ScopedHostThreads limit(min_items ? 3 : 1);
+        b = nbmc::mesh::cleanup_mesh(m.p, m.n, m.t, 0.05, variant == 2 ? &inc : nullptr, &changed);
+      }
+      if (variant == 2) EXPECT_TRUE(inc.empty());  // (taken)
+      repair_pass_hooks() = saved;
+      EXPECT_EQ(b.removed_triangles, a.removed_triangles) << "mesh " << meshes;
+      EXPECT_EQ(b.removed_vertices, a.removed_vertices) << "mesh " << meshes;
+      ASSERT_EQ(m.p.size(), ref.p.size());
+      ASSERT_EQ(m.t.size(), ref.t.size());
+      EXPECT_TRUE(triples(m) == triples(ref)) << "mesh " << meshes;
+      EXPECT_TRUE(vertices(m) == vertices(ref)) << "mesh " << meshes;
+      EXPECT_EQ(m.check().unreferenced_vertices, 0u);
+      // Every place that differs from the input is listed.
+      std::vector<std::uint32_t> dv, dt;
+      for (std::size_t v = 0; v < m.p.size() / 3; ++v)
+        if (!std::equal(m.p.begin() + std::ptrdiff_t(3 * v), m.p.begin() + std::ptrdiff_t(3 * v + 3),
+                        input.p.begin() + std::ptrdiff_t(3 * v)) ||
+            !std::equal(m.n.begin() + std::ptrdiff_t(3 * v), m.n.begin() + std::ptrdiff_t(3 * v + 3),
+                        input.n.begin() + std::ptrdiff_t(3 * v)))
+          dv.push_back(std::uint32_t(v));
+      for (std::size_t t = 0; t < m.t.size() / 3; ++t)
+        if (!std::equal(m.t.begin() + std::ptrdiff_t(3 * t), m.t.begin() + std::ptrdiff_t(3 * t + 3),
+                        input.t.begin() + std::ptrdiff_t(3 * t)))
+          dt.push_back(std::uint32_t(t));
+      EXPECT_TRUE(changed.valid);
+      std::vector<std::uint32_t> cv = changed.vertices, ct = changed.triangles;  // (in no particular order)
+      std::sort(cv.begin(), cv.end());
+      std::sort(ct.begin(), ct.end());
+      EXPECT_TRUE(std::adjacent_find(cv.begin(), cv.end()) == cv.end()) << "a vertex listed twice";
+      EXPECT_TRUE(std::adjacent_find(ct.begin(), ct.end()) == ct.end()) << "a triangle listed twice";
+      EXPECT_TRUE(cv.empty() || cv.back() < m.p.size() / 3);
+      EXPECT_TRUE(ct.empty() || ct.back() < m.t.size() / 3);
+      EXPECT_TRUE(std::includes(cv.begin(), cv.end(), dv.begin(), dv.end())) << "mesh " << meshes;
+      EXPECT_TRUE(std::includes(ct.begin(), ct.end(), dt.begin(), dt.end())) << "mesh " << meshes;
+      // Most of the mesh stays where it was (an order-keeping compaction
+      // moves everything after the first removed entry).
+      EXPECT_LT(dt.size() * 4, m.t.size() / 3) << "mesh " << meshes;
+      (void)nv, (void)nt;
+    }
   }
 }
 
@@ -1134,13 +1207,14 @@ TEST(MeshCleanup, PrebuiltIncidenceIsTheCleanersOwn) {
   }
 }
 
-// A clean-up whose caller compacts (a device mesh) can also list what it
-// wrote (cleanup_mesh's `changed`): every vertex and triangle it leaves
-// different from the input is listed (once), so that the input with
-// only those entries copied over, then compacted, is the mesh of a clean-up
-// that compacts itself. Serially and with parallel passes (their workers
-// write the flags too), once with a pass undone (its writes stay listed),
-// and from a prebuilt incidence (the flags cleared in its own loop).
+// A clean-up can also list where its result differs from its input
+// (cleanup_mesh's `changed`, for a device mesh): every place below the new
+// counts whose vertex or triangle differs is listed (once), so
+// that the input with only those places copied over, cut to the new
+// counts, is the result; and the result is that of a clean-up without the
+// list. Serially and with parallel passes (their workers write the flags
+// too), once with a pass undone (its writes stay listed), and from a
+// prebuilt incidence (the flags cleared in its own loop).
 TEST(MeshCleanup, ChangedEntriesListEverythingTheCleanUpWrote) {
   using nbmc::mesh::detail::repair_pass_hooks;
   TestMesh input = pinched_sphere();
@@ -1156,31 +1230,38 @@ TEST(MeshCleanup, ChangedEntriesListEverythingTheCleanUpWrote) {
     repair_pass_hooks().min_items = 4;
     repair_pass_hooks().undo_after_round = run[1];
     TestMesh left = input;
-    nbmc::mesh::AliveFlags alive;
     nbmc::mesh::ChangedEntries changed;
     nbmc::mesh::PrebuiltIncidence inc;
     if (run[2]) inc = kokkos_incidence(input.p, input.t);
     {
       nbmc::ScopedHostThreads limit(run[0]);
-      nbmc::mesh::cleanup_mesh(left.p, left.n, left.t, 0.05, run[2] ? &inc : nullptr, &alive, &changed);
+      nbmc::mesh::cleanup_mesh(left.p, left.n, left.t, 0.05, run[2] ? &inc : nullptr, &changed);
     }
     if (run[2]) EXPECT_TRUE(inc.empty());  // (taken)
     const auto done = repair_pass_hooks();
     repair_pass_hooks() = saved;
     if (run[0] > 1) EXPECT_GT(done.parallel_passes, saved.parallel_passes) << run[0] << " threads";
-    std::vector<std::uint32_t> cv = changed.vertices, ct = changed.triangles;
-    ASSERT_FALSE(cv.empty());
-    ASSERT_FALSE(ct.empty());
-    EXPECT_LT(cv.size(), nv);
-    EXPECT_LT(ct.size(), nt);
+    EXPECT_TRUE(changed.valid);
+    EXPECT_TRUE(left.p == own.p && left.n == own.n && left.t == own.t) << run[0] << " threads";
+    const std::size_t kv = left.p.size() / 3, kt = left.t.size() / 3;
+    ASSERT_LT(kv, nv);  // (vertices and triangles removed)
+    ASSERT_LT(kt, nt);
+    std::vector<std::uint32_t> cv = changed.vertices, ct = changed.triangles;  // (in no particular order)
     std::sort(cv.begin(), cv.end());
     std::sort(ct.begin(), ct.end());
+    ASSERT_FALSE(cv.empty());
+    ASSERT_FALSE(ct.empty());
+    EXPECT_LT(cv.size(), kv);
+    EXPECT_LT(ct.size(), kt);
     EXPECT_TRUE(std::adjacent_find(cv.begin(), cv.end()) == cv.end()) << "a vertex listed twice";
     EXPECT_TRUE(std::adjacent_find(ct.begin(), ct.end()) == ct.end()) << "a triangle listed twice";
-    ASSERT_LT(cv.back(), nv);
-    ASSERT_LT(ct.back(), nt);
-    // The input, with the listed entries copied over from the clean-up's.
+    ASSERT_LT(cv.back(), kv);
+    ASSERT_LT(ct.back(), kt);
+    // The input cut to the new counts, with the listed places copied over.
     TestMesh copied = input;
+    copied.p.resize(3 * kv);
+    copied.n.resize(3 * kv);
+    copied.t.resize(3 * kt);
     for (const std::uint32_t v : cv)
       for (int a = 0; a < 3; ++a) {
         copied.p[3 * std::size_t(v) + a] = left.p[3 * std::size_t(v) + a];
@@ -1191,13 +1272,6 @@ TEST(MeshCleanup, ChangedEntriesListEverythingTheCleanUpWrote) {
     EXPECT_EQ(copied.p, left.p) << run[0] << " threads";
     EXPECT_EQ(copied.n, left.n) << run[0] << " threads";
     EXPECT_EQ(copied.t, left.t) << run[0] << " threads";
-    const auto kept = nbmc::mesh::compact_mesh(copied.p.data(), copied.n.data(), nv, copied.t.data(), nt, alive);
-    copied.p.resize(3 * kept.first);
-    copied.n.resize(3 * kept.first);
-    copied.t.resize(3 * kept.second);
-    EXPECT_EQ(copied.p, own.p) << run[0] << " threads";
-    EXPECT_EQ(copied.n, own.n) << run[0] << " threads";
-    EXPECT_EQ(copied.t, own.t) << run[0] << " threads";
   }
 }
 

@@ -582,166 +582,85 @@ void upload_mesh_after_postprocess(HostMesh& m, const HostMesh& h) {
 #endif
 }
 
-bool upload_mesh_and_compact(HostMesh& m, const HostMesh& h, const mesh::AliveFlags& alive,
-                             const mesh::ChangedEntries* changed, MemoryTracker& tracker) {
+bool upload_changed_entries(HostMesh& m, const HostMesh& h, const mesh::ChangedEntries& changed,
+                            MemoryTracker& tracker) {
 #if defined(KOKKOS_ENABLE_CUDA)
   const std::size_t nv = h.positions.size() / 3, nt = h.triangles.size() / 3;
   const bool normals = m.d_normals != nullptr;
-  if (nv != m.d_vertices || nt != m.d_triangles_count || alive.size() != nt || nt == 0 ||
-      h.normals.size() != (normals ? 3 * nv : 0))
+  if (!changed.valid || h.f64 || nv > m.d_vertices || nt > m.d_triangles_count || h.normals.size() != (normals ? 3 * nv : 0))
     return false;
-  const std::size_t ncv = changed ? changed->vertices.size() : 0, nct = changed ? changed->triangles.size() : 0;
+  const std::size_t ncv = changed.vertices.size(), nct = changed.triangles.size();
+  for (std::uint32_t v : changed.vertices)
+    if (v >= nv) return false;
+  for (std::uint32_t t : changed.triangles)
+    if (t >= nt) return false;
   const std::size_t width = normals ? 6 : 3;  // (floats per changed vertex)
   const Kokkos::Cuda space;
   using Range = Kokkos::RangePolicy<Kokkos::Cuda>;
   using Details::Buffer;
-  // The mesh as the clean-up left it (and its flags) into buffers of their
-  // own; then compacted into m's arrays, in the host's order (compact_mesh
-  // in core/mesh_check.hpp: kept triangles in their order, the vertices
-  // they use in theirs). With `changed`, those buffers are copies of m's
-  // arrays (the mesh before the clean-up) into which only what the clean-up
-  // wrote is copied from the host: on the 1.65 M frame's mesh at r/2 a few
-  // percent of the 40 MB.
-  Buffer<float, Kokkos::CudaSpace> pos, nor, vval;
-  Buffer<std::uint32_t, Kokkos::CudaSpace> tri, vdst, tdst, vidx, tidx, tval;
-  Buffer<std::uint8_t, Kokkos::CudaSpace> keep;
+  // The listed places of h (the compacted result) packed, uploaded and
+  // scattered into m's arrays, which hold the mesh h was downloaded from:
+  // every other place below h's counts is the same there.
+  Buffer<float, Kokkos::CudaSpace> vval;
+  Buffer<std::uint32_t, Kokkos::CudaSpace> vidx, tidx, tval;
   try {
-    pos = Buffer<float, Kokkos::CudaSpace>(tracker, "compaction::positions", 3 * nv);
-    if (normals) nor = Buffer<float, Kokkos::CudaSpace>(tracker, "compaction::normals", 3 * nv);
-    tri = Buffer<std::uint32_t, Kokkos::CudaSpace>(tracker, "compaction::triangles", 3 * nt);
-    keep = Buffer<std::uint8_t, Kokkos::CudaSpace>(tracker, "compaction::alive", nt);
-    vdst = Buffer<std::uint32_t, Kokkos::CudaSpace>(tracker, "compaction::vertex_places", nv + 1, true);
-    tdst = Buffer<std::uint32_t, Kokkos::CudaSpace>(tracker, "compaction::triangle_places", nt + 1);
-    if (changed) {
-      vidx = Buffer<std::uint32_t, Kokkos::CudaSpace>(tracker, "compaction::changed_vertices", ncv);
-      vval = Buffer<float, Kokkos::CudaSpace>(tracker, "compaction::changed_vertex_values", width * ncv);
-      tidx = Buffer<std::uint32_t, Kokkos::CudaSpace>(tracker, "compaction::changed_triangles", nct);
-      tval = Buffer<std::uint32_t, Kokkos::CudaSpace>(tracker, "compaction::changed_triangle_values", 3 * nct);
-    }
+    vidx = Buffer<std::uint32_t, Kokkos::CudaSpace>(tracker, "changed::vertices", ncv);
+    vval = Buffer<float, Kokkos::CudaSpace>(tracker, "changed::vertex_values", width * ncv);
+    tidx = Buffer<std::uint32_t, Kokkos::CudaSpace>(tracker, "changed::triangles", nct);
+    tval = Buffer<std::uint32_t, Kokkos::CudaSpace>(tracker, "changed::triangle_values", 3 * nct);
   } catch (const Error& e) {
     if (e.status != 6 /*NBMC_ERROR_OUT_OF_MEMORY*/ && e.status != 10 /*NBMC_ERROR_MEMORY_BUDGET*/) throw;
     return false;
   } catch (const std::bad_alloc&) {
     return false;
   }
-  host_trace("post-processing: compaction's device buffers", nt);
-  if (!changed) {
-    const Details::UploadSegment segments[] = {
-        {pos.data(), h.positions.data(), 3 * nv * sizeof(float)},
-        {nor.data(), h.normals.data(), normals ? 3 * nv * sizeof(float) : 0},
-        {tri.data(), h.triangles.data(), 3 * nt * sizeof(std::uint32_t)},
-        {keep.data(), alive.data(), nt}};
-    Details::upload_segments(space, segments, sizeof(segments) / sizeof(segments[0]), copy_on_host_threads);
-    host_trace("post-processing: upload (uncompacted)", nt);
-  } else {
-    const cudaStream_t stream = space.cuda_stream();
-    cuda_check(cudaMemcpyAsync(pos.data(), m.d_positions, 3 * nv * sizeof(float), cudaMemcpyDeviceToDevice, stream),
-               "mesh compaction");
+  std::vector<float> vpack(width * ncv);
+  std::vector<std::uint32_t> tpack(3 * nct);
+  for (std::size_t i = 0; i < ncv; ++i) {
+    const std::size_t v = changed.vertices[i];
+    for (int a = 0; a < 3; ++a) vpack[width * i + a] = h.positions[3 * v + a];
     if (normals)
-      cuda_check(cudaMemcpyAsync(nor.data(), m.d_normals, 3 * nv * sizeof(float), cudaMemcpyDeviceToDevice, stream),
-                 "mesh compaction");
-    cuda_check(
-        cudaMemcpyAsync(tri.data(), m.d_triangles, 3 * nt * sizeof(std::uint32_t), cudaMemcpyDeviceToDevice, stream),
-        "mesh compaction");
-    // (Gathered while the GPU copies.)
-    std::vector<float> vpack(width * ncv);
-    std::vector<std::uint32_t> tpack(3 * nct);
-    for (std::size_t i = 0; i < ncv; ++i) {
-      const std::size_t v = changed->vertices[i];
-      for (int a = 0; a < 3; ++a) vpack[width * i + a] = h.positions[3 * v + a];
-      if (normals)
-        for (int a = 0; a < 3; ++a) vpack[width * i + 3 + a] = h.normals[3 * v + a];
-    }
-    for (std::size_t i = 0; i < nct; ++i)
-      for (int c = 0; c < 3; ++c) tpack[3 * i + c] = h.triangles[3 * std::size_t(changed->triangles[i]) + c];
-    const Details::UploadSegment segments[] = {
-        {vidx.data(), changed->vertices.data(), ncv * sizeof(std::uint32_t)},
-        {vval.data(), vpack.data(), vpack.size() * sizeof(float)},
-        {tidx.data(), changed->triangles.data(), nct * sizeof(std::uint32_t)},
-        {tval.data(), tpack.data(), tpack.size() * sizeof(std::uint32_t)},
-        {keep.data(), alive.data(), nt}};
-    Details::upload_segments(space, segments, sizeof(segments) / sizeof(segments[0]), copy_on_host_threads);
-    host_trace("post-processing: upload (changed entries and flags)", ncv + nct);
-    const std::uint32_t* vi = vidx.data();
-    const float* vv = vval.data();
-    const std::uint32_t* ti = tidx.data();
-    const std::uint32_t* tv = tval.data();
-    float* p = pos.data();
-    float* n = nor.data();
-    std::uint32_t* t = tri.data();
-    Kokkos::parallel_for(
-        "nbmc::compaction::changed_vertices", Range(space, 0, ncv), KOKKOS_LAMBDA(const std::size_t i) {
-          const std::size_t v = vi[i];
-          for (int a = 0; a < 3; ++a) p[3 * v + a] = vv[width * i + a];
-          if (n)
-            for (int a = 0; a < 3; ++a) n[3 * v + a] = vv[width * i + 3 + a];
-        });
-    Kokkos::parallel_for(
-        "nbmc::compaction::changed_triangles", Range(space, 0, nct), KOKKOS_LAMBDA(const std::size_t i) {
-          const std::size_t x = ti[i];
-          for (int c = 0; c < 3; ++c) t[3 * x + c] = tv[3 * i + c];
-        });
+      for (int a = 0; a < 3; ++a) vpack[width * i + 3 + a] = h.normals[3 * v + a];
   }
-  // Flags (1: used by a kept triangle; 1: kept), then their exclusive sums:
-  // each kept item's new place, and in the last entry how many are kept.
-  {
-    const std::uint8_t* k = keep.data();
-    const std::uint32_t* t = tri.data();
-    std::uint32_t* vd = vdst.data();
-    std::uint32_t* td = tdst.data();
-    Kokkos::parallel_for(
-        "nbmc::compaction::flags", Range(space, 0, nt + 1), KOKKOS_LAMBDA(const std::size_t i) {
-          if (i == nt) {
-            td[i] = 0;
-            return;
-          }
-          td[i] = k[i] ? 1u : 0u;
-          if (k[i])
-            for (int c = 0; c < 3; ++c) vd[t[3 * i + c]] = 1u;  // (the same value from every writer)
-        });
-  }
-  Details::device_exclusive_sum(space, tracker, vdst.data(), nv + 1);
-  Details::device_exclusive_sum(space, tracker, tdst.data(), nt + 1);
-  {
-    const float* p = pos.data();
-    const float* n = nor.data();
-    const std::uint32_t* vd = vdst.data();
-    float* dp = m.d_positions;
-    float* dn = m.d_normals;
-    Kokkos::parallel_for(
-        "nbmc::compaction::vertices", Range(space, 0, nv), KOKKOS_LAMBDA(const std::size_t v) {
-          const std::uint32_t d = vd[v];
-          if (vd[v + 1] == d) return;  // (not used)
-          for (int a = 0; a < 3; ++a) dp[3 * std::size_t(d) + a] = p[3 * v + a];
-          if (n)
-            for (int a = 0; a < 3; ++a) dn[3 * std::size_t(d) + a] = n[3 * v + a];
-        });
-    const std::uint32_t* t = tri.data();
-    const std::uint32_t* td = tdst.data();
-    std::uint32_t* dt = m.d_triangles;
-    Kokkos::parallel_for(
-        "nbmc::compaction::triangles", Range(space, 0, nt), KOKKOS_LAMBDA(const std::size_t i) {
-          const std::uint32_t d = td[i];
-          if (td[i + 1] == d) return;  // (removed)
-          for (int c = 0; c < 3; ++c) dt[3 * std::size_t(d) + c] = vd[t[3 * i + c]];
-        });
-  }
+  for (std::size_t i = 0; i < nct; ++i)
+    for (int c = 0; c < 3; ++c) tpack[3 * i + c] = h.triangles[3 * std::size_t(changed.triangles[i]) + c];
+  const Details::UploadSegment segments[] = {
+      {vidx.data(), changed.vertices.data(), ncv * sizeof(std::uint32_t)},
+      {vval.data(), vpack.data(), vpack.size() * sizeof(float)},
+      {tidx.data(), changed.triangles.data(), nct * sizeof(std::uint32_t)},
+      {tval.data(), tpack.data(), tpack.size() * sizeof(std::uint32_t)}};
+  Details::upload_segments(space, segments, sizeof(segments) / sizeof(segments[0]), copy_on_host_threads);
+  host_trace("post-processing: upload (changed entries)", ncv + nct);
+  const std::uint32_t* vi = vidx.data();
+  const float* vv = vval.data();
+  const std::uint32_t* ti = tidx.data();
+  const std::uint32_t* tv = tval.data();
+  float* p = m.d_positions;
+  float* n = m.d_normals;
+  std::uint32_t* t = m.d_triangles;
+  Kokkos::parallel_for(
+      "nbmc::changed::vertices", Range(space, 0, ncv), KOKKOS_LAMBDA(const std::size_t i) {
+        const std::size_t v = vi[i];
+        for (int a = 0; a < 3; ++a) p[3 * v + a] = vv[width * i + a];
+        if (n)
+          for (int a = 0; a < 3; ++a) n[3 * v + a] = vv[width * i + 3 + a];
+      });
+  Kokkos::parallel_for(
+      "nbmc::changed::triangles", Range(space, 0, nct), KOKKOS_LAMBDA(const std::size_t i) {
+        const std::size_t x = ti[i];
+        for (int c = 0; c < 3; ++c) t[3 * x + c] = tv[3 * i + c];
+      });
   {
     const cudaError_t e = cudaGetLastError();
-    if (e != cudaSuccess) cuda_fail(e, "mesh compaction");
+    if (e != cudaSuccess) cuda_fail(e, "mesh upload");
   }
-  std::uint32_t kept_v = 0, kept_t = 0;  // (the copies wait for the kernels)
-  cuda_check(cudaMemcpyAsync(&kept_v, vdst.data() + nv, sizeof kept_v, cudaMemcpyDeviceToHost, space.cuda_stream()),
-             "mesh compaction");
-  cuda_check(cudaMemcpyAsync(&kept_t, tdst.data() + nt, sizeof kept_t, cudaMemcpyDeviceToHost, space.cuda_stream()),
-             "mesh compaction");
   space.fence();
-  host_trace("post-processing: compaction on the device", kept_t);
-  m.d_vertices = kept_v;
-  m.d_triangles_count = kept_t;
+  host_trace("post-processing: changed entries on the device", ncv + nct);
+  m.d_vertices = nv;
+  m.d_triangles_count = nt;
   return true;
 #else
-  (void)m; (void)h; (void)alive; (void)changed; (void)tracker;
+  (void)m; (void)h; (void)changed; (void)tracker;
   throw Error(7, "the CUDA backend is not compiled in");
 #endif
 }

@@ -5,8 +5,11 @@
 # passes), old = 531499a (session 39's end), from out/dev/old.tgz. Run 2:
 # new = the working tree (consider_move's trials that leave the bad
 # triangle bad found before the fan's old shapes; consider_flip's shapes
-# before its fans), old = 531499a; SCAL_THREADS="1 4 16". (Run 1 kept
-# scalold's and trace6's whole traces under $O; run 2 under $L.)
+# before its fans), old = 531499a; SCAL_THREADS="1 4 16". Run 3: new =
+# the working tree (the clean-up's compaction fills holes from the end,
+# found from what the repairs recorded; device meshes get back only the
+# places that differ; run 3 a first version, run 4 the kept one), old =
+# 8d445dd.
 set -uo pipefail
 R=$PWD; O=${OUT:-/tmp/o}; L=/tmp/L; mkdir -p $O $L
 export PATH=/usr/local/cuda/bin:$PATH
@@ -94,7 +97,7 @@ trace6)  # in the library: the clean-up's steps per frame, device-resident and h
   for v in new old; do B=$N; [ $v = old ] && B=$OB
     for args in "--backend cuda --device-resident --repeat 6" "--backend cuda --repeat 6" "--backend cuda --tile 2 --repeat 3"; do
       NBMC_TRACE=1 $B/bench/nbmc_bench $BIG --spacing 0.00484 $args > $L/tr.txt 2>&1
-      echo "# $v ${args// /_}"; grep -h "clean-up: moves \|clean-up: repairs \|clean-up: compaction \|clean-up moves:" $L/tr.txt | tail -6 | cut -c1-150; grep RESULT $L/tr.txt | res
+      echo "# $v ${args// /_}"; grep -h "clean-up: repairs \|clean-up: compaction \|post-processing: upload\|changed entries\|compaction on the device" $L/tr.txt | tail -8 | cut -c1-150; grep RESULT $L/tr.txt | res
       cat $L/tr.txt >> $L/trace6-$v.txt
     done
   done > $O/trace6.txt 2>&1

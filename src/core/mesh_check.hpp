@@ -2,8 +2,8 @@
 // Mesh check (nbmc_mesh_check, `nbmc reconstruct --check`): topology and
 // quality figures of a triangle mesh given as flat host arrays. Plain C++,
 // serial, so the figures are the same on every backend and thread count
-// (compact_mesh, for the clean-up and the decimation, runs on host threads
-// and its result does not depend on them either).
+// (compact_mesh, for the decimation, runs on host threads and its result
+// does not depend on them either).
 //
 // Definitions (also in include/nbmc.h):
 //  - an edge is an unordered pair of vertices used by at least one triangle;

@@ -127,9 +127,10 @@
 // and fan() reads them, through relaxed atomics (see fan()), so that such a
 // read, whose value does not matter, is no data race. Counts and changed
 // lists are per thread and merged after each round; the next pass' list is
-// sorted, so their order does not matter. The output keeps the surviving
-// triangles in their order and the surviving vertices in theirs;
-// unreferenced vertices are dropped.
+// sorted, so their order does not matter. In the output the places of the
+// removed triangles and of the vertices no triangle uses (also the
+// input's) are filled with the last surviving ones (compact()); every other
+// entry stays where it was.
 #pragma once
 
 #include "mesh_check.hpp"
@@ -209,6 +210,9 @@ struct RepairPassHooks {
   // the list before, the changed vertices and triangles; the same at any
   // thread count.
   std::uint64_t looked_at = 0;
+  // The compaction as compact_mesh does it (everything kept in its order)
+  // instead of filling the removed entries' places from the end.
+  bool compact_in_order = false;
 };
 inline RepairPassHooks& repair_pass_hooks() {
   static RepairPassHooks hooks;
@@ -265,6 +269,10 @@ class Cleaner {
     // build below.)
     const std::size_t vchunks = chunk_count(nv, 65536);
     std::vector<std::array<double, 6>> box(vchunks);  // lo, hi
+    // A prebuilt incidence's lists bounds are looked at here: the vertices
+    // without a triangle (bare_, for compact()).
+    const bool take = prebuilt && prebuilt->fits(nv, nt);
+    std::vector<std::vector<std::uint32_t>> bare(vchunks);
     for_chunks(nv, vchunks, [&](std::size_t k, std::size_t b, std::size_t e) {
       for (std::size_t v = b; v < e; ++v) {
         next_[v] = kNone;
@@ -272,6 +280,9 @@ class Cleaner {
         irregular_[v] = kFanUnknown;  // (found when first asked: irregular())
         expanded_[v] = 0;
       }
+      if (take)
+        for (std::size_t v = b; v < e; ++v)
+          if (prebuilt->start[v] == prebuilt->start[v + 1]) bare[k].push_back(std::uint32_t(v));
       if (vchanged_) std::fill(vchanged_ + b, vchanged_ + e, std::uint8_t(0));
       // As bounding_extent: every chunk starts from vertex 0 (so a NaN
       // coordinate is ignored, or not, exactly as in its serial loop).
@@ -295,8 +306,9 @@ class Cleaner {
       extent = std::max({x[3] - x[0], x[4] - x[1], x[5] - x[2]});
     }
     degenerate_double_area_ = 2 * kDegenerateAreaFraction * extent * extent;
+    for (const auto& x : bare) bare_.insert(bare_.end(), x.begin(), x.end());
     host_trace("clean-up: arrays, extent", nv);
-    if (prebuilt && prebuilt->fits(nv, nt)) {
+    if (take) {
       // The lists as they are; the first scan classifies only the
       // triangles whose bit is set (add_if_bad: the same list).
       const std::uint32_t* bits = prebuilt->maybe_bad.data();
@@ -391,6 +403,7 @@ class Cleaner {
       start_.resize(nv + 1);
       start_[0] = 0;
       if (sorted) incident_.resize(corners.size());
+      bare.assign(groups, {});
       on_threads(groups, [&](std::size_t g) {
         // (Ranges [r0, r1): their corners lie together, by range, then
         // triangle range, so in triangle order for each vertex.)
@@ -408,6 +421,7 @@ class Cleaner {
         std::size_t pos = sorted ? cb : 0;
         for (std::size_t v = vb; v < ve; ++v) {
           fill[v - vb] = std::uint32_t(pos);
+          if (start_[v + 1] == 0) bare[g].push_back(std::uint32_t(v));  // (no triangle: compact())
           pos += start_[v + 1];
           start_[v + 1] = std::uint32_t(pos);
         }
@@ -417,6 +431,7 @@ class Cleaner {
           if (sorted || v < nv) incident_[fill[v - vb]++] = c / 3;
         }
       });
+      for (const auto& x : bare) bare_.insert(bare_.end(), x.begin(), x.end());
       host_trace("clean-up: incidence lists", nt);
     }
   }
@@ -1149,21 +1164,144 @@ class Cleaner {
     return removed;
   }
   // Writes the surviving triangles and vertices back, compacted; returns the
-  // new counts.
-  std::pair<std::size_t, std::size_t> compact() { return compact_mesh(P_, N_, nv_, T_, nt_, alive_); }
-  // ... or hands the triangles' alive flags (1: kept) to whoever compacts
-  // the mesh instead; the Cleaner is done with them.
-  AliveFlags take_alive() { return std::move(alive_own_); }
+  // new counts. The places of the removed triangles below the new triangle
+  // count take the surviving triangles from it on (both ascending, one for
+  // one), and the same for the vertices that no surviving triangle uses
+  // (their corners renumbered); everything else stays where it was. The
+  // clean-up removes a few hundred of millions of entries: the removed
+  // triangles and the vertices that may have lost their last triangle are
+  // those it recorded (killed_, lost_; bare_: those that never had one),
+  // and a moved vertex's triangles are its fan, so that nothing is read
+  // whole. (An
+  // order-keeping compaction moved every entry after the first removed one
+  // and read every triangle twice: 3-4 ms of the 1.65 M frame on 16 host
+  // threads, 18-26 ms of the 13.2 M frame: bench/RESULTS.md, session 39.)
+  // written_*: the places below the new counts that now hold another
+  // vertex or triangle, or a triangle with a vertex renumbered (ascending,
+  // each once; may be null). The result does not depend on the thread count.
+  std::pair<std::size_t, std::size_t> compact(std::vector<std::uint32_t>* written_vertices = nullptr,
+                                              std::vector<std::uint32_t>* written_triangles = nullptr) {
+    if (written_vertices) written_vertices->clear();
+    if (written_triangles) written_triangles->clear();
+    if (repair_pass_hooks().compact_in_order) return compact_in_order(written_vertices, written_triangles);
+    // The removed triangles, and the vertices to look at: those that lost
+    // a triangle, and those whose lists are empty (no triangle in the input).
+    std::vector<std::uint32_t> dead, look;
+    auto gather = [&](const Cleaner& c) {
+      for (std::uint32_t t : c.killed_)
+        if (!alive_[t]) dead.push_back(t);
+      look.insert(look.end(), c.lost_.begin(), c.lost_.end());
+    };
+    gather(*this);
+    for (const auto& w : workers_) gather(*w);
+    look.insert(look.end(), bare_.begin(), bare_.end());
+    std::sort(dead.begin(), dead.end());
+    dead.erase(std::unique(dead.begin(), dead.end()), dead.end());
+    std::sort(look.begin(), look.end());
+    look.erase(std::unique(look.begin(), look.end()), look.end());
+    // Of those, the vertices that no surviving triangle uses (an empty fan:
+    // fan() finds every surviving triangle that holds the vertex).
+    std::vector<std::uint8_t> unused_flag(look.size(), 0);
+    for_chunks(look.size(), chunk_count(look.size(), 1024), [&](std::size_t, std::size_t b, std::size_t e) {
+      std::vector<std::uint32_t> f;
+      for (std::size_t i = b; i < e; ++i) {
+        fan(look[i], f);
+        unused_flag[i] = f.empty() ? 1 : 0;
+      }
+    });
+    std::vector<std::uint32_t> unused;
+    for (std::size_t i = 0; i < look.size(); ++i)
+      if (unused_flag[i]) unused.push_back(look[i]);
+    if (dead.empty() && unused.empty()) return {nv_, nt_};
+    const std::size_t kv = nv_ - unused.size(), kt = nt_ - dead.size();
+    // Holes below the counts and the entries kept from them on, ascending:
+    // as many of each.
+    auto holes_and_movers = [](const std::vector<std::uint32_t>& gone, std::size_t n, std::size_t kept,
+                               std::vector<std::uint32_t>& holes, std::vector<std::uint32_t>& movers) {
+      auto it = std::lower_bound(gone.begin(), gone.end(), std::uint32_t(kept));
+      holes.assign(gone.begin(), it);
+      for (std::size_t x = kept; x < n; ++x) {
+        if (it != gone.end() && *it == x) {
+          ++it;
+          continue;
+        }
+        movers.push_back(std::uint32_t(x));
+      }
+    };
+    std::vector<std::uint32_t> vhole, vmove, thole, tmove, renamed, f;
+    holes_and_movers(unused, nv_, kv, vhole, vmove);
+    holes_and_movers(dead, nt_, kt, thole, tmove);
+    // Each moved vertex' triangles (its fan, by the triangles' places
+    // before they move) name its new place. A hole is a vertex no triangle
+    // uses, and no moved vertex is one, so no fan sees another's renaming.
+    for (std::size_t i = 0; i < vmove.size(); ++i) {
+      const std::uint32_t from = vmove[i], to = vhole[i];
+      for (int a = 0; a < 3; ++a) P_[3 * std::size_t(to) + a] = P_[3 * std::size_t(from) + a];
+      if (N_)
+        for (int a = 0; a < 3; ++a) N_[3 * std::size_t(to) + a] = N_[3 * std::size_t(from) + a];
+      fan(from, f);
+      for (std::uint32_t t : f) {
+        for (int k = 0; k < 3; ++k)
+          if (T_[3 * std::size_t(t) + k] == from) T_[3 * std::size_t(t) + k] = to;
+        renamed.push_back(t);
+      }
+    }
+    for (std::size_t i = 0; i < tmove.size(); ++i)
+      for (int k = 0; k < 3; ++k) T_[3 * std::size_t(thole[i]) + k] = T_[3 * std::size_t(tmove[i]) + k];
+    if (written_vertices) *written_vertices = std::move(vhole);
+    if (written_triangles) {
+      std::vector<std::uint32_t>& w = *written_triangles;
+      w = std::move(thole);
+      for (std::uint32_t t : renamed)
+        if (t < kt) w.push_back(t);
+      std::sort(w.begin(), w.end());
+      w.erase(std::unique(w.begin(), w.end()), w.end());
+    }
+    return {kv, kt};
+  }
+  // compact() as compact_mesh does it (everything kept in order), for the
+  // tests (RepairPassHooks::compact_in_order); written_*: every place below
+  // the new counts whose contents changed.
+  std::pair<std::size_t, std::size_t> compact_in_order(std::vector<std::uint32_t>* written_vertices,
+                                                       std::vector<std::uint32_t>* written_triangles) {
+    const std::vector<Real> p0(P_, P_ + 3 * nv_);
+    std::vector<float> n0;
+    if (N_) n0.assign(N_, N_ + 3 * nv_);
+    const std::vector<std::uint32_t> t0(T_, T_ + 3 * nt_);
+    const auto counts = compact_mesh(P_, N_, nv_, T_, nt_, alive_);
+    for (std::size_t v = 0; v < counts.first && written_vertices; ++v)
+      if (!std::equal(P_ + 3 * v, P_ + 3 * v + 3, p0.begin() + std::ptrdiff_t(3 * v)) ||
+          (N_ && !std::equal(N_ + 3 * v, N_ + 3 * v + 3, n0.begin() + std::ptrdiff_t(3 * v))))
+        written_vertices->push_back(std::uint32_t(v));
+    for (std::size_t t = 0; t < counts.second && written_triangles; ++t)
+      if (!std::equal(T_ + 3 * t, T_ + 3 * t + 3, t0.begin() + std::ptrdiff_t(3 * t)))
+        written_triangles->push_back(std::uint32_t(t));
+    return counts;
+  }
   // What the repairs wrote (with track_changes; else nothing): each entry
   // once, in no particular order (each Cleaner's in the order of its first
   // writes).
-  void changed_entries(ChangedEntries& out) const {
-    out.vertices = vlist_;
-    out.triangles = tlist_;
+  // After compact(): those below the new counts (kv, kt), and the places
+  // compact() wrote (written_*) that the repairs did not; each once, in no
+  // particular order (the change flags tell which the repairs listed).
+  void changed_entries(ChangedEntries& out, const std::vector<std::uint32_t>& written_vertices,
+                       const std::vector<std::uint32_t>& written_triangles, std::size_t kv, std::size_t kt) const {
+    out.vertices.clear();
+    out.triangles.clear();
+    auto below = [](std::vector<std::uint32_t>& to, const std::vector<std::uint32_t>& from, std::size_t count) {
+      for (std::uint32_t x : from)
+        if (x < count) to.push_back(x);
+    };
+    below(out.vertices, vlist_, kv);
+    below(out.triangles, tlist_, kt);
     for (const auto& w : workers_) {
-      out.vertices.insert(out.vertices.end(), w->vlist_.begin(), w->vlist_.end());
-      out.triangles.insert(out.triangles.end(), w->tlist_.begin(), w->tlist_.end());
+      below(out.vertices, w->vlist_, kv);
+      below(out.triangles, w->tlist_, kt);
     }
+    for (std::uint32_t v : written_vertices)
+      if (!vchanged_ || !vchanged_[v]) out.vertices.push_back(v);
+    for (std::uint32_t t : written_triangles)
+      if (!tchanged_ || !tchanged_[t]) out.triangles.push_back(t);
   }
 
  private:
@@ -1231,6 +1369,7 @@ class Cleaner {
       walked_.push_back(t);
       if (to != kRemoved) continue;
       for (int k = 0; k < 3; ++k) irregular(T_[3 * std::size_t(t) + k]);  // (fixed before the write: see irregular())
+      killed(t);
       alive_[t] = 0;
     }
   }
@@ -2820,6 +2959,7 @@ class Cleaner {
     if (worker_) log_.push_back({Undo::Normal, v, {double(N_[3 * std::size_t(v)]), double(N_[3 * std::size_t(v) + 1]), double(N_[3 * std::size_t(v) + 2])}});
   }
   void log_triangle(std::uint32_t t) {
+    lost(t);
     changed_triangle(t);
     touch_triangle(t);
     if (worker_) log_.push_back({Undo::Triangle, t, {double(T_[3 * std::size_t(t)]), double(T_[3 * std::size_t(t) + 1]), double(T_[3 * std::size_t(t) + 2])}});
@@ -2827,7 +2967,17 @@ class Cleaner {
   void log_alive(std::uint32_t t) {
     touch_triangle(t);
     if (worker_) log_.push_back({Undo::Alive, t, {double(alive_[t]), 0, 0}});
+    killed(t);
   }
+  // For the compaction (compact()): a triangle about to be removed, and its
+  // vertices, which may lose their last triangle with it.
+  void killed(std::uint32_t t) {
+    killed_.push_back(t);
+    lost(t);
+  }
+  // ... a triangle's vertices, before its vertices are rewritten or it is
+  // removed (each may lose its last triangle).
+  void lost(std::uint32_t t) { lost_.insert(lost_.end(), T_ + 3 * std::size_t(t), T_ + 3 * std::size_t(t) + 3); }
   // a's chain of merged vertices: next_ of its tail, and its tail.
   void log_chain(std::uint32_t a) {
     touch(a);
@@ -2959,6 +3109,12 @@ class Cleaner {
   // stamps (per vertex, stamp_base_ + the item that last committed with the
   // vertex in its region).
   std::vector<std::unique_ptr<Cleaner>> workers_;
+  // What compact() looks at instead of the whole mesh: the triangles
+  // removed (killed(); an undone pass may have revived some) and the
+  // vertices of every triangle rewritten or removed (lost()), repeats and
+  // all; each Cleaner its own.
+  std::vector<std::uint32_t> killed_, lost_;
+  std::vector<std::uint32_t> bare_;  // vertices without a triangle in the input (the main Cleaner's)
   // Skipping hopeless retries (start_times): per vertex, the time of the
   // last repair that changed its position or triangles (the main
   // Cleaner's; its workers write it through mod_); the current item's
@@ -2999,25 +3155,22 @@ class Cleaner {
 // kSmallComponentCells cells are removed (0: never).
 // prebuilt: this mesh's incidence, built where it was made (may be null;
 // taken when its sizes fit: see mesh_incidence.hpp); the result is the same.
-// alive (may be null): the compaction is left to the caller, which gets one
-// flag per triangle (1: kept; the kept vertices are those the kept
-// triangles use) and arrays of the input's sizes, with the repairs'
-// positions, normals and triangles; the result's removed_vertices and
-// removed_triangles are then 0 (compact_mesh, or a copy of it elsewhere
-// with the same order, gives the mesh cleanup_mesh would have returned).
-// changed (may be null; only with alive): what the clean-up wrote, for a
-// caller that holds the input elsewhere and copies back only that.
+// The compaction fills the removed entries' places from the end (Cleaner::
+// compact()): the kept entries below the new counts stay where they were,
+// and unreferenced vertices (also the input's) are dropped.
+// changed (may be null): the places of the result whose contents may
+// differ from the input's at the same place (ChangedEntries), for a
+// caller that holds the input elsewhere and copies back only those.
 template <class PosVec, class NormalVec, class IndexVec>
 CleanupResult cleanup_mesh(PosVec& positions, NormalVec& normals, IndexVec& triangles, double cell = 0,
-                           PrebuiltIncidence* prebuilt = nullptr,
-                           AliveFlags* alive = nullptr, ChangedEntries* changed = nullptr) {
+                           PrebuiltIncidence* prebuilt = nullptr, ChangedEntries* changed = nullptr) {
   CleanupResult r;
   const std::size_t nv = positions.size() / 3, nt = triangles.size() / 3;
   if (nt == 0) return r;
   const bool has_normals = !normals.empty() && normals.size() == positions.size();
   host_trace("clean-up: start", nt);
   detail::Cleaner<typename PosVec::value_type> c(positions.data(), has_normals ? normals.data() : nullptr, nv, triangles.data(), nt,
-                                                 prebuilt, alive && changed);
+                                                 prebuilt, changed != nullptr);
   // Passes until nothing more can be repaired; then again with a looser
   // limit on the normals' turn for what is left (folds stay excluded);
   // then, for what is still left, with the last resorts (collapses that
@@ -3078,16 +3231,16 @@ CleanupResult cleanup_mesh(PosVec& positions, NormalVec& normals, IndexVec& tria
   r.flips = c.flips;
   r.moves = c.moves;
   host_trace("clean-up: noise components", bad.size());
-  if (alive) {
-    if (changed) {
-      c.changed_entries(*changed);
-      host_trace("clean-up: changed entries", changed->vertices.size() + changed->triangles.size());
-    }
-    *alive = c.take_alive();
-    return r;
-  }
-  const auto counts = c.compact();
+  std::vector<std::uint32_t> filled_vertices, filled_triangles;
+  const auto counts = changed ? c.compact(&filled_vertices, &filled_triangles) : c.compact();
   host_trace("clean-up: compaction", counts.second);
+  if (changed) {
+    // What the repairs wrote that stays below the new counts, and the
+    // places the compaction wrote: each once.
+    c.changed_entries(*changed, filled_vertices, filled_triangles, counts.first, counts.second);
+    changed->valid = true;
+    host_trace("clean-up: changed entries", changed->vertices.size() + changed->triangles.size());
+  }
   positions.resize(3 * counts.first);
   if (has_normals) normals.resize(3 * counts.first);
   triangles.resize(3 * counts.second);

@@ -15,18 +15,18 @@
 namespace nbmc {
 namespace mesh {
 
-// One flag per triangle (1: kept): cleanup_mesh's output (mesh_cleanup.hpp)
-// when its caller compacts the mesh itself (a device mesh: on the GPU).
-using AliveFlags = std::vector<std::uint8_t, NoInitAllocator<std::uint8_t>>;
-// What a clean-up that leaves the compaction to its caller wrote
-// (mesh_cleanup.hpp, cleanup_mesh's `changed`), each entry once, in no
-// particular order: the vertices whose position or normal it wrote and the
-// triangles whose vertices it wrote.
-// Everything else is as it was (every write of a repair goes through the
-// Cleaner's log_ functions, which set the flags these lists are made of); a
-// write that was undone stays listed.
+// Where a clean-up's result differs from its input (mesh_cleanup.hpp,
+// cleanup_mesh's `changed`), each place once, in no particular order,
+// below the result's counts: the vertices whose position or normal may differ from
+// the input's at the same place, and the triangles whose vertices may.
+// Everything else below the counts is as it was (every write of a repair
+// goes through the Cleaner's log_ functions, which list it; the compaction
+// lists the places it fills and renumbers); a write that was undone stays
+// listed. valid: filled by a clean-up (empty lists then mean: nothing
+// differs).
 struct ChangedEntries {
   std::vector<std::uint32_t> vertices, triangles;
+  bool valid = false;
 };
 
 struct PrebuiltIncidence {
