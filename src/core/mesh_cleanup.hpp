@@ -1278,12 +1278,10 @@ class Cleaner {
         written_triangles->push_back(std::uint32_t(t));
     return counts;
   }
-  // What the repairs wrote (with track_changes; else nothing): each entry
-  // once, in no particular order (each Cleaner's in the order of its first
-  // writes).
-  // After compact(): those below the new counts (kv, kt), and the places
-  // compact() wrote (written_*) that the repairs did not; each once, in no
-  // particular order (the change flags tell which the repairs listed).
+  // After compact(): what the repairs wrote (with track_changes; else
+  // nothing) below the new counts (kv, kt), and the places compact() wrote
+  // (written_*) that the repairs did not; each once, in no particular order
+  // (the change flags tell which the repairs listed).
   void changed_entries(ChangedEntries& out, const std::vector<std::uint32_t>& written_vertices,
                        const std::vector<std::uint32_t>& written_triangles, std::size_t kv, std::size_t kt) const {
     out.vertices.clear();
