@@ -537,8 +537,8 @@ void release_device_pool() {
 void download_mesh_for_postprocess(const HostMesh& m, HostMesh& h, bool incidence, MemoryTracker& tracker) {
 #if defined(KOKKOS_ENABLE_CUDA)
   // (The incidence's buffers go back to nbmc's device pool, which keeps them
-  // for the compaction's after the host's clean-up: the caller releases it,
-  // release_device_pool.)
+  // for the changed entries' after the host's clean-up: the caller releases
+  // it, release_device_pool.)
   const std::size_t nv = m.d_vertices, nt = m.d_triangles_count;
   h.positions.resize(3 * nv);
   h.normals.resize(m.d_normals ? 3 * nv : 0);
