@@ -1199,6 +1199,7 @@ class Cleaner {
     dead.erase(std::unique(dead.begin(), dead.end()), dead.end());
     std::sort(look.begin(), look.end());
     look.erase(std::unique(look.begin(), look.end()), look.end());
+    look.erase(std::lower_bound(look.begin(), look.end(), std::uint32_t(std::min<std::size_t>(nv_, kNone))), look.end());  // (no such vertex)
     // Of those, the vertices that no surviving triangle uses (an empty fan:
     // fan() finds every surviving triangle that holds the vertex).
     std::vector<std::uint8_t> unused_flag(look.size(), 0);
