@@ -930,7 +930,6 @@ TEST(MeshCleanup, FillingCompactionKeepsWhatCompactMeshKeeps) {
   int meshes = 0;
   for (const TestMesh& input : {prepare(pinched_sphere(), 3), prepare(speck, 5)}) {
     ++meshes;
-    const std::size_t nv = input.p.size() / 3, nt = input.t.size() / 3;
     TestMesh ref = input;
     repair_pass_hooks().compact_in_order = true;
     const auto a = nbmc::mesh::cleanup_mesh(ref.p, ref.n, ref.t, 0.05);
@@ -983,7 +982,6 @@ TEST(MeshCleanup, FillingCompactionKeepsWhatCompactMeshKeeps) {
       // Most of the mesh stays where it was (an order-keeping compaction
       // moves everything after the first removed entry).
       EXPECT_LT(dt.size() * 4, m.t.size() / 3) << "mesh " << meshes;
-      (void)nv, (void)nt;
     }
   }
 }

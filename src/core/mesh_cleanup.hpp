@@ -1172,10 +1172,10 @@ class Cleaner {
   // triangles and the vertices that may have lost their last triangle are
   // those it recorded (killed_, lost_; bare_: those that never had one),
   // and a moved vertex's triangles are its fan, so that nothing is read
-  // whole. (An
-  // order-keeping compaction moved every entry after the first removed one
-  // and read every triangle twice: 3-4 ms of the 1.65 M frame on 16 host
-  // threads, 18-26 ms of the 13.2 M frame: bench/RESULTS.md, session 39.)
+  // whole. (An order-keeping compaction moved every entry after the first
+  // removed one and read every triangle twice: 3-4 ms of the 1.65 M frame on
+  // 16 host threads, 18-26 ms of the 13.2 M frame: bench/RESULTS.md,
+  // session 39.)
   // written_*: the places below the new counts that now hold another
   // vertex or triangle, or a triangle with a vertex renumbered (ascending,
   // each once; may be null). The result does not depend on the thread count.
@@ -1183,7 +1183,8 @@ class Cleaner {
                                               std::vector<std::uint32_t>* written_triangles = nullptr) {
     if (written_vertices) written_vertices->clear();
     if (written_triangles) written_triangles->clear();
-    if (repair_pass_hooks().compact_in_order) return compact_in_order(written_vertices, written_triangles);
+    // (The tests' reference, which they run without `changed`: no places listed.)
+    if (repair_pass_hooks().compact_in_order) return compact_mesh(P_, N_, nv_, T_, nt_, alive_);
     // The removed triangles, and the vertices to look at: those that lost
     // a triangle, and those whose lists are empty (no triangle in the input).
     std::vector<std::uint32_t> dead, look;
@@ -1259,25 +1260,6 @@ class Cleaner {
       w.erase(std::unique(w.begin(), w.end()), w.end());
     }
     return {kv, kt};
-  }
-  // compact() as compact_mesh does it (everything kept in order), for the
-  // tests (RepairPassHooks::compact_in_order); written_*: every place below
-  // the new counts whose contents changed.
-  std::pair<std::size_t, std::size_t> compact_in_order(std::vector<std::uint32_t>* written_vertices,
-                                                       std::vector<std::uint32_t>* written_triangles) {
-    const std::vector<Real> p0(P_, P_ + 3 * nv_);
-    std::vector<float> n0;
-    if (N_) n0.assign(N_, N_ + 3 * nv_);
-    const std::vector<std::uint32_t> t0(T_, T_ + 3 * nt_);
-    const auto counts = compact_mesh(P_, N_, nv_, T_, nt_, alive_);
-    for (std::size_t v = 0; v < counts.first && written_vertices; ++v)
-      if (!std::equal(P_ + 3 * v, P_ + 3 * v + 3, p0.begin() + std::ptrdiff_t(3 * v)) ||
-          (N_ && !std::equal(N_ + 3 * v, N_ + 3 * v + 3, n0.begin() + std::ptrdiff_t(3 * v))))
-        written_vertices->push_back(std::uint32_t(v));
-    for (std::size_t t = 0; t < counts.second && written_triangles; ++t)
-      if (!std::equal(T_ + 3 * t, T_ + 3 * t + 3, t0.begin() + std::ptrdiff_t(3 * t)))
-        written_triangles->push_back(std::uint32_t(t));
-    return counts;
   }
   // After compact(): what the repairs wrote (with track_changes; else
   // nothing) below the new counts (kv, kt), and the places compact() wrote
