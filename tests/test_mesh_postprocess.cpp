@@ -248,6 +248,22 @@ TestMesh icosphere(int levels) {
   return m;
 }
 
+// While one lives, bad_triangles_after also makes each list with the fans
+// of the vertices that moves and collapses moved (which it leaves out:
+// those repairs judged every triangle there); the two lists must be the
+// same after every pass.
+struct ListCheck {
+  std::uint64_t mismatches_before;
+  ListCheck() : mismatches_before(nbmc::mesh::detail::repair_pass_hooks().list_mismatches) {
+    nbmc::mesh::detail::repair_pass_hooks().check_lists = true;
+  }
+  ~ListCheck() {
+    auto& h = nbmc::mesh::detail::repair_pass_hooks();
+    h.check_lists = false;
+    EXPECT_EQ(h.list_mismatches, mismatches_before) << "a list without the judged fans differed";
+  }
+};
+
 TEST(MeshCleanup, SphereIsUntouched) {
   TestMesh m = icosphere(2);
   const TestMesh before = m;
@@ -402,6 +418,7 @@ std::uint32_t vertex_of_degree_6(const TestMesh& m) {
 // vertex): every collapse leaves other degenerate triangles degenerate, which
 // the first rounds refuse; the last round allows it and repairs them all.
 TEST(MeshCleanup, CoincidentVerticesAreMerged) {
+  const ListCheck lists;
   TestMesh m = icosphere(2);
   const float zero[3][3] = {};
   split_vertex(m, vertex_of_degree_6(m), zero, false);
@@ -450,6 +467,7 @@ TestMesh pinched_cap(float ab, float c_off, float apex) {
 // clean-up cuts the cycle: the cap goes, the hole's side closes in one
 // vertex.
 TEST(MeshCleanup, PinchedCapIsCut) {
+  const ListCheck lists;
   // a at v, b 1e-5 along a tangent, c halfway and 1e-8 off the line, x
   // 1e-5 outward.
   TestMesh m = pinched_cap(1e-5f, 1e-8f, 1e-5f);
@@ -479,6 +497,7 @@ TEST(MeshCleanup, PinchedCapIsCut) {
 // around it: a collapse), x and the six triangles with two cluster vertices
 // go.
 TEST(MeshCleanup, PinchedCapBeyondTheCutIsMerged) {
+  const ListCheck lists;
   TestMesh m = pinched_cap(1e-4f, 1e-2f, 2e-3f);
   const CheckResult in = m.check();
   ASSERT_TRUE(in.closed && in.manifold && in.oriented);
@@ -535,6 +554,7 @@ static nbmc::mesh::CleanupResult expect_patch_repaired(TestMesh& m) {
 // keeps those triangles good: the sliver stayed. Each loop's vertex now has
 // a point of its own (one found by the pattern search).
 TEST(MeshCleanup, NeedleBesideNearOneDegreeTrianglesIsMerged) {
+  const ListCheck lists;
   TestMesh m;
   m.p = {-0.507562399f, 0.156678408f, 0.131805241f,
         -0.507562399f, 0.156585038f, 0.132068455f,
@@ -614,6 +634,7 @@ TEST(MeshCleanup, NeedleBesideNearOneDegreeTrianglesIsMerged) {
 // ends' centres make triangles of just over a degree bad (each loop vertex
 // now gets a point of its own). Before, the sliver stayed.
 TEST(MeshCleanup, StripBesideNearOneDegreeTrianglesIsMerged) {
+  const ListCheck lists;
   TestMesh m;
   m.p = {-0.27282241f, 0.372058392f, 0.37158975f,
         -0.27282241f, 0.371981472f, 0.371648461f,
@@ -689,7 +710,10 @@ TEST(MeshCleanup, RandomPinchedHolesStayClosed) {
     ASSERT_TRUE(before.closed && before.manifold && before.oriented) << "seed " << seed;
     TestMesh again = m;
     const auto r = nbmc::mesh::cleanup_mesh(m.p, m.n, m.t);
-    nbmc::mesh::cleanup_mesh(again.p, again.n, again.t);
+    {
+      const ListCheck lists;  // (the lists after each pass also with the judged fans)
+      nbmc::mesh::cleanup_mesh(again.p, again.n, again.t);
+    }
     ASSERT_EQ(m.t, again.t) << "seed " << seed;
     ASSERT_EQ(m.p, again.p) << "seed " << seed;
     const CheckResult after = m.check();
@@ -711,6 +735,7 @@ TEST(MeshCleanup, RandomPinchedHolesStayClosed) {
 }
 
 TEST(MeshCleanup, NeedlesAreRepaired) {
+  const ListCheck lists;
   TestMesh m = icosphere(2);
   // Move vertex 0 almost onto its neighbour: its two shared triangles become needles.
   const std::uint32_t a = m.t[0], b = m.t[1];
@@ -731,6 +756,7 @@ TEST(MeshCleanup, NeedlesAreRepaired) {
 }
 
 TEST(MeshCleanup, CapIsRepaired) {
+  const ListCheck lists;
   TestMesh m = icosphere(2);
   // Put a vertex of degree 6 on the segment between two of its neighbours
   // (projected on their chord): its triangles on that side become caps.
@@ -778,7 +804,10 @@ TEST(MeshCleanup, RandomPinchesNeverOpenTheMesh) {
     const CheckResult before = m.check();
     TestMesh again = m;
     const auto r = nbmc::mesh::cleanup_mesh(m.p, m.n, m.t);
-    nbmc::mesh::cleanup_mesh(again.p, again.n, again.t);
+    {
+      const ListCheck lists;  // (the lists after each pass also with the judged fans)
+      nbmc::mesh::cleanup_mesh(again.p, again.n, again.t);
+    }
     ASSERT_EQ(m.t, again.t) << "seed " << seed;
     ASSERT_EQ(m.p, again.p) << "seed " << seed;
     const CheckResult after = m.check();
@@ -1013,11 +1042,13 @@ TEST(MeshCleanup, ParallelRepairsMatchSerial) {
     repair_pass_hooks().prefix_per_thread = prefix;
     repair_pass_hooks().check_writes = true;
     repair_pass_hooks().check_skips = check_skips;
+    repair_pass_hooks().check_lists = true;
     {
       nbmc::ScopedHostThreads limit(threads);
       r = nbmc::mesh::cleanup_mesh(m.p, m.n, m.t, 0.05);
     }
     const auto done = repair_pass_hooks();
+    EXPECT_EQ(done.list_mismatches, saved.list_mismatches) << threads << " threads: a list without the judged fans differed";
     repair_pass_hooks() = saved;
     repair_pass_hooks().parallel_passes = done.parallel_passes;
     repair_pass_hooks().rounds = done.rounds;

@@ -210,6 +210,12 @@ struct RepairPassHooks {
   // the list before, the changed vertices and triangles; the same at any
   // thread count.
   std::uint64_t looked_at = 0;
+  // bad_triangles_after leaves out the fans of the vertices whose repair
+  // judged every triangle around them (judged_vertices_). With check_lists
+  // it also makes the list with them and counts each pass whose two lists
+  // differ in list_mismatches (added to; it must stay 0).
+  bool check_lists = false;
+  std::uint64_t list_mismatches = 0;
   // The compaction as compact_mesh does it (everything kept in its order)
   // instead of filling the removed entries' places from the end.
   bool compact_in_order = false;
@@ -531,8 +537,35 @@ class Cleaner {
   // triangles of `before` and those around the changed vertices (and the
   // flipped ones) are looked at again. A full scan costs about 40 ns per
   // triangle of the mesh; this, the same per triangle of the repairs'
-  // neighbourhoods.
+  // neighbourhoods. The fans of the vertices that moves and collapses moved
+  // (judged_vertices_, nearly all of the changed ones) are not looked at:
+  // those repairs judged every triangle of the fan with the arithmetic of
+  // add_if_bad (the positions rounded as stored, the corners in the
+  // triangle's order) and leave none bad that was good, so a bad triangle
+  // there was bad before the pass, and `before` (every bad triangle then)
+  // holds it. (A cut or a cluster merge judges less: their vertices' fans
+  // are looked at.)
   BadList bad_triangles_after(const BadList& before) {
+    RepairPassHooks& hooks = repair_pass_hooks();
+    if (hooks.check_lists) {  // (a test's: the list with the judged fans too)
+      std::vector<std::uint32_t> kept = changed_vertices_;
+      changed_vertices_.insert(changed_vertices_.end(), judged_vertices_.begin(), judged_vertices_.end());
+      const std::vector<std::uint32_t> triangles = changed_triangles_;
+      const std::uint64_t looked_at = hooks.looked_at;
+      const BadList full = list_after(before);
+      hooks.looked_at = looked_at;
+      changed_vertices_ = std::move(kept);
+      changed_triangles_ = triangles;
+      judged_vertices_.clear();
+      BadList bad = list_after(before);
+      if (bad != full) ++hooks.list_mismatches;
+      return bad;
+    }
+    judged_vertices_.clear();
+    return list_after(before);
+  }
+  // bad_triangles_after's list from `before` and changed_vertices_' fans.
+  BadList list_after(const BadList& before) {
     // On several host threads: each chunk of what is looked at (the
     // triangles of `before`, the fans of the changed vertices, the changed
     // triangles) lists its bad triangles, a triangle looked at twice twice;
@@ -670,6 +703,10 @@ class Cleaner {
   static constexpr std::size_t kPrefixPerThread = 64;
 
   std::uint64_t repair_pass(const BadList& bad) {
+    // (NBMC_TRACE: the main thread's time before, in and after the rounds.)
+    const bool trace = host_trace_on();
+    using Clock = std::chrono::steady_clock;
+    const Clock::time_point setup_start = trace ? Clock::now() : Clock::time_point();
     const std::size_t n = bad.size();
     const RepairPassHooks hooks = repair_pass_hooks();
     const std::size_t threads =
@@ -790,7 +827,6 @@ class Cleaner {
     std::uint64_t repaired = 0, rounds = 0, lost = 0;
     SpinBarrier barrier(threads);
     // (NBMC_TRACE: the main thread's time in each step of the rounds.)
-    const bool trace = host_trace_on();
     double step_ms[5] = {0, 0, 0, 0, 0};  // reserve, commit, release, merge, waits
     // The items of a round: each thread takes its own range first (in both
     // steps, so that an item commits where its region's lines are cached),
@@ -806,6 +842,7 @@ class Cleaner {
       }
     };
     reset_cursors();
+    const Clock::time_point rounds_start = trace ? Clock::now() : Clock::time_point();
     on_threads(threads, [&](std::size_t w) {
       auto each_item = [&](Cursor* cursor, const auto& f) {
         const std::size_t m = cur.size();
@@ -825,7 +862,6 @@ class Cleaner {
           failed = true;
         }
       };
-      using Clock = std::chrono::steady_clock;
       Clock::time_point t0;
       auto step = [&](int k) {  // (the main thread's, when tracing)
         if (!trace || w != 0) return;
@@ -948,6 +984,7 @@ class Cleaner {
       }
     });
     round_base_ = round_id;
+    const Clock::time_point rounds_end = trace ? Clock::now() : Clock::time_point();
     auto clear_workers = [&] {
       for (std::size_t k = 0; k < threads; ++k) {
         Cleaner& o = *workers_[k];
@@ -955,6 +992,7 @@ class Cleaner {
         o.round_ends_.clear();
         o.changed_vertices_.clear();
         o.changed_triangles_.clear();
+        o.judged_vertices_.clear();
       }
     };
     if (error) {
@@ -966,6 +1004,7 @@ class Cleaner {
         const Cleaner& o = *workers_[k];
         changed_vertices_.insert(changed_vertices_.end(), o.changed_vertices_.begin(), o.changed_vertices_.end());
         changed_triangles_.insert(changed_triangles_.end(), o.changed_triangles_.begin(), o.changed_triangles_.end());
+        judged_vertices_.insert(judged_vertices_.end(), o.judged_vertices_.begin(), o.judged_vertices_.end());
       }
     else {
       // The rounds undone last first; within a round, each worker's entries
@@ -996,14 +1035,17 @@ class Cleaner {
       h.kept_regions += reused.load();
       h.writes_outside += writes_outside;
     }
-    if (host_trace_on()) {
+    if (trace) {
+      auto ms = [](Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double, std::milli>(b - a).count(); };
       std::fprintf(stderr,
                    "[nbmc trace] clean-up rounds: items=%zu threads=%zu rounds=%llu lost=%llu (%.1f%%, regions kept "
-                   "%llu)%s; main thread: reserve %.3f, commit %.3f, release %.3f, merge %.3f, waiting %.3f ms\n",
+                   "%llu)%s; main thread: setup %.3f, reserve %.3f, commit %.3f, release %.3f, merge %.3f, waiting "
+                   "%.3f, threads' start and end %.3f, after %.3f ms\n",
                    n, threads, (unsigned long long)rounds, (unsigned long long)lost, 100.0 * double(lost) / double(n),
-                   (unsigned long long)reused.load(),
-                   violation ? " (undone, run serially)" : "", step_ms[0],
-                   step_ms[1], step_ms[2], step_ms[3], step_ms[4]);
+                   (unsigned long long)reused.load(), violation ? " (undone, run serially)" : "",
+                   ms(setup_start, rounds_start), step_ms[0], step_ms[1], step_ms[2], step_ms[3], step_ms[4],
+                   ms(rounds_start, rounds_end) - (step_ms[0] + step_ms[1] + step_ms[2] + step_ms[3] + step_ms[4]),
+                   ms(rounds_end, Clock::now()));
     }
     return finish(repaired);
   }
@@ -1790,7 +1832,7 @@ class Cleaner {
       P_[3 * std::size_t(m.first)] = Real(m.second.x);
       P_[3 * std::size_t(m.first) + 1] = Real(m.second.y);
       P_[3 * std::size_t(m.first) + 2] = Real(m.second.z);
-      changed_vertices_.push_back(m.first);
+      judged_vertices_.push_back(m.first);
     }
     ++moves;
   }
@@ -2872,7 +2914,7 @@ class Cleaner {
     log_chain(a);
     next_[tail_[a]] = b;
     tail_[a] = tail_[b];
-    changed_vertices_.push_back(a);
+    judged_vertices_.push_back(a);
     ++collapses;
   }
 
@@ -3065,8 +3107,10 @@ class Cleaner {
   std::vector<OldTriangle> around_old_;
   Vec3 around_normal_;
   // What the repairs changed since the last bad_triangles_after(): vertices
-  // moved or renamed into, triangles rewritten in place.
-  std::vector<std::uint32_t> changed_vertices_, changed_triangles_;
+  // moved or renamed into, triangles rewritten in place; and the vertices
+  // moved or renamed into by a move or a collapse, whose every triangle the
+  // repair judged (judged_vertices_: see bad_triangles_after).
+  std::vector<std::uint32_t> changed_vertices_, changed_triangles_, judged_vertices_;
   // The component walks (the main Cleaner's): per triangle, its state, and
   // per vertex, whether the current walk has taken its fan (both cleared in
   // the constructor, on all host threads: a fresh array cleared by one
