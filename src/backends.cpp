@@ -3,6 +3,7 @@
 #include "subdomains.hpp"
 #include "core/clusters.hpp"
 #include "core/parallel.hpp"
+#include "core/repair_scratch.hpp"
 
 #include <Kokkos_Core.hpp>
 
@@ -250,8 +251,13 @@ void runtime_acquire(nbmc_context& ctx) {
 void runtime_release(nbmc_context&) {
   std::lock_guard<std::mutex> lock(g_runtime_mutex);
   // The last context gone: the host blocks kept for a next frame go too
-  // (core/host_cache.hpp; blocks of meshes still alive stay theirs).
-  if (--g_contexts == 0) HostBlockCache::instance().release();
+  // (core/host_cache.hpp; blocks of meshes still alive stay theirs), the
+  // clean-up's kept scratch first (core/repair_scratch.hpp: its blocks go
+  // back to the host cache).
+  if (--g_contexts == 0) {
+    mesh::detail::RepairScratchPool::instance().release();
+    HostBlockCache::instance().release();
+  }
 }
 
 bool runtime_finalize() {

@@ -20,6 +20,7 @@
 #include <cmath>
 #include <cstdint>
 #include <map>
+#include <memory>
 #include <numeric>
 #include <random>
 #include <utility>
@@ -1118,6 +1119,90 @@ TEST(MeshCleanup, ParallelRepairsMatchSerial) {
               (unsigned long long)(h.rounds - at_start.rounds), (unsigned long long)(h.lost - at_start.lost),
               (unsigned long long)(h.kept_regions - at_start.kept_regions),
               (unsigned long long)(h.skipped - at_start.skipped));
+}
+
+// The repair passes' per-vertex scratch is kept from one clean-up to the
+// next (RepairScratchPool): a kept block gives the mesh a new one gives,
+// also when its counters are about to wrap (its stamps, rounds and times
+// start again from 0); a block whose rounds did not end cleanly, one for
+// fewer vertices than the pool keeps, and one more than twice as large as
+// asked for are not handed out again.
+TEST(MeshCleanup, KeptRepairScratchGivesTheSameMesh) {
+  using nbmc::mesh::detail::RepairScratch;
+  using nbmc::mesh::detail::RepairScratchPool;
+  using nbmc::mesh::detail::repair_pass_hooks;
+  const TestMesh sphere = pinched_sphere(7);
+  const std::size_t nv = sphere.p.size() / 3;
+  ASSERT_GE(nv, RepairScratchPool::kMinVertices);
+  RepairScratchPool& pool = RepairScratchPool::instance();
+  pool.release();
+  // (Parallel passes from a few items per thread; no pass may be undone:
+  // a stamp left from an earlier clean-up would undo one; no retry may be
+  // skipped whose repair would now succeed: a time left from an earlier
+  // clean-up could skip one.)
+  auto clean = [&] {
+    TestMesh m = sphere;
+    const auto saved = repair_pass_hooks();
+    repair_pass_hooks().min_items = 4;
+    repair_pass_hooks().check_skips = true;
+    {
+      nbmc::ScopedHostThreads limit(3);
+      nbmc::mesh::cleanup_mesh(m.p, m.n, m.t, 0.05);
+    }
+    const auto done = repair_pass_hooks();
+    repair_pass_hooks() = saved;
+    EXPECT_GT(done.parallel_passes, saved.parallel_passes);
+    EXPECT_EQ(done.undone, saved.undone);
+    EXPECT_GT(done.skipped, saved.skipped);
+    EXPECT_EQ(done.skip_mismatches, saved.skip_mismatches);
+    return m;
+  };
+  const TestMesh fresh = clean();
+  {
+    // The clean-up gave its scratch back, its counters moved on.
+    std::unique_ptr<RepairScratch> s = pool.take(nv);
+    EXPECT_GT(s->time_next, 1u);
+    EXPECT_GT(s->stamp_base, 0u);
+    EXPECT_TRUE(s->clean);
+    pool.give(std::move(s));
+  }
+  const TestMesh again = clean();
+  EXPECT_EQ(again.t, fresh.t);
+  EXPECT_EQ(again.p, fresh.p);
+  EXPECT_EQ(again.n, fresh.n);
+  {
+    std::unique_ptr<RepairScratch> s = pool.take(nv);
+    s->stamp_base = s->round_base = s->time_next = 0xffffffffu - 50;
+    pool.give(std::move(s));
+  }
+  const TestMesh wrapped = clean();
+  EXPECT_EQ(wrapped.t, fresh.t);
+  EXPECT_EQ(wrapped.p, fresh.p);
+  EXPECT_EQ(wrapped.n, fresh.n);
+  {
+    std::unique_ptr<RepairScratch> s = pool.take(nv);
+    EXPECT_LT(s->time_next, 0xffffffffu - 50);  // (started again)
+    s->time_next = 777;
+    s->clean = false;  // (as after an error in a round)
+    pool.give(std::move(s));
+    EXPECT_EQ(pool.take(nv)->time_next, 1u);  // a new block
+  }
+  {
+    std::unique_ptr<RepairScratch> s = pool.take(nv);
+    s->time_next = 777;
+    pool.give(std::move(s));
+    EXPECT_EQ(pool.take(nv / 3)->time_next, 1u);        // more than twice as large: not taken
+    EXPECT_EQ(pool.take(nv + 1)->time_next, 1u);        // too small
+    std::unique_ptr<RepairScratch> kept = pool.take(nv);  // still there
+    EXPECT_EQ(kept->time_next, 777u);
+    std::unique_ptr<RepairScratch> small = pool.take(RepairScratchPool::kMinVertices - 1);
+    small->time_next = 555;
+    pool.give(std::move(small));  // (too small to keep)
+    EXPECT_EQ(pool.take(RepairScratchPool::kMinVertices - 1)->time_next, 1u);
+    pool.give(std::move(kept));
+  }
+  pool.release();
+  EXPECT_EQ(pool.take(nv)->time_next, 1u);
 }
 
 // The incidence the CUDA pipeline builds for the clean-up

@@ -137,6 +137,7 @@
 #include "mesh_incidence.hpp"
 #include "parallel.hpp"
 #include "params.hpp"
+#include "repair_scratch.hpp"
 #include "trace.hpp"
 
 #include <algorithm>
@@ -199,8 +200,9 @@ struct RepairPassHooks {
   bool check_writes = false;
   std::uint64_t writes_outside = 0;
   // What the parallel passes did while min_items > 0 (added to): passes,
-  // rounds, items that lost, lost items' regions kept for the next round.
-  std::uint64_t parallel_passes = 0, rounds = 0, lost = 0, kept_regions = 0;
+  // rounds, items that lost, lost items' regions kept for the next round,
+  // passes undone and run serially (a stamp of a later item found).
+  std::uint64_t parallel_passes = 0, rounds = 0, lost = 0, kept_regions = 0, undone = 0;
   // Items skipped because their earlier failure must repeat (added to,
   // always). With check_skips, such an item is repaired anyway and counted
   // in skip_mismatches if that succeeds (it must never).
@@ -248,6 +250,61 @@ class SpinBarrier {
 
 // Real: the positions' scalar (float, or double with
 // nbmc_params.double_positions); normals are float either way.
+// The heads of the lists of triangles added to vertices (Cleaner::
+// add_incidence: after flips, cuts and merges), by vertex. A few hundred
+// vertices get one in a clean-up of a million, so a small open-addressed
+// table, not an array per vertex: nothing to fill for each clean-up, and
+// fan()'s look-up, for every vertex it walks, stays in the cache. Written
+// only while nothing reads it (between a parallel pass' rounds, on the main
+// thread, or in a serial pass).
+class ExtraHeads {
+ public:
+  static constexpr std::uint32_t kNone = 0xffffffffu;
+  bool empty() const { return size_ == 0; }
+  // v's head (kNone: none).
+  std::uint32_t get(std::uint32_t v) const {
+    if (size_ == 0) return kNone;
+    for (std::size_t h = slot(v);; h = (h + 1) & (table_.size() - 1)) {
+      const std::pair<std::uint32_t, std::uint32_t>& e = table_[h];
+      if (e.first == v) return e.second;
+      if (e.first == kNone) return kNone;
+    }
+  }
+  void set(std::uint32_t v, std::uint32_t head) {
+    if (2 * (size_ + 1) > table_.size()) grow();
+    for (std::size_t h = slot(v);; h = (h + 1) & (table_.size() - 1)) {
+      std::pair<std::uint32_t, std::uint32_t>& e = table_[h];
+      if (e.first == v) {
+        e.second = head;
+        return;
+      }
+      if (e.first == kNone) {
+        e = {v, head};
+        ++size_;
+        return;
+      }
+    }
+  }
+
+ private:
+  std::size_t slot(std::uint32_t v) const {
+    return std::size_t((std::uint64_t(v) * 0x9e3779b97f4a7c15ull) >> (64 - bits_));
+  }
+  void grow() {
+    std::vector<std::pair<std::uint32_t, std::uint32_t>> old(std::max<std::size_t>(64, 2 * table_.size()),
+                                                           {kNone, kNone});
+    old.swap(table_);
+    bits_ = 0;
+    while ((std::size_t(1) << bits_) < table_.size()) ++bits_;
+    size_ = 0;
+    for (const auto& e : old)
+      if (e.first != kNone) set(e.first, e.second);
+  }
+  std::vector<std::pair<std::uint32_t, std::uint32_t>> table_;  // (vertex, head); kNone: empty
+  std::size_t size_ = 0;
+  int bits_ = 0;  // table_.size() is 2^bits_
+};
+
 template <class Real>
 class Cleaner {
  public:
@@ -449,7 +506,13 @@ class Cleaner {
       : P_(m.P_), N_(m.N_), nv_(m.nv_), T_(m.T_), nt_(m.nt_), alive_(m.alive_own_), irregular_(m.irregular_own_),
         start_(m.start_own_), next_(m.next_own_), tail_(m.tail_own_), incident_(m.incident_own_),
         extra_head_(m.extra_head_own_), extra_(m.extra_own_), degenerate_double_area_(m.degenerate_double_area_),
-        worker_(true), mod_(m.mod_own_), vchanged_(m.vchanged_), tchanged_(m.tchanged_) {}
+        worker_(true), repair_scratch_(m.repair_scratch_own_), vchanged_(m.vchanged_), tchanged_(m.tchanged_) {}
+  Cleaner(const Cleaner&) = delete;
+  Cleaner& operator=(const Cleaner&) = delete;
+  // The repair passes' scratch goes back to the pool for the next clean-up.
+  ~Cleaner() {
+    if (repair_scratch_own_) RepairScratchPool::instance().give(std::move(repair_scratch_own_));
+  }
 
   std::uint64_t collapses = 0, flips = 0, moves = 0, cuts = 0;
   // Largest turn of a triangle's normal a repair may cause (cosine).
@@ -767,30 +830,17 @@ class Cleaner {
       return finish(repaired);
     }
     const std::uint64_t saved[4] = {collapses, flips, moves, cuts};
-    // The lists of the triangles added to vertices (add_incidence, between
-    // rounds on the main thread), allocated here on all host threads rather
-    // than by the first round's merge on the main thread alone.
-    if (extra_head_.empty()) {
-      extra_head_.resize(nv_);  // (unwritten: NoInitAllocator)
-      for_chunks(nv_, chunk_count(nv_, 65536), [&](std::size_t, std::size_t b, std::size_t e) {
-        std::fill(extra_head_.begin() + b, extra_head_.begin() + e, kNone);
-      });
-    }
-    // (A pass has at most n rounds: each round's first item wins.)
-    if (!slots_ || std::uint64_t(stamp_base_) + n + 2 >= kNone || std::uint64_t(round_base_) + n + 2 >= kNone) {
-      if (!slots_) slots_ = NoInitArray<Slot>(nv_);  // (every field written below)
-      stamp_base_ = round_base_ = 0;
-      for_chunks(nv_, chunk_count(nv_, 65536), [&](std::size_t, std::size_t b, std::size_t e) {
-        for (std::size_t x = b; x < e; ++x) {
-          slots_[x].reserve.store(kNone, std::memory_order_relaxed);
-          slots_[x].stamp = 0;
-          slots_[x].wrote = 0;
-        }
-      });
-    }
-    const std::uint32_t base = stamp_base_ + 1;  // item i's stamp: base + i
-    stamp_base_ = base + std::uint32_t(n);
-    std::uint32_t round_id = round_base_ + 1;  // the current round's (slots_' wrote)
+    // The per-vertex reservations, stamps and rounds (start_times took
+    // the scratch; kept from an earlier clean-up, its stamps and rounds are
+    // all below the counters). (A pass has at most n rounds: each round's
+    // first item wins.)
+    RepairScratch& scratch = *repair_scratch_;
+    if (std::uint64_t(scratch.stamp_base) + n + 2 >= kNone || std::uint64_t(scratch.round_base) + n + 2 >= kNone)
+      scratch.reset_stamps();
+    RepairSlot* const slots_ = &scratch.slots[0];
+    const std::uint32_t base = scratch.stamp_base + 1;  // item i's stamp: base + i
+    scratch.stamp_base = base + std::uint32_t(n);
+    std::uint32_t round_id = scratch.round_base + 1;  // the current round's (slots_' wrote)
     while (workers_.size() < threads) workers_.emplace_back(new Cleaner(*this, WorkerTag{}));
     for (std::size_t w = 0; w < threads; ++w) {
       Cleaner& k = *workers_[w];
@@ -843,6 +893,7 @@ class Cleaner {
     };
     reset_cursors();
     const Clock::time_point rounds_start = trace ? Clock::now() : Clock::time_point();
+    scratch.clean = false;  // (until the rounds end without an error: see RepairScratchPool::give)
     on_threads(threads, [&](std::size_t w) {
       auto each_item = [&](Cursor* cursor, const auto& f) {
         const std::size_t m = cur.size();
@@ -983,7 +1034,8 @@ class Cleaner {
         step(3);
       }
     });
-    round_base_ = round_id;
+    scratch.round_base = round_id;
+    if (!error) scratch.clean = true;
     const Clock::time_point rounds_end = trace ? Clock::now() : Clock::time_point();
     auto clear_workers = [&] {
       for (std::size_t k = 0; k < threads; ++k) {
@@ -1033,6 +1085,7 @@ class Cleaner {
       h.rounds += rounds;
       h.lost += lost;
       h.kept_regions += reused.load();
+      h.undone += violation ? 1 : 0;
       h.writes_outside += writes_outside;
     }
     if (trace) {
@@ -1092,7 +1145,8 @@ class Cleaner {
   // the positions and triangles of its vertices; the tests check its
   // writes), and what it finds there decides. A repair stamps each vertex
   // whose position or triangles it changes with its time (touch): its
-  // place in the serial order of all passes (time_next_ on), so the same
+  // place in the serial order of all passes (the scratch's time_next on:
+  // times only grow, also from one clean-up to the next), so the same
   // at any thread count (a parallel pass commits the items whose regions
   // meet in that order). A triangle whose repair failed at time f, with
   // no vertex of its region (now) stamped f or later, has the same region
@@ -1104,16 +1158,16 @@ class Cleaner {
     const int key = (cos_limit == kCosMaxNormalTurn ? 0 : cos_limit == kCosMaxNormalTurnLast ? 1 : 2) +
                     3 * (last_resort ? 1 : 0) + 6 * (merge_clusters ? 1 : 0);
     if (key != failed_key_) failed_.clear(), failed_key_ = key;
-    if (mod_.empty() || std::uint64_t(time_next_) + n + 1 >= kNone) {
-      if (mod_.empty()) mod_.resize(nv_);
-      for_chunks(nv_, chunk_count(nv_, 65536), [&](std::size_t, std::size_t b, std::size_t e) {
-        std::fill(mod_.begin() + b, mod_.begin() + e, 0u);
-      });
+    // (The scratch of an earlier clean-up holds only times below its
+    // counter, older than any of this one's.)
+    if (!repair_scratch_) repair_scratch_ = RepairScratchPool::instance().take(nv_);
+    RepairScratch& scratch = *repair_scratch_;
+    if (std::uint64_t(scratch.time_next) + n + 1 >= kNone) {
+      scratch.reset_times();
       failed_.clear();
-      time_next_ = 1;
     }
-    const std::uint32_t base = time_next_;
-    time_next_ += std::uint32_t(n);
+    const std::uint32_t base = scratch.time_next;
+    scratch.time_next += std::uint32_t(n);
     now_ = 0;  // (the main Cleaner's, for add_incidence after a round)
     return base;
   }
@@ -1124,8 +1178,9 @@ class Cleaner {
     return it != failed_.end() && it->first == t ? it->second : 0;
   }
   bool unchanged_since(const std::vector<std::uint32_t>& region, std::uint32_t time) const {
+    const RepairSlot* slots = &repair_scratch_->slots[0];
     for (std::uint32_t x : region)
-      if (mod_[x] >= time) return false;
+      if (slots[x].mod >= time) return false;
     return true;
   }
   void record_failures(const BadList& bad) {
@@ -1533,7 +1588,7 @@ class Cleaner {
     };
     for (std::uint32_t u = v; u != kNone; u = next_[u]) {
       for (std::uint32_t i = start_[u]; i < start_[u + 1]; ++i) take(incident_[i]);
-      for (std::uint32_t x = extra_head_.empty() ? kNone : extra_head_[u]; x != kNone; x = extra_[x].second)
+      for (std::uint32_t x = extra_head_.get(u); x != kNone; x = extra_[x].second)
         take(extra_[x].first);
     }
     std::sort(out.begin(), out.end());
@@ -2951,7 +3006,10 @@ class Cleaner {
   // irregular().)
   void touch(std::uint32_t v) {
     irregular(v);
-    if (!mod_.empty() && mod_[v] < now_) mod_[v] = now_;
+    if (repair_scratch_) {
+      std::uint32_t& mod = repair_scratch_->slots[v].mod;
+      if (mod < now_) mod = now_;
+    }
   }
   void touch_triangle(std::uint32_t t) {
     for (int k = 0; k < 3; ++k) touch(T_[3 * std::size_t(t) + k]);
@@ -3065,9 +3123,8 @@ class Cleaner {
       pending_incidence_.push_back({v, t});
       return;
     }
-    if (extra_head_.empty()) extra_head_.assign(nv_, kNone);
-    extra_.push_back({t, extra_head_[v]});
-    extra_head_[v] = std::uint32_t(extra_.size() - 1);
+    extra_.push_back({t, extra_head_.get(v)});
+    extra_head_.set(v, std::uint32_t(extra_.size() - 1));
   }
 
   Real* P_;
@@ -3083,7 +3140,7 @@ class Cleaner {
   using Extra = std::vector<std::pair<std::uint32_t, std::uint32_t>>;
   Bytes alive_own_, irregular_own_;
   Indices start_own_, next_own_, tail_own_, incident_own_;
-  Indices extra_head_own_;
+  ExtraHeads extra_head_own_;
   Extra extra_own_;
   Bytes& alive_ = alive_own_;
   Bytes& irregular_ = irregular_own_;
@@ -3091,7 +3148,7 @@ class Cleaner {
   Indices& next_ = next_own_;
   Indices& tail_ = tail_own_;
   Indices& incident_ = incident_own_;
-  Indices& extra_head_ = extra_head_own_;  // per vertex, into extra_ (after flips)
+  ExtraHeads& extra_head_ = extra_head_own_;  // by vertex, into extra_ (after flips)
   Extra& extra_ = extra_own_;                                 // (triangle, next entry)
   double degenerate_double_area_ = 0;
   // The constructor's scan (initial_bad_triangles).
@@ -3129,10 +3186,7 @@ class Cleaner {
   // A worker's log_ sizes at the end of each round of a parallel pass.
   std::vector<std::size_t> round_ends_;
   std::uint64_t repaired_ = 0;
-  // The main Cleaner's: its workers, the reservations (per vertex, the
-  // first item of the round whose region holds it; kNone: none) and the
-  // stamps (per vertex, stamp_base_ + the item that last committed with the
-  // vertex in its region).
+  // The main Cleaner's workers.
   std::vector<std::unique_ptr<Cleaner>> workers_;
   // What compact() looks at instead of the whole mesh: the triangles
   // removed (killed(); an undone pass may have revived some) and the
@@ -3140,15 +3194,17 @@ class Cleaner {
   // all; each Cleaner its own.
   std::vector<std::uint32_t> killed_, lost_;
   std::vector<std::uint32_t> bare_;  // vertices without a triangle in the input (the main Cleaner's)
-  // Skipping hopeless retries (start_times): per vertex, the time of the
-  // last repair that changed its position or triangles (the main
-  // Cleaner's; its workers write it through mod_); the current item's
-  // time (each Cleaner's own); per item of the pass, 0 (repaired) or when
-  // it failed; the failures of the last pass (triangle, time), sorted, and
-  // under which limits.
-  std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>> mod_own_;
-  std::vector<std::uint32_t, NoInitAllocator<std::uint32_t>>& mod_ = mod_own_;
-  std::uint32_t now_ = 0, time_next_ = 1;
+  // The repair passes' per-vertex scratch (repair_scratch.hpp; the main
+  // Cleaner's, taken by the first pass, given back by the destructor; its
+  // workers use it through repair_scratch_): per vertex, the reservation, the
+  // stamp and round of repair_pass, and the time of the last repair that
+  // changed its position or triangles (start_times). Also for skipping
+  // hopeless retries: the current item's time (each Cleaner's own); per
+  // item of the pass, 0 (repaired) or when it failed; the failures of the
+  // last pass (triangle, time), sorted, and under which limits.
+  std::unique_ptr<RepairScratch> repair_scratch_own_;
+  std::unique_ptr<RepairScratch>& repair_scratch_ = repair_scratch_own_;
+  std::uint32_t now_ = 0;
   // With track_changes: per vertex, its position or normal was written; per
   // triangle, its vertices were (the main Cleaner's flags, null: not kept);
   // and each Cleaner's list of what it flagged.
@@ -3160,14 +3216,9 @@ class Cleaner {
   std::vector<std::pair<std::uint32_t, std::uint32_t>> failed_;
   int failed_key_ = -1;
   std::uint64_t skipped_ = 0, skip_mismatches_ = 0;
-  // ... and the last round (round_base_ + its number) in which an item
-  // that wrote something committed with the vertex in its region.
-  struct Slot {
-    std::atomic<std::uint32_t> reserve;
-    std::uint32_t stamp, wrote;
-  };
-  NoInitArray<Slot> slots_;  // per vertex (one cache line for all three)
-  std::uint32_t stamp_base_ = 0, round_base_ = 0;
+  // ... and the last round (the scratch's round_base + its number) in
+  // which an item that wrote something committed with the vertex in its
+  // region: all in the scratch's slots (RepairSlot, per vertex).
 };
 
 }  // namespace detail

@@ -37,11 +37,12 @@ inline std::uint64_t mesh_bytes(std::uint64_t nv, std::uint64_t nt, bool double_
 
 // The clean-up (cleanup_mesh) of a mesh of nv vertices and nt triangles.
 //   per vertex (34 B): the triangle lists' offsets (start_) and fill
-//     cursors while they are built, the renaming chains (next_, tail_), the
-//     list heads after flips (extra_head_) (4 B each), the parallel passes'
-//     slots (reservation, stamp, last write: 12 B), the irregular flag and,
-//     for a device mesh, the change flag (1 B each); the compaction's lists
-//     (a few entries per repair) are not counted;
+//     cursors while they are built, the renaming chains (next_, tail_) (4 B
+//     each), the repair passes' slots (reservation, stamp, last write, last
+//     change: 16 B; kept for the next clean-up afterwards, see
+//     repair_scratch.hpp), the irregular flag and, for a device mesh, the
+//     change flag (1 B each); the compaction's lists and the list heads
+//     after flips (a few entries per repair) are not counted;
 //   per triangle (67 B): the lists of triangles around each vertex
 //     (incident_, 3 x 4 B), alive, walk state and the change flag (1 B
 //     each), and the larger
@@ -60,7 +61,7 @@ inline std::uint64_t mesh_bytes(std::uint64_t nv, std::uint64_t nt, bool double_
 inline std::uint64_t cleanup_bytes(std::uint64_t nv, std::uint64_t nt) {
   constexpr std::uint64_t bad_entry = sizeof(std::tuple<int, double, std::uint32_t>);
   constexpr std::uint64_t corners = 3 * 8, passes = 2 * bad_entry + 4;
-  return (nv + 1) * (5 * 4 + 12 + 2) + nt * (3 * 4 + 3 + (corners > passes ? corners : passes));
+  return (nv + 1) * (4 * 4 + 16 + 2) + nt * (3 * 4 + 3 + (corners > passes ? corners : passes));
 }
 // Smoothing (smooth_mesh), and with feature weights the particle density
 // around each vertex (particle_density_ratio, over `particles` particles;
