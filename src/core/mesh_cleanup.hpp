@@ -825,7 +825,11 @@ class Cleaner {
     if (threads <= 1) {
       std::uint64_t repaired = 0;
       skip_mismatches_ = 0;
-      for (std::size_t pos = 0; pos < n; ++pos) repaired += attempt(*this, pos, nullptr) ? 1 : 0;
+      for (std::size_t pos = 0; pos < n; ++pos) {
+        for (int d = 4; d >= 1; --d)  // (the lines of the next items, as in the reserve step below)
+          if (pos + std::size_t(d) < n) prefetch_region(std::get<2>(bad[pos + std::size_t(d)]), 4 - d);
+        repaired += attempt(*this, pos, nullptr) ? 1 : 0;
+      }
       skip_mismatches = skip_mismatches_;
       return finish(repaired);
     }
@@ -930,8 +934,8 @@ class Cleaner {
           std::uint64_t kept = 0;
           each_item(cursor_a.get(), [&](std::size_t i) {
             const std::uint32_t pos = cur[i];
-            for (int d = 3; d >= 1; --d)  // (the lines of the next items: prefetch_region)
-              if (i + std::size_t(d) < cur.size()) me.prefetch_region(std::get<2>(bad[cur[i + std::size_t(d)]]), 3 - d);
+            for (int d = 4; d >= 1; --d)  // (the lines of the next items: prefetch_region)
+              if (i + std::size_t(d) < cur.size()) me.prefetch_region(std::get<2>(bad[cur[i + std::size_t(d)]]), 4 - d);
             bool find = true;
             if (carried[i]) {
               find = false;
@@ -1127,8 +1131,8 @@ class Cleaner {
       Cleaner& me = threads > 1 ? *workers_[k] : *this;
       me.last_resort = last_resort;  // (region() depends on it; a worker's is set here)
       for (std::size_t pos = b; pos < e && !tried.load(std::memory_order_relaxed); ++pos) {
-        for (int d = 3; d >= 1; --d)
-          if (pos + std::size_t(d) < e) me.prefetch_region(std::get<2>(bad[pos + std::size_t(d)]), 3 - d);
+        for (int d = 4; d >= 1; --d)
+          if (pos + std::size_t(d) < e) me.prefetch_region(std::get<2>(bad[pos + std::size_t(d)]), 4 - d);
         const std::uint32_t t = std::get<2>(bad[pos]), failed_at = failed_before(t);
         me.region(t, me.region_);
         if (unchanged_since(me.region_, failed_at)) outcome_[pos] = failed_at;
@@ -1456,7 +1460,17 @@ class Cleaner {
     const std::uint32_t* v = T_ + 3 * std::size_t(t);
     return triangle_shape(load(P_, v[0]), load(P_, v[1]), load(P_, v[2]));
   }
-  int tri_class(std::uint32_t t) const { return triangle_class(shape(t), degenerate_double_area_); }
+  int tri_class(std::uint32_t t) const {
+    const std::uint32_t* v = T_ + 3 * std::size_t(t);
+    return class_of(load(P_, v[0]), load(P_, v[1]), load(P_, v[2]));
+  }
+  // triangle_class of the triangle (a, b, c): surely_good first (no square
+  // root or division; most triangles a repair looks at are good), the same
+  // class.
+  int class_of(const Vec3& a, const Vec3& b, const Vec3& c) const {
+    if (surely_good(a, b, c, degenerate_double_area_)) return 0;
+    return triangle_class(triangle_shape(a, b, c), degenerate_double_area_);
+  }
 
   // A vertex is regular when each of its edges is used once in each
   // direction (two triangles, opposite orientations) and its triangles form
@@ -1594,12 +1608,16 @@ class Cleaner {
     std::sort(out.begin(), out.end());
     out.erase(std::unique(out.begin(), out.end()), out.end());
   }
-  // repair_pass' reserve step asks for the lines region(t) reads first,
-  // a few items ahead, in three steps (each reads what the one before
-  // fetched): t's vertices; their positions, flags and list bounds; their
-  // lists' triangles. (Only hints: no value depends on them.)
-  // (On the dev VM's two threads, the reserve step of the 1.65 M frame's
-  // first pass: 16.8-18.7 ms on the main thread without, 13.7-15.3 with.)
+  // repair_pass' reserve step (and a serial pass) asks for the lines
+  // region(t) and repair(t) read first, a few items ahead, in four steps
+  // (each reads what the one before fetched): t's vertices; their
+  // positions, flags and list bounds; their lists' triangles and alive
+  // flags; those triangles' corners' positions. (Only hints: no value
+  // depends on them.) (On the dev VM's two threads, the reserve step of the
+  // 1.65 M frame's first pass: 16.8-18.7 ms on the main thread without,
+  // 13.7-15.3 with the first three steps; with the alive flags and the
+  // fourth step 8.0-9.3 -> 6.0-6.8 ms (another day's load), and the serial
+  // pass 23-25 -> 17-18 ms.)
   void prefetch_region(std::uint32_t t, int step) const {
     const std::uint32_t* w = T_ + 3 * std::size_t(t);
     if (step == 0) {
@@ -1610,7 +1628,7 @@ class Cleaner {
     for (int k = 0; k < 3; ++k) prefetch_vertex(load_relaxed(w[k]), step);
   }
   // Step 1: v's position, flags and list bounds; step 2: its list's
-  // triangles (reads its bounds and list).
+  // triangles and their alive flags (reads its bounds and list).
   void prefetch_vertex(std::uint32_t v, int step) const {
     if (v >= nv_) return;
     if (step == 1) {
@@ -1620,7 +1638,17 @@ class Cleaner {
       prefetch(&next_[v]);
       return;
     }
-    for (std::uint32_t i = start_[v], e = start_[v + 1]; i < e; ++i) prefetch(T_ + 3 * std::size_t(incident_[i]));
+    if (step == 2) {
+      for (std::uint32_t i = start_[v], e = start_[v + 1]; i < e; ++i) {
+        const std::uint32_t t = incident_[i];
+        prefetch(T_ + 3 * std::size_t(t));
+        prefetch(&alive_[t]);
+      }
+      return;
+    }
+    // Step 3: the positions of its list's triangles' corners (reads the
+    // triangles).
+    for (std::uint32_t i = start_[v], e = start_[v + 1]; i < e; ++i) prefetch_corners(incident_[i]);
   }
   // The positions of t's corners (reads t's vertices).
   void prefetch_corners(std::uint32_t t) const {
@@ -1734,9 +1762,8 @@ class Cleaner {
         }
         // Rounded as the output will be.
         for (int k = 0; k < 3; ++k) q[k] = Vec3{double(Real(q[k].x)), double(Real(q[k].y)), double(Real(q[k].z))};
-        const TriangleShape s_old = triangle_shape(o[0], o[1], o[2]);
         const TriangleShape s_new = triangle_shape(q[0], q[1], q[2]);
-        const int c_old = triangle_class(s_old, degenerate_double_area_);
+        const int c_old = class_of(o[0], o[1], o[2]);
         const int c_new = triangle_class(s_new, degenerate_double_area_);
         // A triangle that was degenerate may stay so: where several
         // vertices coincide (the field is zero at a grid vertex), one
@@ -1837,10 +1864,12 @@ class Cleaner {
       const Vec3 c = cross(o1 - o0, o2 - o0);
       n = n + c;
       around_old_[i].normal = c;
-      around_old_[i].cls = triangle_class(triangle_shape(o0, o1, o2), degenerate_double_area_);
+      around_old_[i].cls = class_of(o0, o1, o2);
     }
     around_normal_ = n;
-    return norm(n) > 0;
+    const double ln = norm(n);
+    for (OldTriangle& o : around_old_) o.ref_norm = o.cls == 0 ? norm(o.normal) : ln;
+    return ln > 0;
   }
   // The second step: one trial (v, p) (the vertices given to
   // prepare_positions, in any order). The bad triangle t is judged first:
@@ -1863,9 +1892,11 @@ class Cleaner {
       const int c_old = around_old_[i].cls;
       const int c_new = triangle_class(s_new, degenerate_double_area_);
       if (c_new == 2 || (c_new != 0 && (c_old == 0 || u == t))) return false;
+      // (norm(n_new) is s_new.double_area: the same cross product but for
+      // its sign, so the same square root.)
       const Vec3 n_new = cross(q[1] - q[0], q[2] - q[0]);
       const Vec3& n_ref = c_old == 0 ? around_old_[i].normal : n;
-      if (dot(n_new, n_ref) <= cos_limit * norm(n_new) * norm(n_ref)) return false;
+      if (dot(n_new, n_ref) <= cos_limit * s_new.double_area * around_old_[i].ref_norm) return false;
       score = std::min(score, s_new.sin_min_angle);
       return true;
     };
@@ -2220,9 +2251,8 @@ class Cleaner {
           o[k] = load(P_, T_[3 * std::size_t(r.first) + k]);
           q[k] = r.second[k] == a || r.second[k] == b ? cand.p : o[k];
         }
-        const TriangleShape s_old = triangle_shape(o[0], o[1], o[2]);
         const TriangleShape s_new = triangle_shape(q[0], q[1], q[2]);
-        const int c_old = triangle_class(s_old, degenerate_double_area_);
+        const int c_old = class_of(o[0], o[1], o[2]);
         const int c_new = triangle_class(s_new, degenerate_double_area_);
         if (c_new == 2 || (c_old == 0 && c_new != 0)) {
           ok = false;
@@ -2296,9 +2326,8 @@ class Cleaner {
   // collapses: a degenerate triangle may stay degenerate, a bad one bad),
   // else its new smallest angle's sine.
   double merged_triangle_score(const Vec3 o[3], const Vec3 q[3], const Vec3& ref) const {
-    const TriangleShape s_old = triangle_shape(o[0], o[1], o[2]);
     const TriangleShape s_new = triangle_shape(q[0], q[1], q[2]);
-    const int c_old = triangle_class(s_old, degenerate_double_area_);
+    const int c_old = class_of(o[0], o[1], o[2]);
     const int c_new = triangle_class(s_new, degenerate_double_area_);
     if (c_old != 0 && c_new != 0 && (c_new != 2 || c_old == 2)) return 2;
     const Vec3 n_new = cross(q[1] - q[0], q[2] - q[0]);
@@ -2313,7 +2342,7 @@ class Cleaner {
   // sin 1 degree and its normal's cosine to its old one above cos_limit
   // (negative: a rule broken); 1 (no bound) for a triangle that was bad.
   double good_triangle_margin(const Vec3 o[3], const Vec3 q[3]) const {
-    if (triangle_class(triangle_shape(o[0], o[1], o[2]), degenerate_double_area_) != 0) return 1;
+    if (class_of(o[0], o[1], o[2]) != 0) return 1;
     const Vec3 n_new = cross(q[1] - q[0], q[2] - q[0]), n_old = cross(o[1] - o[0], o[2] - o[0]);
     const double ln = norm(n_new) * norm(n_old);
     return std::min(triangle_shape(q[0], q[1], q[2]).sin_min_angle - kSinOneDegree,
@@ -3159,6 +3188,7 @@ class Cleaner {
   // and their sum.
   struct OldTriangle {
     Vec3 normal;
+    double ref_norm = 0;  // the length of the normal a trial's is compared with (its own, or the mean)
     int cls = 0;
   };
   std::vector<OldTriangle> around_old_;
