@@ -1593,6 +1593,13 @@ class Cleaner {
   // merged vertices (next_, tail_) only by the thread whose region holds its
   // first vertex, the one whose fan() walks it.
   void fan(std::uint32_t v, std::vector<std::uint32_t>& out) const {
+    fan_unsorted(v, out);
+    std::sort(out.begin(), out.end());
+    out.erase(std::unique(out.begin(), out.end()), out.end());
+  }
+  // fan()'s triangles in list order, a triangle listed twice (after a flip
+  // or a merge) twice: for region(), whose vertices need no order.
+  void fan_unsorted(std::uint32_t v, std::vector<std::uint32_t>& out) const {
     out.clear();
     auto take = [&](std::uint32_t t) {
       const std::uint32_t* w = T_ + 3 * std::size_t(t);
@@ -1605,8 +1612,6 @@ class Cleaner {
       for (std::uint32_t x = extra_head_.get(u); x != kNone; x = extra_[x].second)
         take(extra_[x].first);
     }
-    std::sort(out.begin(), out.end());
-    out.erase(std::unique(out.begin(), out.end()), out.end());
   }
   // repair_pass' reserve step (and a serial pass) asks for the lines
   // region(t) and repair(t) read first, a few items ahead, in four steps
@@ -1636,6 +1641,7 @@ class Cleaner {
       prefetch(P_ + 3 * std::size_t(v));
       prefetch(&irregular_[v]);
       prefetch(&next_[v]);
+      if (repair_scratch_) prefetch(&repair_scratch_->slots[v]);
       return;
     }
     if (step == 2) {
@@ -1646,9 +1652,18 @@ class Cleaner {
       }
       return;
     }
-    // Step 3: the positions of its list's triangles' corners (reads the
-    // triangles).
-    for (std::uint32_t i = start_[v], e = start_[v + 1]; i < e; ++i) prefetch_corners(incident_[i]);
+    // Step 3: the positions (and repair_pass' slots) of its list's
+    // triangles' corners (reads the triangles).
+    const RepairSlot* slots = repair_scratch_ ? &repair_scratch_->slots[0] : nullptr;
+    for (std::uint32_t i = start_[v], e = start_[v + 1]; i < e; ++i) {
+      const std::uint32_t* w = T_ + 3 * std::size_t(incident_[i]);
+      for (int k = 0; k < 3; ++k) {
+        const std::uint32_t u = load_relaxed(w[k]);
+        if (u >= nv_) continue;
+        prefetch(P_ + 3 * std::size_t(u));
+        if (slots) prefetch(&slots[u]);
+      }
+    }
   }
   // The positions of t's corners (reads t's vertices).
   void prefetch_corners(std::uint32_t t) const {
@@ -1977,9 +1992,9 @@ class Cleaner {
     // The fans of the short edge's ends (a, b) in fa_ and fb_, their rings
     // in ra_ and rb_ (consider_push's first two steps, and the cut's).
     const std::uint32_t a = v[k_short], b = v[(k_short + 1) % 3], c = v[(k_short + 2) % 3];
-    fan(a, fa_);
-    fan(b, fb_);
-    fan(c, scratch_);
+    fan_unsorted(a, fa_);
+    fan_unsorted(b, fb_);
+    fan_unsorted(c, scratch_);
     add(fa_);
     add(fb_);
     add(scratch_);
@@ -1993,7 +2008,7 @@ class Cleaner {
         const std::vector<std::uint32_t>* r = &ra_;
         if (i == 1) r = &rb_;
         if (i >= 2) {
-          fan(x, scratch_);
+          fan_unsorted(x, scratch_);
           add(scratch_);
           ring(x, scratch_, common_);
           r = &common_;
@@ -2005,7 +2020,7 @@ class Cleaner {
       }
       // (members found but not looked from: their one-rings too)
       for (std::size_t i = 2; i < cluster_.size(); ++i) {
-        fan(cluster_[i], scratch_);
+        fan_unsorted(cluster_[i], scratch_);
         add(scratch_);
       }
     }
@@ -2020,7 +2035,7 @@ class Cleaner {
       for (std::uint32_t x : common_) {
         const Vec3 px = load(P_, x);
         if (norm(px - pa) < near && norm(px - pb) < near) {
-          fan(x, scratch_);
+          fan_unsorted(x, scratch_);
           add(scratch_);
         }
       }
