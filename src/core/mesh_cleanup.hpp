@@ -841,7 +841,7 @@ class Cleaner {
     RepairScratch& scratch = *repair_scratch_;
     if (std::uint64_t(scratch.stamp_base) + n + 2 >= kNone || std::uint64_t(scratch.round_base) + n + 2 >= kNone)
       scratch.reset_stamps();
-    RepairSlot* const slots_ = &scratch.slots[0];
+    RepairSlot* const slots_ = scratch.slots.data();
     const std::uint32_t base = scratch.stamp_base + 1;  // item i's stamp: base + i
     scratch.stamp_base = base + std::uint32_t(n);
     std::uint32_t round_id = scratch.round_base + 1;  // the current round's (slots_' wrote)
@@ -1182,7 +1182,7 @@ class Cleaner {
     return it != failed_.end() && it->first == t ? it->second : 0;
   }
   bool unchanged_since(const std::vector<std::uint32_t>& region, std::uint32_t time) const {
-    const RepairSlot* slots = &repair_scratch_->slots[0];
+    const RepairSlot* slots = repair_scratch_->slots.data();
     for (std::uint32_t x : region)
       if (slots[x].mod >= time) return false;
     return true;
@@ -1654,7 +1654,7 @@ class Cleaner {
     }
     // Step 3: the positions (and repair_pass' slots) of its list's
     // triangles' corners (reads the triangles).
-    const RepairSlot* slots = repair_scratch_ ? &repair_scratch_->slots[0] : nullptr;
+    const RepairSlot* slots = repair_scratch_ ? repair_scratch_->slots.data() : nullptr;
     for (std::uint32_t i = start_[v], e = start_[v + 1]; i < e; ++i) {
       const std::uint32_t* w = T_ + 3 * std::size_t(incident_[i]);
       for (int k = 0; k < 3; ++k) {

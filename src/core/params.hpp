@@ -90,6 +90,8 @@ class NoInitArray {
   }
   T& operator[](std::size_t i) { return p_[i]; }
   const T& operator[](std::size_t i) const { return p_[i]; }
+  T* data() { return p_; }
+  const T* data() const { return p_; }
   std::size_t size() const { return n_; }
   explicit operator bool() const { return p_ != nullptr; }
 

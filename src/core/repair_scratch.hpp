@@ -18,17 +18,21 @@
 // clean-up takes the smallest kept block that holds its vertices and is at
 // most twice as large. A block whose pass ended with an error is not kept.
 // release() drops them all (the library's last context destroyed, as the
-// host block cache); NBMC_HOST_CACHE=0 keeps none.
+// host block cache); NBMC_HOST_CACHE=0 keeps none. (Unlike the host block
+// cache, it keeps blocks under AddressSanitizer too: a kept block is never
+// freed while kept, so it hides no use after free, and the sanitized tests
+// run the reuse.)
 #pragma once
 
 #include <atomic>
 #include <cstddef>
 #include <cstdint>
+#include <cstdlib>
+#include <cstring>
 #include <memory>
 #include <mutex>
 #include <vector>
 
-#include "host_cache.hpp"
 #include "parallel.hpp"
 #include "params.hpp"
 
@@ -91,6 +95,15 @@ class RepairScratchPool {
   static constexpr std::size_t kKept = 2;
   static constexpr std::size_t kMinVertices = std::size_t(1) << 16;
 
+  // False with NBMC_HOST_CACHE=0 in the environment (read once).
+  static bool enabled() {
+    static const bool on = [] {
+      const char* e = std::getenv("NBMC_HOST_CACHE");
+      return !(e && std::strcmp(e, "0") == 0);
+    }();
+    return on;
+  }
+
   static RepairScratchPool& instance() {
     static RepairScratchPool* p = new RepairScratchPool();  // never destroyed, as the host block cache
     return *p;
@@ -98,7 +111,7 @@ class RepairScratchPool {
 
   // A block for nv vertices: a kept one, or a new one filled here.
   std::unique_ptr<RepairScratch> take(std::size_t nv) {
-    if (nv >= kMinVertices && HostBlockCache::enabled()) {
+    if (nv >= kMinVertices && enabled()) {
       std::lock_guard<std::mutex> lock(m_);
       std::size_t best = kept_.size();
       for (std::size_t k = 0; k < kept_.size(); ++k)
@@ -117,7 +130,7 @@ class RepairScratchPool {
   // Takes back a block that holds no reservation (else it is freed); the
   // oldest kept block goes when there are more than kKept.
   void give(std::unique_ptr<RepairScratch> s) noexcept {
-    if (!s || !s->clean || s->vertices < kMinVertices || !HostBlockCache::enabled()) return;
+    if (!s || !s->clean || s->vertices < kMinVertices || !enabled()) return;
     std::unique_ptr<RepairScratch> dropped;
     std::lock_guard<std::mutex> lock(m_);
     try {
