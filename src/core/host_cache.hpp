@@ -69,6 +69,11 @@ class HostBlockCache {
     return false;
 #endif
 #endif
+    return switched_on();
+  }
+  // False with NBMC_HOST_CACHE=0 in the environment (read once); enabled()
+  // also asks for AddressSanitizer.
+  static bool switched_on() {
     static const bool on = [] {
       const char* e = std::getenv("NBMC_HOST_CACHE");
       return !(e && std::strcmp(e, "0") == 0);

@@ -248,8 +248,6 @@ class SpinBarrier {
   std::atomic<std::size_t> count_{0}, gen_{0};
 };
 
-// Real: the positions' scalar (float, or double with
-// nbmc_params.double_positions); normals are float either way.
 // The heads of the lists of triangles added to vertices (Cleaner::
 // add_incidence: after flips, cuts and merges), by vertex. A few hundred
 // vertices get one in a clean-up of a million, so a small open-addressed
@@ -260,7 +258,6 @@ class SpinBarrier {
 class ExtraHeads {
  public:
   static constexpr std::uint32_t kNone = 0xffffffffu;
-  bool empty() const { return size_ == 0; }
   // v's head (kNone: none).
   std::uint32_t get(std::uint32_t v) const {
     if (size_ == 0) return kNone;
@@ -305,6 +302,8 @@ class ExtraHeads {
   int bits_ = 0;  // table_.size() is 2^bits_
 };
 
+// Real: the positions' scalar (float, or double with
+// nbmc_params.double_positions); normals are float either way.
 template <class Real>
 class Cleaner {
  public:
@@ -838,6 +837,7 @@ class Cleaner {
     // the scratch; kept from an earlier clean-up, its stamps and rounds are
     // all below the counters). (A pass has at most n rounds: each round's
     // first item wins.)
+    static_assert(RepairScratch::kFree == kNone, "a free reservation is kNone, above every place in the list");
     RepairScratch& scratch = *repair_scratch_;
     if (std::uint64_t(scratch.stamp_base) + n + 2 >= kNone || std::uint64_t(scratch.round_base) + n + 2 >= kNone)
       scratch.reset_stamps();
@@ -1654,23 +1654,17 @@ class Cleaner {
     }
     // Step 3: the positions (and repair_pass' slots) of its list's
     // triangles' corners (reads the triangles).
-    const RepairSlot* slots = repair_scratch_ ? repair_scratch_->slots.data() : nullptr;
-    for (std::uint32_t i = start_[v], e = start_[v + 1]; i < e; ++i) {
-      const std::uint32_t* w = T_ + 3 * std::size_t(incident_[i]);
-      for (int k = 0; k < 3; ++k) {
-        const std::uint32_t u = load_relaxed(w[k]);
-        if (u >= nv_) continue;
-        prefetch(P_ + 3 * std::size_t(u));
-        if (slots) prefetch(&slots[u]);
-      }
-    }
+    for (std::uint32_t i = start_[v], e = start_[v + 1]; i < e; ++i) prefetch_corners(incident_[i], true);
   }
-  // The positions of t's corners (reads t's vertices).
-  void prefetch_corners(std::uint32_t t) const {
+  // The positions of t's corners, with `slots` their repair passes' slots
+  // too (reads t's vertices).
+  void prefetch_corners(std::uint32_t t, bool slots = false) const {
     const std::uint32_t* w = T_ + 3 * std::size_t(t);
     for (int k = 0; k < 3; ++k) {
       const std::uint32_t v = load_relaxed(w[k]);
-      if (v < nv_) prefetch(P_ + 3 * std::size_t(v));
+      if (v >= nv_) continue;
+      prefetch(P_ + 3 * std::size_t(v));
+      if (slots && repair_scratch_) prefetch(&repair_scratch_->slots[v]);
     }
   }
   static void prefetch(const void* p) {

@@ -27,12 +27,11 @@
 #include <atomic>
 #include <cstddef>
 #include <cstdint>
-#include <cstdlib>
-#include <cstring>
 #include <memory>
 #include <mutex>
 #include <vector>
 
+#include "host_cache.hpp"
 #include "parallel.hpp"
 #include "params.hpp"
 
@@ -95,14 +94,9 @@ class RepairScratchPool {
   static constexpr std::size_t kKept = 2;
   static constexpr std::size_t kMinVertices = std::size_t(1) << 16;
 
-  // False with NBMC_HOST_CACHE=0 in the environment (read once).
-  static bool enabled() {
-    static const bool on = [] {
-      const char* e = std::getenv("NBMC_HOST_CACHE");
-      return !(e && std::strcmp(e, "0") == 0);
-    }();
-    return on;
-  }
+  // False with NBMC_HOST_CACHE=0 in the environment (the host block
+  // cache's switch, without its AddressSanitizer exception).
+  static bool enabled() { return HostBlockCache::switched_on(); }
 
   static RepairScratchPool& instance() {
     static RepairScratchPool* p = new RepairScratchPool();  // never destroyed, as the host block cache
