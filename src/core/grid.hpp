@@ -10,18 +10,13 @@
 // what makes a split reconstruction bit-identical to the whole one.
 #pragma once
 
+#include "hd.hpp"
 #include "params.hpp"
 
 #include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <sstream>
-
-#if defined(KOKKOS_INLINE_FUNCTION)
-#define NBMC_HD KOKKOS_INLINE_FUNCTION
-#else
-#define NBMC_HD inline
-#endif
 
 namespace nbmc {
 

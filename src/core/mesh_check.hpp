@@ -31,6 +31,7 @@
 #include <utility>
 #include <vector>
 
+#include "hd.hpp"
 #include "parallel.hpp"
 #include "params.hpp"
 
@@ -46,17 +47,20 @@ constexpr double kDegenerateAreaFraction = 1e-12;
 struct Vec3 {
   double x = 0, y = 0, z = 0;
 };
-inline Vec3 operator-(const Vec3& a, const Vec3& b) { return {a.x - b.x, a.y - b.y, a.z - b.z}; }
-inline Vec3 operator+(const Vec3& a, const Vec3& b) { return {a.x + b.x, a.y + b.y, a.z + b.z}; }
-inline Vec3 operator*(double s, const Vec3& a) { return {s * a.x, s * a.y, s * a.z}; }
-inline double dot(const Vec3& a, const Vec3& b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
-inline Vec3 cross(const Vec3& a, const Vec3& b) {
+// (These, triangle_shape, triangle_class and surely_good also run on GPUs:
+// NBMC_HD, with the same roundings there, as contraction into fused
+// multiply-adds is off on every backend: src/CMakeLists.txt.)
+NBMC_HD Vec3 operator-(const Vec3& a, const Vec3& b) { return {a.x - b.x, a.y - b.y, a.z - b.z}; }
+NBMC_HD Vec3 operator+(const Vec3& a, const Vec3& b) { return {a.x + b.x, a.y + b.y, a.z + b.z}; }
+NBMC_HD Vec3 operator*(double s, const Vec3& a) { return {s * a.x, s * a.y, s * a.z}; }
+NBMC_HD double dot(const Vec3& a, const Vec3& b) { return a.x * b.x + a.y * b.y + a.z * b.z; }
+NBMC_HD Vec3 cross(const Vec3& a, const Vec3& b) {
   return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
 }
-inline double norm(const Vec3& a) { return std::sqrt(dot(a, a)); }
+NBMC_HD double norm(const Vec3& a) { return sqrt(dot(a, a)); }
 // Vertex v of positions in float, or in double (nbmc_params.double_positions).
-inline Vec3 load(const float* p, std::uint32_t v) { return {p[3 * std::size_t(v)], p[3 * std::size_t(v) + 1], p[3 * std::size_t(v) + 2]}; }
-inline Vec3 load(const double* p, std::uint32_t v) { return {p[3 * std::size_t(v)], p[3 * std::size_t(v) + 1], p[3 * std::size_t(v) + 2]}; }
+NBMC_HD Vec3 load(const float* p, std::uint32_t v) { return {p[3 * std::size_t(v)], p[3 * std::size_t(v) + 1], p[3 * std::size_t(v) + 2]}; }
+NBMC_HD Vec3 load(const double* p, std::uint32_t v) { return {p[3 * std::size_t(v)], p[3 * std::size_t(v) + 1], p[3 * std::size_t(v) + 2]}; }
 
 namespace detail {
 
@@ -174,16 +178,27 @@ struct TriangleShape {
   double sin_min_angle = 0;
   double min_edge = 0;
 };
-inline TriangleShape triangle_shape(const Vec3& a, const Vec3& b, const Vec3& c) {
+NBMC_HD TriangleShape triangle_shape(const Vec3& a, const Vec3& b, const Vec3& c) {
   TriangleShape s;
   const Vec3 ab = b - a, bc = c - b, ca = a - c;
   s.double_area = norm(cross(ab, ca));
   double l[3] = {norm(ab), norm(bc), norm(ca)};
-  std::sort(l, l + 3);
+  // (Sorted by three exchanges: the values std::sort gives.)
+  auto order = [](double& x, double& y) {
+    if (y < x) {
+      const double t = x;
+      x = y;
+      y = t;
+    }
+  };
+  order(l[0], l[1]);
+  order(l[1], l[2]);
+  order(l[0], l[1]);
   s.min_edge = l[0];
   // The smallest angle lies opposite the shortest edge, between the two
-  // longer ones: sin = 2A / (l1 * l2).
-  s.sin_min_angle = l[1] > 0 ? std::min(1.0, s.double_area / (l[1] * l[2])) : 0;
+  // longer ones: sin = 2A / (l1 * l2). (As std::min(1.0, q).)
+  const double q = l[1] > 0 ? s.double_area / (l[1] * l[2]) : 0;
+  s.sin_min_angle = l[1] > 0 ? (q < 1.0 ? q : 1.0) : 0;
   return s;
 }
 
@@ -206,7 +221,7 @@ inline double bounding_extent(const Real* positions, std::size_t vertex_count, V
 }
 
 // Classifies a triangle: 0 good, 1 sliver, 2 degenerate.
-inline int triangle_class(const TriangleShape& s, double degenerate_double_area) {
+NBMC_HD int triangle_class(const TriangleShape& s, double degenerate_double_area) {
   if (s.double_area < degenerate_double_area || s.sin_min_angle <= 0) return 2;
   return s.sin_min_angle < kSinOneDegree ? 1 : 0;
 }
@@ -217,13 +232,16 @@ inline int triangle_class(const TriangleShape& s, double degenerate_double_area)
 // far above the few roundings either way, so a triangle near a threshold
 // (and a NaN) gets false and is judged by triangle_shape itself; a scan
 // that asks this first finds the same triangles.
-inline bool surely_good(const Vec3& a, const Vec3& b, const Vec3& c, double degenerate_double_area) {
+NBMC_HD bool surely_good(const Vec3& a, const Vec3& b, const Vec3& c, double degenerate_double_area) {
   const Vec3 ab = b - a, bc = c - b, ca = a - c;
   const Vec3 n = cross(ab, ca);
   const double area2 = dot(n, n);  // (2 * area)^2
   const double x = dot(ab, ab), y = dot(bc, bc), z = dot(ca, ca);
-  // The product of the two largest squared edges.
-  const double l12 = std::max({x * y, y * z, z * x});
+  // The product of the two largest squared edges (as std::max of the three:
+  // the first of the largest).
+  double l12 = x * y;
+  if (l12 < y * z) l12 = y * z;
+  if (l12 < z * x) l12 = z * x;
   constexpr double kMargin = 1 + 1e-6;
   return area2 > 0 && area2 >= degenerate_double_area * degenerate_double_area * kMargin &&
          area2 >= kSinOneDegree * kSinOneDegree * l12 * kMargin;

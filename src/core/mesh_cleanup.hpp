@@ -135,6 +135,7 @@
 
 #include "mesh_check.hpp"
 #include "mesh_incidence.hpp"
+#include "mesh_moves.hpp"
 #include "parallel.hpp"
 #include "params.hpp"
 #include "repair_scratch.hpp"
@@ -144,6 +145,7 @@
 #include <array>
 #include <atomic>
 #include <chrono>
+#include <cstddef>
 #include <cstdint>
 #include <cstdio>
 #include <cstdlib>
@@ -159,8 +161,8 @@
 namespace nbmc {
 namespace mesh {
 
-// Largest turn of a triangle's normal that a repair may cause.
-constexpr double kCosMaxNormalTurn = 0.5;  // 60 degrees
+// Largest turn of a triangle's normal that a repair may cause:
+// kCosMaxNormalTurn (mesh_moves.hpp), 60 degrees ...
 // ... for the triangles still bad after that.
 constexpr double kCosMaxNormalTurnLast = 0.0;  // 90 degrees
 // Passes over the bad triangles (each pass repairs what the previous one
@@ -368,6 +370,9 @@ class Cleaner {
       extent = std::max({x[3] - x[0], x[4] - x[1], x[5] - x[2]});
     }
     degenerate_double_area_ = 2 * kDegenerateAreaFraction * extent * extent;
+    // (The moves made where the mesh was made judged with the extent before
+    // them, as move_rounds here does: the same area from here on.)
+    if (prebuilt && prebuilt->moves_made) degenerate_double_area_ = prebuilt->degenerate_double_area;
     for (const auto& x : bare) bare_.insert(bare_.end(), x.begin(), x.end());
     host_trace("clean-up: arrays, extent", nv);
     if (take) {
@@ -743,6 +748,131 @@ class Cleaner {
     apply_cluster(m);
     return true;
   }
+
+  // The move rounds (mesh_moves.hpp) over the bad triangles `bad` of the
+  // mesh as it came (every triangle alive, the lists as built), on the host
+  // threads; returns the bad triangles left (the list a scan would give).
+  // The reservations are the repair scratch's (all free before and after).
+  BadList move_rounds(const BadList& bad) {
+    const std::size_t n = bad.size();
+    if (n == 0) return bad;
+    const bool trace = host_trace_on();
+    using Clock = std::chrono::steady_clock;
+    if (!repair_scratch_) repair_scratch_ = RepairScratchPool::instance().take(nv_);
+    RepairScratch& scratch = *repair_scratch_;
+    RepairSlot* const slots = scratch.slots.data();
+    MoveMesh<Real> mm;
+    mm.P = P_;
+    mm.T = T_;
+    mm.start = start_.data();
+    mm.incident = incident_.data();
+    mm.degenerate_double_area = degenerate_double_area_;
+    mm.cos_limit = kCosMaxNormalTurn;
+    std::vector<std::uint32_t> cur(n), next;  // the waiting triangles
+    for (std::size_t i = 0; i < n; ++i) cur[i] = std::get<2>(bad[i]);
+    std::vector<MoveProposal> prop;
+    std::vector<std::uint8_t> state;  // 0 waits, 1 leaves, 2 proposes, 3 moves
+    const std::size_t min_items = repair_pass_hooks().min_items;
+    auto take = [&](std::uint32_t x, std::uint32_t t) {
+      std::atomic<std::uint32_t>& r = slots[x].reserve;
+      std::uint32_t old = r.load(std::memory_order_relaxed);
+      while (t < old && !r.compare_exchange_weak(old, t, std::memory_order_relaxed)) {
+      }
+    };
+    auto held = [&](std::uint32_t x) { return slots[x].reserve.load(std::memory_order_relaxed); };
+    // (The reservations as plain words, for neighbour_taken_before, which
+    // reads them in a step that writes none.)
+    static_assert(sizeof(std::atomic<std::uint32_t>) == sizeof(std::uint32_t) &&
+                      sizeof(RepairSlot) % sizeof(std::uint32_t) == 0 && offsetof(RepairSlot, reserve) == 0,
+                  "a reservation is a plain word at the start of its slot");
+    const std::uint32_t* const reserved = reinterpret_cast<const std::uint32_t*>(slots);
+    scratch.clean = false;  // (until the rounds end: see RepairScratchPool::give)
+    std::uint64_t made = 0, rounds = 0;
+    while (!cur.empty()) {
+      const Clock::time_point r0 = trace ? Clock::now() : Clock::time_point();
+      const std::size_t m = cur.size();
+      const std::size_t threads = chunk_count(m, min_items > 0 ? min_items : kParallelMinItems);
+      prop.resize(m);
+      state.assign(m, 0);
+      // (Blocks of items handed out as they come: the items' costs differ.)
+      constexpr std::size_t kBlock = 16;
+      std::atomic<std::size_t> cursor{0};
+      auto each = [&](const auto& f) {
+        cursor.store(0, std::memory_order_relaxed);
+        on_threads(threads, [&](std::size_t) {
+          for (std::size_t b; (b = cursor.fetch_add(kBlock, std::memory_order_relaxed)) < m;)
+            for (std::size_t i = b, e = std::min(m, b + kBlock); i < e; ++i) f(i);
+        });
+      };
+      // 1. Each triangle's vertices take the smallest index.
+      each([&](std::size_t i) {
+        const std::uint32_t* v = T_ + 3 * std::size_t(cur[i]);
+        for (int k = 0; k < 3; ++k) take(v[k], cur[i]);
+      });
+      // 2. Those holding all three decide; then the vertices are freed.
+      each([&](std::size_t i) {
+        const std::uint32_t t = cur[i];
+        const std::uint32_t* v = T_ + 3 * std::size_t(t);
+        for (int k = 0; k < 3; ++k)
+          if (held(v[k]) != t) return;
+        state[i] = std::uint8_t(evaluate_move(mm, t, prop[i]));
+      });
+      each([&](std::size_t i) {
+        const std::uint32_t* v = T_ + 3 * std::size_t(cur[i]);
+        for (int k = 0; k < 3; ++k) slots[v[k]].reserve.store(kNone, std::memory_order_relaxed);
+      });
+      // 3. Each proposal's vertex takes the smallest proposing index; a
+      // proposal holding its vertex, with no neighbour of it held by a
+      // smaller index, is made.
+      each([&](std::size_t i) {
+        if (state[i] == std::uint8_t(MoveVerdict::Propose)) take(prop[i].v, cur[i]);
+      });
+      each([&](std::size_t i) {
+        if (state[i] != std::uint8_t(MoveVerdict::Propose)) return;
+        const std::uint32_t t = cur[i], v = prop[i].v;
+        if (held(v) == t && !neighbour_taken_before(mm, v, t, reserved, sizeof(RepairSlot) / sizeof(std::uint32_t)))
+          state[i] = 3;
+      });
+      // Made (their vertices differ), the vertices freed; 4. the losers and
+      // the waiting ones go on.
+      next.clear();
+      std::uint64_t won = 0, waited = 0;
+      for (std::size_t i = 0; i < m; ++i) {
+        if (state[i] >= std::uint8_t(MoveVerdict::Propose)) slots[prop[i].v].reserve.store(kNone, std::memory_order_relaxed);
+        if (state[i] == 3) {
+          const std::uint32_t v = prop[i].v;
+          changed_vertex(v);
+          for (int a = 0; a < 3; ++a) P_[3 * std::size_t(v) + a] = Real(prop[i].p[a]);
+          ++won;
+        } else if (state[i] != std::uint8_t(MoveVerdict::Leave)) {
+          next.push_back(cur[i]);
+          waited += state[i] == 0 ? 1 : 0;
+        }
+      }
+      ++rounds;
+      made += won;
+      if (trace)
+        std::fprintf(stderr, "[nbmc trace]   move round: items=%zu waited=%llu moved=%llu %.3f ms\n", m,
+                     (unsigned long long)waited, (unsigned long long)won,
+                     std::chrono::duration<double, std::milli>(Clock::now() - r0).count());
+      cur.swap(next);
+    }
+    scratch.clean = true;
+    moves += made;
+    move_rounds_ = rounds;
+    // The bad triangles left: among those before (a move never makes a
+    // good triangle bad), judged again on the threads and sorted.
+    const std::size_t parts = chunk_count(n, 1024);
+    std::vector<BadList> part(parts);
+    for_chunks(n, parts, [&](std::size_t k, std::size_t b, std::size_t e) {
+      for (std::size_t i = b; i < e; ++i) add_if_bad(std::get<2>(bad[i]), part[k]);
+    });
+    BadList left = sorted_union(part);
+    RepairPassHooks& hooks = repair_pass_hooks();
+    if (hooks.check_lists && left != bad_triangles()) ++hooks.list_mismatches;  // (a test's: against a scan)
+    return left;
+  }
+  std::uint64_t move_rounds_ = 0;  // (the last move_rounds' rounds, for the tests)
 
   // One pass of repair() over `bad`, in its order; returns how many were
   // repaired. Serial below kParallelMinItems items per thread (and for the
@@ -1514,30 +1644,9 @@ class Cleaner {
 
   // The test for v with a list [b, e) of at most kSmallFan triangles:
   // exactly the loop above and one_closed_fan's small case.
-  static constexpr std::uint32_t kSmallFan = 16;
+  static constexpr std::uint32_t kSmallFan = kMoveFanMax;
   bool small_closed_fan(std::uint32_t v, std::uint32_t b, std::uint32_t e) const {
-    const std::uint32_t n = e - b;
-    if (n < 3) return false;
-    std::uint32_t in[kSmallFan], out[kSmallFan];  // previous and next vertex, by local index
-    for (std::uint32_t i = 0; i < n; ++i) {
-      const std::uint32_t* w = T_ + 3 * std::size_t(incident_[b + i]);
-      const int k = w[0] == v ? 0 : w[1] == v ? 1 : 2;
-      out[i] = w[(k + 1) % 3];
-      in[i] = w[(k + 2) % 3];
-      if (out[i] == v || in[i] == v) return false;
-    }
-    for (std::uint32_t i = 1; i < n; ++i)
-      for (std::uint32_t j = 0; j < i; ++j)
-        if (in[i] == in[j]) return false;
-    std::uint32_t cur = 0, steps = 0;
-    do {
-      std::uint32_t j = 0;
-      while (j < n && in[j] != out[cur]) ++j;
-      if (j == n) return false;
-      cur = j;
-      ++steps;
-    } while (cur != 0 && steps <= n);
-    return cur == 0 && steps == n;
+    return mesh::small_closed_fan(T_, incident_.data(), v, b, e - b);  // (mesh_moves.hpp)
   }
 
   // Whether triangles with these (previous vertex, local index) and next
@@ -3284,6 +3393,10 @@ CleanupResult cleanup_mesh(PosVec& positions, NormalVec& normals, IndexVec& tria
   if (nt == 0) return r;
   const bool has_normals = !normals.empty() && normals.size() == positions.size();
   host_trace("clean-up: start", nt);
+  // (Read before the Cleaner takes the prebuilt incidence.)
+  const bool moved_before = prebuilt && prebuilt->moves_made;
+  const std::uint64_t moved_bad_before = moved_before ? prebuilt->bad_before_moves : 0;
+  const std::uint64_t moves_made = moved_before ? prebuilt->moves : 0;
   detail::Cleaner<typename PosVec::value_type> c(positions.data(), has_normals ? normals.data() : nullptr, nv, triangles.data(), nt,
                                                  prebuilt, changed != nullptr);
   // Passes until nothing more can be repaired; then again with a looser
@@ -3296,6 +3409,16 @@ CleanupResult cleanup_mesh(PosVec& positions, NormalVec& normals, IndexVec& tria
   auto bad = c.initial_bad_triangles();
   r.bad_before = bad.size();
   host_trace("clean-up: scan", bad.size());
+  // First the moves, in rounds that need no order (mesh_moves.hpp), unless
+  // they were made where the mesh was made (the scan above then found what
+  // they left).
+  if (moved_before) {
+    r.bad_before = moved_bad_before;
+    c.moves = moves_made;
+  } else {
+    bad = c.move_rounds(bad);
+    host_trace("clean-up: moves", c.moves);
+  }
   auto passes = [&] {
     for (int pass = 0; pass < kCleanupPasses && !bad.empty(); ++pass) {
       // (NBMC_TRACE: each pass' items, repairs and times, on a line of its

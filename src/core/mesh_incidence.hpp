@@ -39,6 +39,13 @@ struct PrebuiltIncidence {
   // degenerate area (relative to the positions' bounding box); the
   // clean-up classifies exactly these.
   Indices maybe_bad;
+  // moves_made: the clean-up's move rounds (mesh_moves.hpp) were made on
+  // this mesh where it was made; then the moves made, the bad triangles
+  // before them and the degenerate area they judged with (the clean-up goes on from its scan, which finds what they
+  // left: the bits above are set for every triangle bad before them).
+  bool moves_made = false;
+  std::uint64_t moves = 0, bad_before_moves = 0;
+  double degenerate_double_area = 0;  // (the clean-up's, from the extent before them)
   // maybe_bad's words for nt triangles; the words of all three arrays.
   static std::uint64_t bit_words(std::uint64_t nt) { return (nt + 31) / 32; }
   static std::uint64_t words(std::uint64_t nv, std::uint64_t nt) { return (nv + 1) + 3 * nt + bit_words(nt); }
