@@ -19,6 +19,8 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <cstring>
+#include <limits>
 #include <map>
 #include <memory>
 #include <numeric>
@@ -1320,6 +1322,80 @@ TEST(MeshCleanup, PrebuiltIncidenceIsTheCleanersOwn) {
     for (std::size_t t = 0; t < nt; ++t) set += (inc.maybe_bad[t / 32] >> (t % 32)) & 1u;
     EXPECT_EQ(set, nt);
   }
+}
+
+// The move rounds where the mesh was made (backends/kokkos/mesh_moves.hpp,
+// here on the host threads, as Kokkos runs it there; on a GPU the same code)
+// move exactly what the host's rounds (Cleaner::move_rounds) move: the
+// clean-up that goes on from that mesh, its incidence and its record of the
+// moves gives the host's mesh and counts, bit for bit. Also on several
+// Kokkos threads (the rounds' atomics), and with a mesh whose position is
+// not finite (no moves there: the host's clean-up makes them).
+template <class Real>
+void expect_moves_where_made(const TestMesh& in) {
+  using Exec = Kokkos::DefaultHostExecutionSpace;
+  using Mem = Exec::memory_space;
+  using Unmanaged = Kokkos::MemoryTraits<Kokkos::Unmanaged>;
+  const std::size_t nv = in.p.size() / 3, nt = in.t.size() / 3;
+  const std::vector<Real> p(in.p.begin(), in.p.end());
+  TestMesh host = in, made = in;
+  std::vector<Real> ph = p, pm = p;
+  const nbmc::mesh::CleanupResult r0 = nbmc::mesh::cleanup_mesh(ph, host.n, host.t, 0.05);
+  nbmc::MemoryTracker tracker;
+  nbmc::mesh::PrebuiltIncidence inc;
+  bool moved = false;
+  {
+    nbmc::Details::DeviceIncidence<Exec> di;
+    ASSERT_TRUE(di.template build<Real>(Exec(), tracker, Kokkos::View<const Real*, Mem, Unmanaged>(pm.data(), pm.size()),
+                                        Kokkos::View<const std::uint32_t*, Mem, Unmanaged>(made.t.data(), made.t.size()),
+                                        nv, nt, inc));
+    moved = di.template move_rounds<Real>(Exec(), tracker, Kokkos::View<Real*, Mem, Unmanaged>(pm.data(), pm.size()),
+                                          Kokkos::View<const std::uint32_t*, Mem, Unmanaged>(made.t.data(), made.t.size()),
+                                          nv, nt, inc);
+    Exec().fence();
+    auto copy = [](const auto& from, auto& to) {
+      Kokkos::deep_copy(Kokkos::View<std::uint32_t*, Mem, Unmanaged>(to.data(), to.size()), from.view());
+    };
+    copy(di.start, inc.start);
+    copy(di.incident, inc.incident);
+    copy(di.bits, inc.maybe_bad);
+  }
+  EXPECT_EQ(tracker.current.load(), 0u);  // (their scratch given back)
+  bool finite = true;
+  for (Real x : p) finite = finite && std::isfinite(x);
+  // (Bit for bit: a NaN is not equal to itself.)
+  auto same = [](const std::vector<Real>& a, const std::vector<Real>& b) {
+    return a.size() == b.size() && std::memcmp(a.data(), b.data(), a.size() * sizeof(Real)) == 0;
+  };
+  EXPECT_EQ(moved, finite);
+  EXPECT_EQ(inc.moves_made, finite);
+  if (finite) {
+    EXPECT_EQ(inc.bad_before_moves, r0.bad_before);
+    EXPECT_LE(inc.moves, r0.moves);  // (r0's: the rounds' and the passes')
+    EXPECT_GT(inc.moves, 100u);
+    EXPECT_FALSE(same(pm, p));
+  } else {
+    EXPECT_TRUE(same(pm, p));
+  }
+  const nbmc::mesh::CleanupResult r1 = nbmc::mesh::cleanup_mesh(pm, made.n, made.t, 0.05, &inc);
+  expect_same_counts(r0, r1);
+  EXPECT_TRUE(same(ph, pm));
+  EXPECT_TRUE(host.t == made.t);
+}
+
+TEST(MeshCleanup, MovesWhereTheMeshWasMadeAreTheHosts) {
+  const TestMesh sphere = pinched_sphere();
+  expect_moves_where_made<float>(sphere);
+  expect_moves_where_made<double>(sphere);
+  {
+    // Larger, with the host's rounds on 3 threads.
+    const TestMesh large = pinched_sphere(6);
+    const nbmc::ScopedHostThreads three(3);
+    expect_moves_where_made<float>(large);
+  }
+  TestMesh nan = sphere;
+  nan.p[7] = std::numeric_limits<float>::quiet_NaN();
+  expect_moves_where_made<float>(nan);
 }
 
 // A clean-up can also list where its result differs from its input

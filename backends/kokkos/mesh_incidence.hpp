@@ -29,12 +29,14 @@
 #pragma once
 
 #include "common.hpp"
+#include "mesh_moves.hpp"
 
 #include "../../src/core/mesh_check.hpp"  // kSinOneDegree, kDegenerateAreaFraction
 #include "../../src/core/mesh_incidence.hpp"
 
 #include <cmath>
 #include <cstdint>
+#include <cstdlib>
 #include <limits>
 #include <new>
 #include <type_traits>
@@ -83,9 +85,11 @@ struct MeshBoxReduce {
 // Builds the incidence and the maybe-bad bits of the mesh (pos: 3 nv Real,
 // tri: 3 nt indices, every one below nv) into start (nv + 1), incident
 // (3 nt) and bits ((nt + 31) / 32 words), all in MemSpace. Queued on
-// `space`; one wait, for the bounding box.
+// `space`; one wait, for the bounding box. Returns the degenerate area the
+// bits were set with (the host clean-up's, from the same box), or -1 when
+// a position is not finite (every bit set).
 template <class ExecSpace, class Real>
-void build_prebuilt_incidence(const ExecSpace& space, MemoryTracker& tracker,
+double build_prebuilt_incidence(const ExecSpace& space, MemoryTracker& tracker,
                               const Kokkos::View<const Real*, typename ExecSpace::memory_space>& pos,
                               const Kokkos::View<const std::uint32_t*, typename ExecSpace::memory_space>& tri,
                               std::size_t nv, std::size_t nt,
@@ -164,6 +168,7 @@ void build_prebuilt_incidence(const ExecSpace& space, MemoryTracker& tracker,
         }
         if (bad) Kokkos::atomic_fetch_or(&bits(t / 32), std::uint32_t(1) << (t % 32));
       });
+  return all ? -1.0 : deg;
 }
 
 // build_prebuilt_incidence for a mesh in device memory, with the device
@@ -177,6 +182,7 @@ template <class ExecSpace>
 struct DeviceIncidence {
   using MemSpace = typename ExecSpace::memory_space;
   Buffer<std::uint32_t, MemSpace> start, incident, bits;
+  double degenerate_double_area = -1;  // (build's: build_prebuilt_incidence)
   // Whether to build it for a mesh of nv vertices and nt triangles (32-bit
   // offsets) that takes mesh_bytes in host memory: not where the memory
   // budget would not hold it on the device (with its fill cursors) and on
@@ -196,8 +202,8 @@ struct DeviceIncidence {
       start = Buffer<std::uint32_t, MemSpace>(tracker, "incidence::start", nv + 1);
       incident = Buffer<std::uint32_t, MemSpace>(tracker, "incidence::incident", 3 * nt);
       bits = Buffer<std::uint32_t, MemSpace>(tracker, "incidence::maybe_bad", mesh::PrebuiltIncidence::bit_words(nt));
-      build_prebuilt_incidence<ExecSpace, Real>(space, tracker, pos, tri, nv, nt, start.view(), incident.view(),
-                                                bits.view());
+      degenerate_double_area = build_prebuilt_incidence<ExecSpace, Real>(space, tracker, pos, tri, nv, nt,
+                                                                         start.view(), incident.view(), bits.view());
       inc.start.resize(nv + 1);
       inc.incident.resize(3 * nt);
       inc.maybe_bad.resize(mesh::PrebuiltIncidence::bit_words(nt));
@@ -209,6 +215,25 @@ struct DeviceIncidence {
     start.release(), incident.release(), bits.release();
     inc.clear();
     return false;
+  }
+  // After build: the clean-up's move rounds on this mesh (mesh_moves.hpp;
+  // pos: the positions build was given), unless the mesh holds a position
+  // that is not finite or NBMC_DEVICE_MOVES=0; false when not made.
+  template <class Real>
+  bool move_rounds(const ExecSpace& space, MemoryTracker& tracker, const Kokkos::View<Real*, MemSpace>& pos,
+                   const Kokkos::View<const std::uint32_t*, MemSpace>& tri, std::size_t nv, std::size_t nt,
+                   mesh::PrebuiltIncidence& inc) {
+    if (!(degenerate_double_area >= 0) || !device_moves_switched_on()) return false;
+    return device_move_rounds<ExecSpace, Real>(space, tracker, pos, tri, start.view(), incident.view(), bits.view(),
+                                               nv, nt, degenerate_double_area, inc);
+  }
+  // NBMC_DEVICE_MOVES=0: the host makes the moves (for comparisons).
+  static bool device_moves_switched_on() {
+    static const bool on = [] {
+      const char* e = std::getenv("NBMC_DEVICE_MOVES");
+      return !(e && e[0] == '0' && e[1] == 0);
+    }();
+    return on;
   }
 };
 

@@ -562,8 +562,11 @@ void reconstruct(const ExecSpace& space, const ParticleInput& in, const Params& 
       if constexpr (std::is_same<ExecSpace, Kokkos::Cuda>::value) {
         mesh::PrebuiltIncidence& inc = mesh.incidence;
         DeviceIncidence<ExecSpace> di;
-        if (prebuilt && di.template build<Real>(space, tracker, dpos.view(), dtri.view(), r.vertices, r.triangles, inc))
+        if (prebuilt && di.template build<Real>(space, tracker, dpos.view(), dtri.view(), r.vertices, r.triangles, inc)) {
           trace("incidence on the device", r.triangles);
+          if (di.template move_rounds<Real>(space, tracker, dpos.view(), dtri.view(), r.vertices, r.triangles, inc))
+            trace("moves on the device", inc.moves);
+        }
         const DownloadSegment segments[] = {
             {hpos.data(), dpos.data(), hpos.extent(0) * sizeof(Real)},
             {hnrm.data(), dnrm.data(), hnrm.extent(0) * sizeof(float)},

@@ -551,8 +551,15 @@ void download_mesh_for_postprocess(const HostMesh& m, HostMesh& h, bool incidenc
   if (incidence &&
       Incidence::wanted(tracker, mesh::mesh_bytes(nv, nt, false, m.d_normals != nullptr), nv, nt) &&
       di.build<float>(space, tracker, Kokkos::View<const float*, Kokkos::CudaSpace>(m.d_positions, 3 * nv),
-                      Kokkos::View<const std::uint32_t*, Kokkos::CudaSpace>(m.d_triangles, 3 * nt), nv, nt, inc))
+                      Kokkos::View<const std::uint32_t*, Kokkos::CudaSpace>(m.d_triangles, 3 * nt), nv, nt, inc)) {
     host_trace("post-processing: incidence on the device", nt);
+    // (The device mesh itself moves: the host's clean-up goes on from it,
+    // and gives back only what it changes after.)
+    if (di.move_rounds<float>(space, tracker, Kokkos::View<float*, Kokkos::CudaSpace>(m.d_positions, 3 * nv),
+                              Kokkos::View<const std::uint32_t*, Kokkos::CudaSpace>(m.d_triangles, 3 * nt), nv, nt,
+                              inc))
+      host_trace("post-processing: moves on the device", inc.moves);
+  }
   const Details::DownloadSegment segments[] = {
       {h.positions.data(), m.d_positions, h.positions.size() * sizeof(float)},
       {h.normals.data(), m.d_normals, h.normals.size() * sizeof(float)},
