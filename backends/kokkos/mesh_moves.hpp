@@ -33,6 +33,15 @@
 namespace nbmc {
 namespace Details {
 
+// f(i) for i in [0, m) on `space`. (Blocks of one warp on the GPU, so that
+// a round's few long items spread over more multiprocessors, made the
+// 1.65 M frame's decide steps slower: 1.61-1.69 ms against 1.22-1.31 in
+// Kokkos' blocks; bench/RESULTS.md, session 42.)
+template <class ExecSpace, class F>
+void for_move_items(const ExecSpace& space, const char* name, std::size_t m, const F& f) {
+  Kokkos::parallel_for(name, Kokkos::RangePolicy<ExecSpace>(space, 0, m), f);
+}
+
 // The move rounds on the mesh pos (3 nv Real) / tri (3 nt) with its
 // incidence (start, incident) and maybe-bad bits, whose degenerate area
 // (relative to the positions' bounding box before the moves) is
@@ -101,10 +110,13 @@ bool device_move_rounds(const ExecSpace& space, MemoryTracker& tracker,
             if (t >= nt) break;
             const std::uint32_t* v = mm.T + 3 * std::size_t(t);
             if (mesh::moves_detail::class_of(mm, mesh::load(mm.P, v[0]), mesh::load(mm.P, v[1]),
-                                             mesh::load(mm.P, v[2])) != 0)
-              c(Kokkos::atomic_fetch_add(&n(0), 1u)) = t;
+                                             mesh::load(mm.P, v[2])) == 0)
+              continue;
+            c(Kokkos::atomic_fetch_add(&n(0), 1u)) = t;
+            for (int k = 0; k < 3; ++k) Kokkos::atomic_fetch_min(&h(v[k]), t);  // (step 1 of the first round)
           }
         });
+    Clock::time_point ts = t0;
     std::uint32_t host_n[2] = {0, 0};
     Kokkos::View<std::uint32_t*, Kokkos::HostSpace, Kokkos::MemoryTraits<Kokkos::Unmanaged>> hn(host_n, 2);
     Kokkos::deep_copy(space, hn, n);
@@ -113,8 +125,7 @@ bool device_move_rounds(const ExecSpace& space, MemoryTracker& tracker,
     inc.bad_before_moves = m;
     std::uint64_t rounds = 0;
     // (NBMC_TRACE: each step's time, the GPU waited for after each.)
-    double step_ms[5] = {0, 0, 0, 0, 0};
-    Clock::time_point ts = trace ? Clock::now() : Clock::time_point();
+    double step_ms[4] = {0, 0, 0, 0};  // list, decide, check, make and count
     auto step = [&](int k) {
       if (!trace) return;
       space.fence();
@@ -122,68 +133,65 @@ bool device_move_rounds(const ExecSpace& space, MemoryTracker& tracker,
       step_ms[k] += std::chrono::duration<double, std::milli>(t1 - ts).count();
       ts = t1;
     };
-    step(4);
+    step(0);
     while (m > 0) {
+      // (Step 1, each waiting triangle taking its vertices, was done where
+      // it was listed: above, or in the last round's "make".)
       Kokkos::deep_copy(space, Kokkos::subview(n, 0), std::uint32_t(0));
       const Kokkos::View<const std::uint32_t*, MemSpace> cc = c;
-      Kokkos::parallel_for(
-          "nbmc::moves::take", Policy(space, 0, m), KOKKOS_LAMBDA(const std::size_t i) {
-            const std::uint32_t t = cc(i);
-            for (int k = 0; k < 3; ++k) Kokkos::atomic_fetch_min(&h(mm.T[3 * std::size_t(t) + k]), t);
-          });
-      step(0);
-      Kokkos::parallel_for(
-          "nbmc::moves::decide", Policy(space, 0, m), KOKKOS_LAMBDA(const std::size_t i) {
-            const std::uint32_t t = cc(i);
-            const std::uint32_t* v = mm.T + 3 * std::size_t(t);
-            st(i) = 0;
-            for (int k = 0; k < 3; ++k)
-              if (h(v[k]) != t) return;
-            mesh::MoveProposal p;
-            const mesh::MoveVerdict verdict = mesh::evaluate_move(mm, t, p);
-            st(i) = std::uint8_t(verdict);
-            if (verdict != mesh::MoveVerdict::Propose) return;
-            pr(i) = p;
-            Kokkos::atomic_fetch_min(&h2(p.v), t);
-          });
+      for_move_items(space, "nbmc::moves::decide", m, KOKKOS_LAMBDA(const std::size_t i) {
+        const std::uint32_t t = cc(i);
+        const std::uint32_t* v = mm.T + 3 * std::size_t(t);
+        st(i) = 0;
+        for (int k = 0; k < 3; ++k)
+          if (h(v[k]) != t) return;
+        mesh::MoveProposal p;
+        const mesh::MoveVerdict verdict = mesh::evaluate_move(mm, t, p);
+        st(i) = std::uint8_t(verdict);
+        if (verdict != mesh::MoveVerdict::Propose) return;
+        pr(i) = p;
+        Kokkos::atomic_fetch_min(&h2(p.v), t);
+      });
       step(1);
-      Kokkos::parallel_for(
-          "nbmc::moves::check", Policy(space, 0, m), KOKKOS_LAMBDA(const std::size_t i) {
-            const std::uint32_t t = cc(i);
-            for (int k = 0; k < 3; ++k) h(mm.T[3 * std::size_t(t) + k]) = kFree;
-            if (st(i) != std::uint8_t(mesh::MoveVerdict::Propose)) return;
-            const std::uint32_t v = pr(i).v;
-            if (h2(v) == t && !mesh::neighbour_taken_before(mm, v, t, h2.data(), 1)) st(i) = 3;
-          });
+      for_move_items(space, "nbmc::moves::check", m, KOKKOS_LAMBDA(const std::size_t i) {
+        const std::uint32_t t = cc(i);
+        for (int k = 0; k < 3; ++k) h(mm.T[3 * std::size_t(t) + k]) = kFree;
+        if (st(i) != std::uint8_t(mesh::MoveVerdict::Propose)) return;
+        const std::uint32_t v = pr(i).v;
+        if (h2(v) == t && !mesh::neighbour_taken_before(mm, v, t, h2.data(), 1)) st(i) = 3;
+      });
       step(2);
-      Kokkos::parallel_for(
-          "nbmc::moves::make", Policy(space, 0, m), KOKKOS_LAMBDA(const std::size_t i) {
-            const std::uint8_t s = st(i);
-            if (s == std::uint8_t(mesh::MoveVerdict::Leave)) return;
-            if (s >= std::uint8_t(mesh::MoveVerdict::Propose)) h2(pr(i).v) = kFree;
-            if (s == 3) {
-              const mesh::MoveProposal& p = pr(i);
-              for (int a = 0; a < 3; ++a) mm.P[3 * std::size_t(p.v) + a] = Real(p.p[a]);
-              Kokkos::atomic_fetch_add(&n(1), 1u);
-              return;
-            }
-            x(Kokkos::atomic_fetch_add(&n(0), 1u)) = cc(i);
-          });
-      step(3);
+      for_move_items(space, "nbmc::moves::make", m, KOKKOS_LAMBDA(const std::size_t i) {
+        const std::uint8_t s = st(i);
+        if (s == std::uint8_t(mesh::MoveVerdict::Leave)) return;
+        if (s >= std::uint8_t(mesh::MoveVerdict::Propose)) h2(pr(i).v) = kFree;
+        if (s == 3) {
+          const mesh::MoveProposal& p = pr(i);
+          for (int a = 0; a < 3; ++a) mm.P[3 * std::size_t(p.v) + a] = Real(p.p[a]);
+          Kokkos::atomic_fetch_add(&n(1), 1u);
+          return;
+        }
+        // Waits for the next round, taking its vertices (all freed by
+        // "check" above).
+        const std::uint32_t t = cc(i);
+        x(Kokkos::atomic_fetch_add(&n(0), 1u)) = t;
+        for (int k = 0; k < 3; ++k) Kokkos::atomic_fetch_min(&h(mm.T[3 * std::size_t(t) + k]), t);
+      });
       Kokkos::deep_copy(space, hn, n);
       space.fence();
       m = host_n[0];
+      step(3);
       ++rounds;
       std::swap(c, x);
     }
     inc.moves = host_n[1];
     if (trace)
       std::fprintf(stderr,
-                   "[nbmc trace] moves on the device: items=%llu moved=%llu rounds=%llu %.3f ms (list %.3f, take "
-                   "%.3f, decide %.3f, check %.3f, make and count %.3f)\n",
+                   "[nbmc trace] moves on the device: items=%llu moved=%llu rounds=%llu %.3f ms (list %.3f, decide "
+                   "%.3f, check %.3f, make and count %.3f)\n",
                    (unsigned long long)inc.bad_before_moves, (unsigned long long)inc.moves,
                    (unsigned long long)rounds, std::chrono::duration<double, std::milli>(Clock::now() - t0).count(),
-                   step_ms[4], step_ms[0], step_ms[1], step_ms[2], step_ms[3]);
+                   step_ms[0], step_ms[1], step_ms[2], step_ms[3]);
     return true;
   } catch (const Error& e) {
     if (e.status != 6 /*NBMC_ERROR_OUT_OF_MEMORY*/ && e.status != 10 /*NBMC_ERROR_MEMORY_BUDGET*/) throw;
