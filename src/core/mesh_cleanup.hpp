@@ -22,7 +22,11 @@
 //  3. collapsing one of its edges (to the midpoint or to either end), when
 //     the link condition holds (the two ends share no neighbour but the two
 //     opposite vertices) and the opposite vertices keep three neighbours.
-// Rounds: passes of these until nothing more is repaired with the normal
+// First, the moves of 1. alone, in rounds that need no order (mesh_moves.hpp:
+// each bad triangle takes its vertices by its index, and moves of vertices
+// that are not neighbours are made together; on a GPU where the mesh is
+// made, with the same decisions). Then, for what they left:
+// rounds: passes of these until nothing more is repaired with the normal
 // turn limit of 60 degrees, then with 90 degrees (a fold, beyond 90, never),
 // then a last round that adds the last resorts (never pre-empting a repair
 // that keeps more of the mesh):
@@ -104,9 +108,10 @@
 // region (below) changes: its repair would fail again (exactly: see
 // start_times).
 //
-// In a fixed order (worst triangle first, then by index), so the result
-// depends only on the input mesh: the same on every backend and thread
-// count. That serial order defines the result; a pass of the repairs runs
+// The passes after the move rounds go in a fixed order (worst triangle
+// first, then by index), so the result depends only on the input mesh: the
+// same on every backend and thread count. That serial order defines the
+// passes' result; a pass of the repairs runs
 // on the host threads (from kParallelMinItems bad triangles per thread; the
 // cluster merges of 5. always serially) by deterministic reservations and
 // gives exactly the serial pass' mesh: in rounds, each of the next items of
@@ -161,9 +166,9 @@
 namespace nbmc {
 namespace mesh {
 
-// Largest turn of a triangle's normal that a repair may cause:
-// kCosMaxNormalTurn (mesh_moves.hpp), 60 degrees ...
-// ... for the triangles still bad after that.
+// Largest turn of a triangle's normal that a repair may cause: 60 degrees
+// (kCosMaxNormalTurn, in mesh_moves.hpp), then for the triangles still bad
+// after that:
 constexpr double kCosMaxNormalTurnLast = 0.0;  // 90 degrees
 // Passes over the bad triangles (each pass repairs what the previous one
 // could not, after its neighbours changed).
