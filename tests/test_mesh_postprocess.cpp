@@ -1511,6 +1511,47 @@ TEST(MeshCleanup, DeviceIncidenceLeftOutWithoutRoom) {
   EXPECT_FALSE(nbmc::Details::DeviceIncidence<Exec>::wanted(nbmc::MemoryTracker(), 0, nv, 0));
 }
 
+// The move rounds where the mesh was made leave everything as it was when
+// their scratch does not fit the memory budget (the host's clean-up then
+// makes the moves, to the same mesh).
+TEST(MeshCleanup, DeviceMovesLeftOutWithoutRoom) {
+  using Exec = Kokkos::DefaultHostExecutionSpace;
+  using Mem = Exec::memory_space;
+  using Unmanaged = Kokkos::MemoryTraits<Kokkos::Unmanaged>;
+  const TestMesh sphere = pinched_sphere();
+  const std::size_t nv = sphere.p.size() / 3, nt = sphere.t.size() / 3;
+  TestMesh host = sphere, made = sphere;
+  const nbmc::mesh::CleanupResult r0 = nbmc::mesh::cleanup_mesh(host.p, host.n, host.t, 0.05);
+  nbmc::MemoryTracker tracker;
+  nbmc::mesh::PrebuiltIncidence inc;
+  {
+    nbmc::Details::DeviceIncidence<Exec> di;
+    ASSERT_TRUE(di.build<float>(Exec(), tracker, Kokkos::View<const float*, Mem, Unmanaged>(made.p.data(), made.p.size()),
+                                Kokkos::View<const std::uint32_t*, Mem, Unmanaged>(made.t.data(), made.t.size()), nv, nt,
+                                inc));
+    Exec().fence();
+    const std::uint64_t built = tracker.current.load();
+    tracker.budget = built + 4 * nv;  // (not the two arrays of 4 B a vertex the rounds take first)
+    EXPECT_FALSE(di.move_rounds<float>(Exec(), tracker, Kokkos::View<float*, Mem, Unmanaged>(made.p.data(), made.p.size()),
+                                       Kokkos::View<const std::uint32_t*, Mem, Unmanaged>(made.t.data(), made.t.size()),
+                                       nv, nt, inc));
+    EXPECT_EQ(tracker.current.load(), built);
+    EXPECT_FALSE(inc.moves_made);
+    EXPECT_TRUE(made.p == sphere.p);
+    auto copy = [](const auto& from, auto& to) {
+      Kokkos::deep_copy(Kokkos::View<std::uint32_t*, Mem, Unmanaged>(to.data(), to.size()), from.view());
+    };
+    copy(di.start, inc.start);
+    copy(di.incident, inc.incident);
+    copy(di.bits, inc.maybe_bad);
+  }
+  const nbmc::mesh::CleanupResult r1 = nbmc::mesh::cleanup_mesh(made.p, made.n, made.t, 0.05, &inc);
+  expect_same_counts(r0, r1);
+  EXPECT_TRUE(host.p == made.p);
+  EXPECT_TRUE(host.t == made.t);
+  EXPECT_GT(r1.moves, 100u);
+}
+
 // Taubin smoothing: a sphere keeps its size (its vertices stay within 1% of
 // the radius), normals become the unit face normals; a droplet of a few
 // vertices, which lambda|mu would shrink to a point, keeps its volume.
