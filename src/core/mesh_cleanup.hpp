@@ -3033,8 +3033,15 @@ class Cleaner {
       P_[3 * std::size_t(x) + 2] = Real(p.z);
       changed_vertices_.push_back(x);
     }
-    if (c.loop_vertices.size() == 1 || c.strip) ++collapses;
-    else ++cuts;
+    // Counted as the repairs that remove as many triangles, so that every
+    // removed triangle is counted once (nbmc_stats: raw - kept = 2
+    // collapses + 6 cuts + removed components): a merge into more than one
+    // loop (not a strip) as a cut of six, the rest as collapses of two. (A
+    // closed mesh keeps an even count: the triangles removed are even.)
+    const std::size_t removed = c.removed.size();
+    const bool cut = c.loop_vertices.size() > 1 && !c.strip && removed >= 6;
+    if (cut) ++cuts;
+    collapses += (removed - (cut ? 6 : 0)) / 2;
   }
 
   void consider_flip(std::uint32_t t, Candidate& best) {
