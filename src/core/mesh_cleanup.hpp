@@ -792,7 +792,7 @@ class Cleaner {
                   "a reservation is a plain word at the start of its slot");
     const std::uint32_t* const reserved = reinterpret_cast<const std::uint32_t*>(slots);
     scratch.clean = false;  // (until the rounds end: see RepairScratchPool::give)
-    std::uint64_t made = 0, rounds = 0;
+    std::uint64_t made = 0;
     while (!cur.empty()) {
       const Clock::time_point r0 = trace ? Clock::now() : Clock::time_point();
       const std::size_t m = cur.size();
@@ -854,7 +854,6 @@ class Cleaner {
           waited += state[i] == 0 ? 1 : 0;
         }
       }
-      ++rounds;
       made += won;
       if (trace)
         std::fprintf(stderr, "[nbmc trace]   move round: items=%zu waited=%llu moved=%llu %.3f ms\n", m,
@@ -864,7 +863,6 @@ class Cleaner {
     }
     scratch.clean = true;
     moves += made;
-    move_rounds_ = rounds;
     // The bad triangles left: among those before (a move never makes a
     // good triangle bad), judged again on the threads and sorted.
     const std::size_t parts = chunk_count(n, 1024);
@@ -877,7 +875,6 @@ class Cleaner {
     if (hooks.check_lists && left != bad_triangles()) ++hooks.list_mismatches;  // (a test's: against a scan)
     return left;
   }
-  std::uint64_t move_rounds_ = 0;  // (the last move_rounds' rounds, for the tests)
 
   // One pass of repair() over `bad`, in its order; returns how many were
   // repaired. Serial below kParallelMinItems items per thread (and for the
