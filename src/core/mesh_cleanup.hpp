@@ -864,13 +864,9 @@ class Cleaner {
     scratch.clean = true;
     moves += made;
     // The bad triangles left: among those before (a move never makes a
-    // good triangle bad), judged again on the threads and sorted.
-    const std::size_t parts = chunk_count(n, 1024);
-    std::vector<BadList> part(parts);
-    for_chunks(n, parts, [&](std::size_t k, std::size_t b, std::size_t e) {
-      for (std::size_t i = b; i < e; ++i) add_if_bad(std::get<2>(bad[i]), part[k]);
-    });
-    BadList left = sorted_union(part);
+    // good triangle bad), judged again (list_after: nothing else changed
+    // yet, the rounds run before any pass).
+    BadList left = list_after(bad);
     RepairPassHooks& hooks = repair_pass_hooks();
     if (hooks.check_lists && left != bad_triangles()) ++hooks.list_mismatches;  // (a test's: against a scan)
     return left;
