@@ -9,14 +9,19 @@
 // the host's bit for bit. The host's clean-up then starts from its scan of
 // the maybe-bad triangles (which finds what the moves left) and its passes.
 //
-// Per round, four kernels over the waiting triangles and one wait for the
-// count of those left: (1) each takes its vertices (atomic minimum of its
-// index); (2) those holding all three decide, and each proposal's vertex
-// takes the smallest proposing index (a second array, so the two steps
-// cannot meet); (3) the first array is freed, and a proposal holding its
-// vertex with no neighbour held by a smaller index is made; (4) the moves
-// are written, the second array freed, and the losers and the waiting ones
-// listed for the next round.
+// Per round, three kernels over the waiting triangles and one wait for the
+// count of those left. Each waiting triangle has taken its vertices
+// (atomic minimum of its index) where it was listed: in the list kernel, or
+// in the last round's "make". (1) "decide": those holding all three decide,
+// and each proposal's vertex takes the smallest proposing index (a second
+// array, so the two steps cannot meet); (2) "check": the first array is
+// freed, and a proposal holding its vertex with no neighbour held by a
+// smaller index is made; (3) "make": the moves are written, the second
+// array freed, and the losers and the waiting ones listed for the next
+// round, taking their vertices. (In Kokkos' own blocks: blocks of one warp,
+// to spread a round's few long evaluations over more multiprocessors, made
+// "decide" slower on an H200, 1.61-1.69 against 1.22-1.31 ms for the 1.65 M
+// frame; bench/RESULTS.md, session 42.)
 #pragma once
 
 #include "common.hpp"
@@ -32,15 +37,6 @@
 
 namespace nbmc {
 namespace Details {
-
-// f(i) for i in [0, m) on `space`. (Blocks of one warp on the GPU, so that
-// a round's few long items spread over more multiprocessors, made the
-// 1.65 M frame's decide steps slower: 1.61-1.69 ms against 1.22-1.31 in
-// Kokkos' blocks; bench/RESULTS.md, session 42.)
-template <class ExecSpace, class F>
-void for_move_items(const ExecSpace& space, const char* name, std::size_t m, const F& f) {
-  Kokkos::parallel_for(name, Kokkos::RangePolicy<ExecSpace>(space, 0, m), f);
-}
 
 // The move rounds on the mesh pos (3 nv Real) / tri (3 nt) with its
 // incidence (start, incident) and maybe-bad bits, whose degenerate area
@@ -139,7 +135,7 @@ bool device_move_rounds(const ExecSpace& space, MemoryTracker& tracker,
       // it was listed: above, or in the last round's "make".)
       Kokkos::deep_copy(space, Kokkos::subview(n, 0), std::uint32_t(0));
       const Kokkos::View<const std::uint32_t*, MemSpace> cc = c;
-      for_move_items(space, "nbmc::moves::decide", m, KOKKOS_LAMBDA(const std::size_t i) {
+      Kokkos::parallel_for("nbmc::moves::decide", Policy(space, 0, m), KOKKOS_LAMBDA(const std::size_t i) {
         const std::uint32_t t = cc(i);
         const std::uint32_t* v = mm.T + 3 * std::size_t(t);
         st(i) = 0;
@@ -153,7 +149,7 @@ bool device_move_rounds(const ExecSpace& space, MemoryTracker& tracker,
         Kokkos::atomic_fetch_min(&h2(p.v), t);
       });
       step(1);
-      for_move_items(space, "nbmc::moves::check", m, KOKKOS_LAMBDA(const std::size_t i) {
+      Kokkos::parallel_for("nbmc::moves::check", Policy(space, 0, m), KOKKOS_LAMBDA(const std::size_t i) {
         const std::uint32_t t = cc(i);
         for (int k = 0; k < 3; ++k) h(mm.T[3 * std::size_t(t) + k]) = kFree;
         if (st(i) != std::uint8_t(mesh::MoveVerdict::Propose)) return;
@@ -161,7 +157,7 @@ bool device_move_rounds(const ExecSpace& space, MemoryTracker& tracker,
         if (h2(v) == t && !mesh::neighbour_taken_before(mm, v, t, h2.data(), 1)) st(i) = 3;
       });
       step(2);
-      for_move_items(space, "nbmc::moves::make", m, KOKKOS_LAMBDA(const std::size_t i) {
+      Kokkos::parallel_for("nbmc::moves::make", Policy(space, 0, m), KOKKOS_LAMBDA(const std::size_t i) {
         const std::uint8_t s = st(i);
         if (s == std::uint8_t(mesh::MoveVerdict::Leave)) return;
         if (s >= std::uint8_t(mesh::MoveVerdict::Propose)) h2(pr(i).v) = kFree;
