@@ -105,8 +105,8 @@ bool device_move_rounds(const ExecSpace& space, MemoryTracker& tracker,
             const std::uint32_t t = std::uint32_t(32 * w) + std::uint32_t(i);
             if (t >= nt) break;
             const std::uint32_t* v = mm.T + 3 * std::size_t(t);
-            if (mesh::moves_detail::class_of(mm, mesh::load(mm.P, v[0]), mesh::load(mm.P, v[1]),
-                                             mesh::load(mm.P, v[2])) == 0)
+            if (mesh::triangle_class_of(mesh::load(mm.P, v[0]), mesh::load(mm.P, v[1]), mesh::load(mm.P, v[2]),
+                                        mm.degenerate_double_area) == 0)
               continue;
             c(Kokkos::atomic_fetch_add(&n(0), 1u)) = t;
             for (int k = 0; k < 3; ++k) Kokkos::atomic_fetch_min(&h(v[k]), t);  // (step 1 of the first round)

@@ -247,6 +247,14 @@ NBMC_HD bool surely_good(const Vec3& a, const Vec3& b, const Vec3& c, double deg
          area2 >= kSinOneDegree * kSinOneDegree * l12 * kMargin;
 }
 
+// triangle_class of the triangle (a, b, c), asking surely_good first (no
+// square root or division; most triangles a repair looks at are good): the
+// same class.
+NBMC_HD int triangle_class_of(const Vec3& a, const Vec3& b, const Vec3& c, double degenerate_double_area) {
+  if (surely_good(a, b, c, degenerate_double_area)) return 0;
+  return triangle_class(triangle_shape(a, b, c), degenerate_double_area);
+}
+
 struct CheckResult {
   bool closed = false, manifold = false, oriented = false;
   std::uint64_t vertices = 0, triangles = 0, edges = 0;

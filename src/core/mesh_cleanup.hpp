@@ -1592,12 +1592,9 @@ class Cleaner {
     const std::uint32_t* v = T_ + 3 * std::size_t(t);
     return class_of(load(P_, v[0]), load(P_, v[1]), load(P_, v[2]));
   }
-  // triangle_class of the triangle (a, b, c): surely_good first (no square
-  // root or division; most triangles a repair looks at are good), the same
-  // class.
+  // The triangle's class, surely_good first (mesh_check.hpp).
   int class_of(const Vec3& a, const Vec3& b, const Vec3& c) const {
-    if (surely_good(a, b, c, degenerate_double_area_)) return 0;
-    return triangle_class(triangle_shape(a, b, c), degenerate_double_area_);
+    return triangle_class_of(a, b, c, degenerate_double_area_);
   }
 
   // A vertex is regular when each of its edges is used once in each

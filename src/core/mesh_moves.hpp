@@ -147,12 +147,6 @@ NBMC_HD void fan_of(const MoveMesh<Real>& m, std::uint32_t v, Fan& f) {
   }
 }
 
-template <class Real>
-NBMC_HD int class_of(const MoveMesh<Real>& m, const Vec3& a, const Vec3& b, const Vec3& c) {
-  if (surely_good(a, b, c, m.degenerate_double_area)) return 0;
-  return triangle_class(triangle_shape(a, b, c), m.degenerate_double_area);
-}
-
 NBMC_HD bool holds(const std::uint32_t* w, std::uint32_t x) { return w[0] == x || w[1] == x || w[2] == x; }
 
 // consider_move(t, v): the shortest of the trial moves of v (a quarter,
@@ -197,7 +191,7 @@ NBMC_HD bool consider_move(const MoveMesh<Real>& m, std::uint32_t t, std::uint32
         const Vec3 c = cross(o1 - o0, o2 - o0);
         mean = mean + c;
         old_normal[i] = c;
-        old_cls[i] = class_of(m, o0, o1, o2);
+        old_cls[i] = triangle_class_of(o0, o1, o2, m.degenerate_double_area);
       }
       const double lm = norm(mean);
       for (std::uint32_t i = 0; i < f.n; ++i) ref_norm[i] = old_cls[i] == 0 ? norm(old_normal[i]) : lm;
@@ -294,7 +288,8 @@ template <class Real>
 NBMC_HD MoveVerdict evaluate_move(const MoveMesh<Real>& m, std::uint32_t t, MoveProposal& out) {
   using namespace moves_detail;
   const std::uint32_t* v = m.T + 3 * std::size_t(t);
-  if (class_of(m, load(m.P, v[0]), load(m.P, v[1]), load(m.P, v[2])) == 0) return MoveVerdict::Leave;
+  if (triangle_class_of(load(m.P, v[0]), load(m.P, v[1]), load(m.P, v[2]), m.degenerate_double_area) == 0)
+    return MoveVerdict::Leave;
   for (int k = 0; k < 3; ++k)
     if (!movable(m, v[k])) return MoveVerdict::Leave;
   MoveProposal best;
